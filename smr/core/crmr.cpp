@@ -1,0 +1,70 @@
+#include "smr/core/crmr.h"
+
+#include <algorithm>
+#include <string>
+
+#include "storage/error.h"
+
+namespace smr {
+
+const CoarserLink* Op::coarser_link(std::uint32_t tri, std::uint8_t edge) const {
+  for (const CoarserLink& l : coarser) {
+    if (l.tri == tri && l.edge == edge) return &l;
+  }
+  return nullptr;
+}
+
+double error_at(const CrmrInfo& info, double res) {
+  const double span = info.err0 - info.err_final;
+  if (span <= 0.0) return info.err_final;
+  return info.err_final + (1.0 - res) * span;
+}
+
+double resolution_of(const CrmrInfo& info, double error) {
+  const double span = info.err0 - info.err_final;
+  if (span <= 0.0) return 1.0;
+  return std::clamp(1.0 - (error - info.err_final) / span, 0.0, 1.0);
+}
+
+double OpSource::error_at(double res) const { return smr::error_at(info(), res); }
+double OpSource::resolution_of(double error) const { return smr::resolution_of(info(), error); }
+
+std::uint64_t Crmr::triangle_count() const {
+  std::uint64_t n = 0;
+  for (const Op& op : ops) n += op.fragment.size();
+  return n;
+}
+
+void link_dag(Crmr& crmr) {
+  const std::uint64_t m = crmr.ops.size();
+  auto ref_error = [&](const Op& op, const std::string& what) {
+    throw_internal("CRMR op " + std::to_string(op.id.value) + ": " + what);
+  };
+  for (Op& op : crmr.ops) {
+    op.parents.clear();
+    op.children.clear();
+  }
+  for (Op& op : crmr.ops) {
+    for (const TriRef& t : op.pre) {
+      if (t.op.value >= m || t.op >= op.id) ref_error(op, "PreF names a triangle of a later op");
+      Op& parent = crmr.ops[t.op.value];
+      if (t.index >= parent.fragment.size()) ref_error(op, "PreF names a missing triangle");
+      FragmentTriangle& tri = parent.fragment[t.index];
+      if (tri.killer.valid() && tri.killer != op.id) ref_error(op, "a triangle is replaced twice");
+      tri.killer = op.id;
+      tri.death_res = op.birth_res;
+      op.parents.push_back(t.op);
+    }
+    std::sort(op.parents.begin(), op.parents.end());
+    op.parents.erase(std::unique(op.parents.begin(), op.parents.end()), op.parents.end());
+    for (OpId p : op.parents) crmr.ops[p.value].children.push_back(op.id);
+  }
+  // ROI = own box united with the children's ROIs; children have larger ids, so go backwards.
+  for (std::uint64_t i = m; i-- > 0;) {
+    Op& op = crmr.ops[i];
+    op.roi = op.box;
+    for (OpId c : op.children) op.roi.add(crmr.ops[c.value].roi);
+  }
+}
+
+}  // namespace smr

@@ -1,0 +1,67 @@
+// The Continuous Resolution Model Representation (Brown 4.4, 4.5): a base mesh R^0 and
+// refinement operations R^1..R^m in non-decreasing birth_res order, with the DAG and Hypermesh
+// links stored in the ops themselves.
+//
+// Resolution. Brown defines r(M^m) = 1 for the finest mesh. We keep that and tie resolution to
+// absolute error against the SOURCE data: r = 1 - (err - err_final) / (err0 - err_final), where
+// err0 is the base mesh's error and err_final the finest mesh's (0 for a lossless build, in which
+// case r = 1 - err/err0 as in DESIGN.md). So error_at(death_res(t)) bounds t's true deviation.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "smr/core/heightfield.h"
+#include "smr/core/op.h"
+
+namespace smr {
+
+enum class ModelKind : std::uint8_t { kTerrain = 0, kMesh3d = 1 };
+
+struct CrmrInfo {
+  ModelKind kind = ModelKind::kTerrain;
+  Georef georef;
+  int grid_width = 0, grid_height = 0;  // terrain: the source grid
+  double err0 = 0.0;                    // max error of the base mesh M^0
+  double err_final = 0.0;               // max error of the finest mesh M^m
+  Box3 bounds;                          // of every vertex
+  std::string source;
+  std::string builder;  // builder name and parameters, for `info`
+  std::uint64_t vertex_count = 0;
+  friend bool operator==(const CrmrInfo&, const CrmrInfo&) = default;
+};
+
+/// Read access to a CRMR, in memory or (later) paged from disk. References returned by op() stay
+/// valid for the lifetime of the source object.
+class OpSource {
+ public:
+  virtual ~OpSource() = default;
+  virtual const CrmrInfo& info() const = 0;
+  virtual std::uint64_t op_count() const = 0;
+  virtual const Op& op(OpId id) const = 0;
+
+  const FragmentTriangle& triangle(TriRef t) const { return op(t.op).fragment[t.index]; }
+  double error_at(double res) const;
+  double resolution_of(double error) const;
+};
+
+class Crmr final : public OpSource {
+ public:
+  CrmrInfo header;
+  std::vector<Op> ops;  // ops[0] = R^0
+
+  const CrmrInfo& info() const override { return header; }
+  std::uint64_t op_count() const override { return ops.size(); }
+  const Op& op(OpId id) const override { return ops.at(id.value); }
+  std::uint64_t triangle_count() const;  // over all fragments
+};
+
+double error_at(const CrmrInfo& info, double res);
+double resolution_of(const CrmrInfo& info, double error);
+
+/// Derives parents/children from PreF, killer/death_res of every triangle, and ROIs (children
+/// before parents). Builders call it once all ops exist. Throws on dangling references.
+void link_dag(Crmr& crmr);
+
+}  // namespace smr

@@ -1,0 +1,84 @@
+// Small geometric types shared by the model, the RCF and (later) the index: boxes, spheres,
+// cones of normals, and exact-enough 2-D predicates on the xy-domain of 2.5-D data.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <span>
+
+#include <glm/common.hpp>
+#include <glm/vec2.hpp>
+#include <glm/vec3.hpp>
+
+namespace smr {
+
+using Vec2 = glm::dvec2;
+using Vec3 = glm::dvec3;
+
+/// Axis-aligned box. Empty when lo > hi on any axis.
+struct Box3 {
+  Vec3 lo{std::numeric_limits<double>::infinity()};
+  Vec3 hi{-std::numeric_limits<double>::infinity()};
+
+  bool empty() const { return lo.x > hi.x || lo.y > hi.y || lo.z > hi.z; }
+  void add(const Vec3& p) {
+    lo = glm::min(lo, p);
+    hi = glm::max(hi, p);
+  }
+  void add(const Box3& b) {
+    if (b.empty()) return;
+    lo = glm::min(lo, b.lo);
+    hi = glm::max(hi, b.hi);
+  }
+  bool contains(const Box3& b) const {
+    return b.empty() || (lo.x <= b.lo.x && lo.y <= b.lo.y && lo.z <= b.lo.z && hi.x >= b.hi.x &&
+                         hi.y >= b.hi.y && hi.z >= b.hi.z);
+  }
+  Vec3 center() const { return (lo + hi) * 0.5; }
+  friend bool operator==(const Box3&, const Box3&) = default;
+};
+
+struct Sphere {
+  Vec3 center{0.0};
+  double radius = 0.0;
+  friend bool operator==(const Sphere&, const Sphere&) = default;
+};
+
+/// Cone of normals (Hoppe 97 / Brown 4.6.1): every normal n of the region satisfies
+/// angle(n, axis) <= half_angle. half_angle >= pi means "any direction".
+struct NormalCone {
+  Vec3 axis{0.0, 0.0, 1.0};
+  double half_angle = 0.0;
+  friend bool operator==(const NormalCone&, const NormalCone&) = default;
+};
+
+/// Twice the signed area of the xy-projection of (a, b, c); > 0 when counter-clockwise.
+inline double orient2d(const Vec2& a, const Vec2& b, const Vec2& c) {
+  return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+}
+inline Vec2 xy(const Vec3& p) { return {p.x, p.y}; }
+
+/// Distance from p to the closed triangle (a, b, c) in the plane (0 when inside).
+double point_triangle_distance2d(const Vec2& p, const Vec2& a, const Vec2& b, const Vec2& c);
+/// Distance from p to the closed triangle (a, b, c) in space.
+double point_triangle_distance3d(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
+/// Distance from p to segment ab in the plane.
+double point_segment_distance2d(const Vec2& p, const Vec2& a, const Vec2& b);
+/// Distance from p to the closed axis-aligned rectangle [lo, hi] in the plane.
+inline double point_rect_distance2d(const Vec2& p, const Vec2& lo, const Vec2& hi) {
+  const double dx = std::max({lo.x - p.x, 0.0, p.x - hi.x});
+  const double dy = std::max({lo.y - p.y, 0.0, p.y - hi.y});
+  return std::hypot(dx, dy);
+}
+
+/// Bounding sphere of points: centred at the centre of their bounding box (so it is contained
+/// in the ball around any box that contains the points' box centre... see Op::sphere docs).
+Sphere bounding_sphere(std::span<const Vec3> points);
+/// Smallest cone (approximately: axis = normalised mean) containing the given unit normals.
+NormalCone normal_cone(std::span<const Vec3> unit_normals);
+/// Unit normal of triangle (a, b, c), counter-clockwise front; zero vector when degenerate.
+Vec3 triangle_normal(const Vec3& a, const Vec3& b, const Vec3& c);
+
+}  // namespace smr

@@ -1,0 +1,424 @@
+// Executable checks of the CRMR definitions (Brown 4.4.1 complete/minimal, 4.4.2 resolution
+// attributes, 4.5.1 Hypermesh, 4.5.2 DAG; Maheshwari 3.1 ROI) and of output tilings.
+// Terrain predicates use exact integer arithmetic on grid coordinates.
+#include "smr/core/invariants.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <sstream>
+#include <unordered_map>
+#include <unordered_set>
+
+#include <glm/geometric.hpp>
+
+namespace smr {
+
+void InvariantReport::fail(std::string message) {
+  ++failures;
+  if (errors.size() < 50) errors.push_back(std::move(message));
+}
+
+std::string InvariantReport::summary() const {
+  std::ostringstream os;
+  os << failures << " failure(s) in " << checked << " checks";
+  for (const std::string& e : errors) os << "\n  " << e;
+  return os.str();
+}
+
+GridPoint to_grid(const CrmrInfo& info, const Vec3& p) {
+  return {std::llround((p.x - info.georef.x0) / info.georef.dx),
+          std::llround((p.y - info.georef.y0) / info.georef.dy)};
+}
+
+namespace {
+
+__extension__ typedef __int128 i128;
+
+std::int64_t orient(const GridPoint& a, const GridPoint& b, const GridPoint& c) {
+  return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+}
+
+// > 0 when d is strictly inside the circumcircle of counter-clockwise (a, b, c).
+i128 incircle(const GridPoint& a, const GridPoint& b, const GridPoint& c, const GridPoint& d) {
+  const i128 adx = a.x - d.x, ady = a.y - d.y, bdx = b.x - d.x, bdy = b.y - d.y;
+  const i128 cdx = c.x - d.x, cdy = c.y - d.y;
+  const i128 ad = adx * adx + ady * ady, bd = bdx * bdx + bdy * bdy, cd = cdx * cdx + cdy * cdy;
+  return adx * (bdy * cd - bd * cdy) - ady * (bdx * cd - bd * cdx) + ad * (bdx * cdy - bdy * cdx);
+}
+
+struct GridTri {
+  std::array<GridPoint, 3> p;
+  std::array<VertexId, 3> id;
+};
+
+GridTri grid_tri(const CrmrInfo& info, const Op& op, const FragmentTriangle& t) {
+  GridTri g;
+  for (int k = 0; k < 3; ++k) {
+    g.p[k] = to_grid(info, op.position(t, k));
+    g.id[k] = op.vertex_id(t, k);
+  }
+  return g;
+}
+
+// True when the open interiors of two counter-clockwise triangles intersect (separating axis).
+bool interiors_overlap(const GridTri& a, const GridTri& b) {
+  auto separated_by = [](const GridTri& s, const GridTri& o) {
+    for (int k = 0; k < 3; ++k) {
+      const GridPoint& p = s.p[k];
+      const GridPoint& q = s.p[(k + 1) % 3];
+      bool all_out = true;
+      for (int j = 0; j < 3 && all_out; ++j) all_out = orient(p, q, o.p[j]) <= 0;
+      if (all_out) return true;
+    }
+    return false;
+  };
+  return !separated_by(a, b) && !separated_by(b, a);
+}
+
+bool on_domain_boundary(const CrmrInfo& info, const GridPoint& a, const GridPoint& b) {
+  const std::int64_t w = info.grid_width - 1, h = info.grid_height - 1;
+  return (a.x == 0 && b.x == 0) || (a.x == w && b.x == w) || (a.y == 0 && b.y == 0) ||
+         (a.y == h && b.y == h);
+}
+
+struct DirectedEdge {
+  std::uint64_t a, b;
+  friend bool operator==(const DirectedEdge&, const DirectedEdge&) = default;
+};
+struct EdgeHash {
+  std::size_t operator()(const DirectedEdge& e) const { return mix64(e.a * 0x9E3779B97F4A7C15ULL ^ e.b); }
+};
+
+// Boundary of a triangle set as directed edges (those whose reverse is not in the set).
+std::vector<DirectedEdge> boundary_of(const std::vector<GridTri>& tris) {
+  std::unordered_set<DirectedEdge, EdgeHash> all;
+  for (const GridTri& t : tris) {
+    for (int k = 0; k < 3; ++k) all.insert({t.id[k].value, t.id[(k + 1) % 3].value});
+  }
+  std::vector<DirectedEdge> out;
+  for (const DirectedEdge& e : all) {
+    if (!all.count({e.b, e.a})) out.push_back(e);
+  }
+  return out;
+}
+
+std::string op_name(OpId id) { return "op " + std::to_string(id.value); }
+
+void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
+                    std::unordered_map<std::uint64_t, std::pair<OpId, Vec3>>& vertex_owner) {
+  const CrmrInfo& info = crmr.header;
+  const std::string name = op_name(op.id);
+  // Vertices: new ones introduced here, others introduced earlier with identical positions.
+  for (std::size_t i = 0; i < op.vertices.size(); ++i) {
+    const Vertex& v = op.vertices[i];
+    ++r.checked;
+    auto it = vertex_owner.find(v.id.value);
+    if (i < op.new_vertex_count) {
+      if (it != vertex_owner.end()) {
+        r.fail(name + ": new vertex " + std::to_string(v.id.value) + " already introduced by " +
+               op_name(it->second.first));
+      } else {
+        vertex_owner.emplace(v.id.value, std::pair{op.id, v.p});
+      }
+    } else if (it == vertex_owner.end()) {
+      r.fail(name + ": vertex " + std::to_string(v.id.value) + " used before it is introduced");
+    } else if (it->second.second != v.p) {
+      r.fail(name + ": vertex " + std::to_string(v.id.value) + " has a different position than in " +
+             op_name(it->second.first));
+    }
+  }
+  std::vector<GridTri> f, pre;
+  for (std::size_t i = 0; i < op.fragment.size(); ++i) {
+    const FragmentTriangle& t = op.fragment[i];
+    ++r.checked;
+    bool bad_index = false;
+    for (auto v : t.v) bad_index |= v >= op.vertices.size();
+    if (bad_index) {
+      r.fail(name + ": triangle " + std::to_string(i) + " has a vertex index out of range");
+      return;
+    }
+    f.push_back(grid_tri(info, op, t));
+    if (orient(f.back().p[0], f.back().p[1], f.back().p[2]) <= 0) {
+      r.fail(name + ": triangle " + std::to_string(i) + " is not counter-clockwise");
+    }
+    // Neighbour links within F are symmetric and share the reversed edge.
+    for (int k = 0; k < 3; ++k) {
+      const VertexId a = op.vertex_id(t, k), b = op.vertex_id(t, (k + 1) % 3);
+      if (t.nbr[k] >= 0) {
+        const auto& n = op.fragment.at(static_cast<std::size_t>(t.nbr[k]));
+        bool found = false;
+        for (int j = 0; j < 3; ++j) {
+          found |= op.vertex_id(n, j) == b && op.vertex_id(n, (j + 1) % 3) == a &&
+                   n.nbr[j] == static_cast<std::int32_t>(i);
+        }
+        if (!found) r.fail(name + ": asymmetric neighbour link at triangle " + std::to_string(i));
+        continue;
+      }
+      const CoarserLink* link = op.coarser_link(static_cast<std::uint32_t>(i), static_cast<std::uint8_t>(k));
+      const bool model_boundary = on_domain_boundary(info, f.back().p[k], f.back().p[(k + 1) % 3]);
+      if (model_boundary) {
+        if (link != nullptr) r.fail(name + ": model boundary edge has a coarser link");
+        continue;
+      }
+      if (link == nullptr) {
+        if (op.id != kBaseOp) {
+          r.fail(name + ": fragment boundary edge of triangle " + std::to_string(i) + " has no coarser version");
+        }
+        continue;
+      }
+      if (link->coarser.tri.op >= op.id) {
+        r.fail(name + ": coarser link points to a finer op");
+        continue;
+      }
+      const Op& target = crmr.ops.at(link->coarser.tri.op.value);
+      const FragmentTriangle& tt = target.fragment.at(link->coarser.tri.index);
+      const int e = link->coarser.edge;
+      const VertexId ta = target.vertex_id(tt, e), tb = target.vertex_id(tt, (e + 1) % 3);
+      if (!((ta == a && tb == b) || (ta == b && tb == a))) {
+        r.fail(name + ": coarser link of triangle " + std::to_string(i) + " names a different edge");
+      }
+    }
+  }
+  for (const TriRef& t : op.pre) {
+    const Op& p = crmr.ops.at(t.op.value);
+    pre.push_back(grid_tri(info, p, p.fragment.at(t.index)));
+  }
+  if (op.id == kBaseOp) return;
+
+  // Complete (Brown 4.4.1): every PreF boundary edge off the model boundary is an F boundary edge.
+  ++r.checked;
+  const auto bf = boundary_of(f), bp = boundary_of(pre);
+  std::unordered_set<DirectedEdge, EdgeHash> bfs(bf.begin(), bf.end());
+  std::unordered_map<std::uint64_t, GridPoint> pos;
+  for (const GridTri& t : pre) {
+    for (int k = 0; k < 3; ++k) pos[t.id[k].value] = t.p[k];
+  }
+  for (const DirectedEdge& e : bp) {
+    if (on_domain_boundary(info, pos[e.a], pos[e.b])) continue;
+    if (!bfs.count(e)) {
+      r.fail(name + " is incomplete: PreF boundary edge " + std::to_string(e.a) + "-" +
+             std::to_string(e.b) + " is not on the boundary of F");
+    }
+  }
+  // F and PreF cover the same region: equal areas (exact).
+  auto area2 = [](const std::vector<GridTri>& ts) {
+    std::int64_t s = 0;
+    for (const GridTri& t : ts) s += orient(t.p[0], t.p[1], t.p[2]);
+    return s;
+  };
+  if (area2(f) != area2(pre)) r.fail(name + ": F and PreF cover different areas");
+
+  // Minimal (Brown 4.4.1): no proper subsets S1 of PreF and S2 of F share a boundary. Such a
+  // pair covers a region that no other triangle of the op overlaps, so it is a union of connected
+  // components of the graph joining overlapping PreF and F triangles; the op is minimal iff no
+  // proper union of components has equal PreF and F boundaries. (An insertion on an edge gives two
+  // components whose boundaries differ by the split edge: minimal.)
+  ++r.checked;
+  const std::size_t n = f.size() + pre.size();
+  std::vector<std::size_t> parent(n);
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&](std::size_t x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  };
+  for (std::size_t i = 0; i < f.size(); ++i) {
+    for (std::size_t j = 0; j < pre.size(); ++j) {
+      if (interiors_overlap(f[i], pre[j])) parent[find(i)] = find(f.size() + j);
+    }
+  }
+  std::vector<std::size_t> roots;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (find(i) == i) roots.push_back(i);
+  }
+  const std::size_t k = std::min<std::size_t>(roots.size(), 12);
+  for (std::uint32_t mask = 1; k > 1 && mask + 1 < (1u << k); ++mask) {
+    std::vector<GridTri> s1, s2;
+    for (std::size_t i = 0; i < n; ++i) {
+      const auto pos_root = std::find(roots.begin(), roots.begin() + k, find(i)) - roots.begin();
+      if (pos_root >= static_cast<std::ptrdiff_t>(k) || !(mask & (1u << pos_root))) continue;
+      (i < f.size() ? s2 : s1).push_back(i < f.size() ? f[i] : pre[i - f.size()]);
+    }
+    auto e1 = boundary_of(s1), e2 = boundary_of(s2);
+    auto key = [](const DirectedEdge& e) { return std::pair(e.a, e.b); };
+    auto less = [&](const DirectedEdge& x, const DirectedEdge& y) { return key(x) < key(y); };
+    std::sort(e1.begin(), e1.end(), less);
+    std::sort(e2.begin(), e2.end(), less);
+    if (!s1.empty() && e1 == e2) {
+      r.fail(name + " is not minimal: part of PreF is replaced by part of F with the same boundary");
+      break;
+    }
+  }
+}
+
+void check_geometry(const Crmr& crmr, const Op& op, InvariantReport& r) {
+  const std::string name = op_name(op.id);
+  ++r.checked;
+  auto check_tri = [&](const Op& owner, const FragmentTriangle& t) {
+    const double tol = 1e-9 * (1.0 + op.sphere.radius + glm::length(op.sphere.center));
+    for (int k = 0; k < 3; ++k) {
+      const Vec3& p = owner.position(t, k);
+      Box3 pb;
+      pb.add(p);
+      if (!op.box.contains(pb)) r.fail(name + ": box does not contain a vertex");
+      if (glm::length(p - op.sphere.center) > op.sphere.radius + tol) {
+        r.fail(name + ": bounding sphere does not contain a vertex");
+      }
+    }
+    const Vec3 nrm = triangle_normal(owner.position(t, 0), owner.position(t, 1), owner.position(t, 2));
+    if (op.cone.half_angle < M_PI &&
+        std::acos(std::clamp(glm::dot(nrm, op.cone.axis), -1.0, 1.0)) > op.cone.half_angle + 1e-9) {
+      r.fail(name + ": normal cone does not contain a triangle normal");
+    }
+  };
+  for (const FragmentTriangle& t : op.fragment) check_tri(op, t);
+  for (const TriRef& t : op.pre) check_tri(crmr.ops[t.op.value], crmr.ops[t.op.value].fragment[t.index]);
+  if (!op.roi.contains(op.box)) r.fail(name + ": ROI does not contain its own box");
+  for (OpId c : op.children) {
+    if (!op.roi.contains(crmr.ops[c.value].roi)) r.fail(name + ": ROI does not contain a child's ROI");
+  }
+}
+
+}  // namespace
+
+InvariantReport check_crmr(const Crmr& crmr) {
+  InvariantReport r;
+  if (crmr.ops.empty()) {
+    r.fail("CRMR has no base mesh");
+    return r;
+  }
+  if (!crmr.ops[0].pre.empty()) r.fail("R^0 has a pre-operation set");
+  std::unordered_map<std::uint64_t, std::pair<OpId, Vec3>> vertex_owner;
+  std::vector<std::vector<OpId>> children(crmr.ops.size());
+  std::vector<std::vector<OpId>> killers;  // per op, per triangle
+  for (const Op& op : crmr.ops) killers.emplace_back(op.fragment.size());
+  for (std::size_t i = 0; i < crmr.ops.size(); ++i) {
+    const Op& op = crmr.ops[i];
+    ++r.checked;
+    if (op.id.value != i) r.fail("op at position " + std::to_string(i) + " has id " + std::to_string(op.id.value));
+    if (!(op.birth_res >= 0.0 && op.birth_res <= 1.0)) r.fail(op_name(op.id) + ": birth_res outside [0,1]");
+    if (i > 0 && op.birth_res < crmr.ops[i - 1].birth_res) {
+      r.fail(op_name(op.id) + ": birth_res decreases (" + std::to_string(op.birth_res) + " after " +
+             std::to_string(crmr.ops[i - 1].birth_res) + ")");
+    }
+    if (i > 0 && std::abs(resolution_of(crmr.header, op.error) - op.birth_res) > 1e-12) {
+      r.fail(op_name(op.id) + ": birth_res does not match its error");
+    }
+    if (op.fragment.empty()) r.fail(op_name(op.id) + ": empty fragment");
+    if (i > 0 && op.pre.empty()) r.fail(op_name(op.id) + ": empty pre-operation set");
+    std::vector<OpId> parents;
+    for (const TriRef& t : op.pre) {
+      if (t.op >= op.id || t.index >= crmr.ops[t.op.value].fragment.size()) {
+        r.fail(op_name(op.id) + ": PreF names a triangle that does not precede it");
+        continue;
+      }
+      OpId& k = killers[t.op.value][t.index];
+      if (k.valid()) r.fail(op_name(op.id) + ": replaces a triangle already replaced by " + op_name(k));
+      k = op.id;
+      parents.push_back(t.op);
+    }
+    std::sort(parents.begin(), parents.end());
+    parents.erase(std::unique(parents.begin(), parents.end()), parents.end());
+    if (parents != op.parents) r.fail(op_name(op.id) + ": parents differ from those implied by PreF");
+    for (OpId p : parents) children[p.value].push_back(op.id);
+  }
+  for (std::size_t i = 0; i < crmr.ops.size(); ++i) {
+    const Op& op = crmr.ops[i];
+    if (children[i] != op.children) r.fail(op_name(op.id) + ": children differ from those implied by PreF");
+    for (std::size_t j = 0; j < op.fragment.size(); ++j) {
+      const FragmentTriangle& t = op.fragment[j];
+      const OpId k = killers[i][j];
+      const double expect = k.valid() ? crmr.ops[k.value].birth_res : 1.0;
+      if (t.killer != k) r.fail(op_name(op.id) + ": triangle " + std::to_string(j) + " names the wrong killer");
+      if (t.death_res != expect) r.fail(op_name(op.id) + ": triangle " + std::to_string(j) + " has the wrong death_res");
+      if (t.death_res < op.birth_res) r.fail(op_name(op.id) + ": a triangle dies before it is born");
+    }
+    check_op_local(crmr, op, r, vertex_owner);
+    if (r.failures > 200) return r;
+    check_geometry(crmr, op, r);
+  }
+  // M^0 and M^m tile the domain.
+  std::vector<TriRef> base, finest;
+  for (const Op& op : crmr.ops) {
+    for (std::uint32_t j = 0; j < op.fragment.size(); ++j) {
+      if (op.id == kBaseOp) base.push_back({op.id, j});
+      if (!op.fragment[j].killer.valid()) finest.push_back({op.id, j});
+    }
+  }
+  for (const auto& [label, set] : {std::pair{"M^0", &base}, std::pair{"M^m", &finest}}) {
+    InvariantReport t = check_tiling(crmr, *set);
+    for (const std::string& e : t.errors) r.fail(std::string(label) + ": " + e);
+    r.checked += t.checked;
+  }
+  return r;
+}
+
+InvariantReport check_tiling(const OpSource& source, std::span<const TriRef> triangles) {
+  InvariantReport r;
+  const CrmrInfo& info = source.info();
+  std::unordered_map<DirectedEdge, std::size_t, EdgeHash> edges;
+  std::unordered_map<std::uint64_t, GridPoint> pos;
+  std::unordered_set<TriRef> seen;
+  i128 area = 0;
+  for (const TriRef& ref : triangles) {
+    ++r.checked;
+    if (!seen.insert(ref).second) {
+      r.fail("triangle " + op_name(ref.op) + "/" + std::to_string(ref.index) + " appears twice");
+      continue;
+    }
+    const Op& op = source.op(ref.op);
+    const GridTri g = grid_tri(info, op, op.fragment.at(ref.index));
+    const std::int64_t a2 = orient(g.p[0], g.p[1], g.p[2]);
+    if (a2 <= 0) r.fail("triangle " + op_name(ref.op) + "/" + std::to_string(ref.index) + " is not counter-clockwise");
+    area += a2;
+    for (int k = 0; k < 3; ++k) {
+      pos[g.id[k].value] = g.p[k];
+      const DirectedEdge e{g.id[k].value, g.id[(k + 1) % 3].value};
+      if (!edges.emplace(e, 1).second) r.fail("directed edge " + std::to_string(e.a) + "-" + std::to_string(e.b) + " used twice (overlap)");
+    }
+  }
+  const i128 domain = i128(2) * (info.grid_width - 1) * (info.grid_height - 1);
+  if (area != domain) {
+    r.fail("triangle areas sum to " + std::to_string(double(area) / 2) + " grid cells, the domain has " +
+           std::to_string(double(domain) / 2));
+  }
+  for (const auto& [e, count] : edges) {
+    if (edges.count({e.b, e.a})) continue;
+    if (!on_domain_boundary(info, pos[e.a], pos[e.b])) {
+      // A T-junction shows here too: the long edge has no reverse (its other side is split).
+      r.fail("edge " + std::to_string(e.a) + "-" + std::to_string(e.b) +
+             " has one triangle but is not on the domain boundary (gap or T-junction)");
+    }
+  }
+  return r;
+}
+
+DelaunayReport check_delaunay(const OpSource& source, std::span<const TriRef> triangles) {
+  DelaunayReport rep;
+  const CrmrInfo& info = source.info();
+  struct Side {
+    TriRef tri;
+    GridTri g;
+    int k;
+  };
+  std::unordered_map<DirectedEdge, Side, EdgeHash> edges;
+  for (const TriRef& ref : triangles) {
+    const Op& op = source.op(ref.op);
+    const GridTri g = grid_tri(info, op, op.fragment.at(ref.index));
+    for (int k = 0; k < 3; ++k) edges[{g.id[k].value, g.id[(k + 1) % 3].value}] = {ref, g, k};
+  }
+  for (const auto& [e, s] : edges) {
+    if (e.a > e.b) continue;
+    auto it = edges.find({e.b, e.a});
+    if (it == edges.end()) continue;
+    ++rep.interior_edges;
+    const GridPoint opposite = it->second.g.p[(it->second.k + 2) % 3];
+    if (incircle(s.g.p[0], s.g.p[1], s.g.p[2], opposite) > 0) {
+      ++rep.non_delaunay_edges;
+      if (rep.examples.size() < 10) rep.examples.emplace_back(s.tri, it->second.tri);
+    }
+  }
+  return rep;
+}
+
+}  // namespace smr

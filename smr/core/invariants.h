@@ -1,0 +1,53 @@
+// Executable forms of the CRMR definitions (Brown 4.4.1, 4.5) and of the output properties of
+// selective refinement (Brown 5.1.4, 5.2.2; DESIGN.md section 8). Used by tests and `verify`.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "smr/core/crmr.h"
+
+namespace smr {
+
+struct InvariantReport {
+  std::vector<std::string> errors;  // empty = every invariant holds
+  std::uint64_t checked = 0;        // number of items examined
+  bool ok() const { return errors.empty(); }
+  void fail(std::string message);   // keeps the first 50 messages, counts the rest
+  std::uint64_t failures = 0;
+  std::string summary() const;
+};
+
+/// Validates a whole terrain CRMR: ids and ordering, non-decreasing birth_res, every op complete
+/// and minimal, PreF references and killers, death_res, parents/children derived from PreF (so the
+/// DAG is acyclic: parents precede children), Hypermesh neighbour and coarser-edge links, geometry
+/// (box, sphere, cone contain F and PreF) and ROI containment, M^0 and M^m tiling the domain.
+InvariantReport check_crmr(const Crmr& crmr);
+
+/// Grid coordinates of a terrain vertex (exact integers by construction).
+struct GridPoint {
+  std::int64_t x, y;
+  friend bool operator==(const GridPoint&, const GridPoint&) = default;
+};
+GridPoint to_grid(const CrmrInfo& info, const Vec3& p);
+
+/// Checks that `triangles` tile the terrain's rectangular domain (Brown Theorem 5.2.1): every
+/// triangle counter-clockwise, twice-areas sum exactly to the domain's, every interior edge shared
+/// by exactly two triangles with opposite orientation, every other edge on the domain boundary,
+/// and no vertex inside another triangle's edge (no T-junction). Void triangles count as tiles.
+InvariantReport check_tiling(const OpSource& source, std::span<const TriRef> triangles);
+
+struct DelaunayReport {
+  std::uint64_t interior_edges = 0;
+  std::uint64_t non_delaunay_edges = 0;  // opposite vertex strictly inside the circumcircle
+  std::vector<std::pair<TriRef, TriRef>> examples;  // up to 10 offending triangle pairs
+  double share() const {
+    return interior_edges == 0 ? 0.0 : double(non_delaunay_edges) / double(interior_edges);
+  }
+};
+/// Local Delaunay test on every interior edge (exact integer arithmetic on grid coordinates).
+DelaunayReport check_delaunay(const OpSource& source, std::span<const TriRef> triangles);
+
+}  // namespace smr

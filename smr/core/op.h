@@ -1,0 +1,87 @@
+// Refinement operations and their fragments: the CRMR's unit of storage (Brown 4.4.1, 4.5).
+//
+// An Op is self-contained: it names other ops only by OpId and other triangles only by TriRef,
+// and carries the positions of every vertex its fragment uses, so one op can be serialised and
+// paged in on its own (DESIGN.md section 3).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "smr/core/geometry.h"
+#include "smr/core/ids.h"
+
+namespace smr {
+
+struct Vertex {
+  VertexId id;
+  Vec3 p{0.0};
+  friend bool operator==(const Vertex&, const Vertex&) = default;
+};
+
+/// The coarser version of a fragment boundary edge (Brown 4.5.1, Hypermesh): the same geometric
+/// edge in the closest coarser fragment that contains it. `tri`/`edge` name one triangle of that
+/// fragment having the edge (on either side of it). Absent on the model boundary.
+struct EdgeRef {
+  TriRef tri;
+  std::uint8_t edge = 0;  // edge k of a triangle joins v[k] and v[(k + 1) % 3]
+  friend bool operator==(const EdgeRef&, const EdgeRef&) = default;
+};
+
+struct CoarserLink {
+  std::uint32_t tri = 0;  // triangle of this fragment
+  std::uint8_t edge = 0;  // its boundary edge
+  EdgeRef coarser;        // the edge's closest coarser version
+  friend bool operator==(const CoarserLink&, const CoarserLink&) = default;
+};
+
+/// A triangle of a fragment F(R).
+struct FragmentTriangle {
+  static constexpr std::int32_t kNoNeighbour = -1;
+  static constexpr std::uint8_t kVoid = 1;  // covers only "no data": never output
+
+  std::array<std::uint32_t, 3> v{};  // indices into Op::vertices, counter-clockwise
+  double death_res = 1.0;            // resolution at which it is replaced (1 if never)
+  OpId killer;                       // op whose PreF contains it; invalid if never replaced
+  std::array<std::int32_t, 3> nbr{kNoNeighbour, kNoNeighbour, kNoNeighbour};  // across edge k, in F
+  std::uint8_t flags = 0;
+
+  bool is_void() const { return (flags & kVoid) != 0; }
+  friend bool operator==(const FragmentTriangle&, const FragmentTriangle&) = default;
+};
+
+struct Op {
+  OpId id;
+  double birth_res = 0.0;  // resolution of M^{i-1} just before this op (Brown 4.4.2)
+  double error = 0.0;      // the error, in data units, that birth_res stands for
+
+  /// Every vertex used by the fragment. The first `new_vertex_count` are V(R^i), the vertices this
+  /// op introduces; the rest are positions copied from ancestors so the op is self-contained.
+  std::vector<Vertex> vertices;
+  std::uint32_t new_vertex_count = 0;
+
+  std::vector<FragmentTriangle> fragment;  // F(R^i)
+  std::vector<TriRef> pre;                 // PreF(R^i): triangles of parents' fragments it replaces
+  std::vector<CoarserLink> coarser;        // one per boundary edge of F that is not model boundary
+
+  std::vector<OpId> parents;   // sorted: ops whose fragments meet PreF (Brown 4.5.2)
+  std::vector<OpId> children;  // sorted: ops whose PreF meets this fragment
+
+  // Geometry for the RCF and the index. `box`, `sphere` and `cone` cover F(R^i) AND PreF(R^i), so
+  // one culling verdict serves both IsFiner and IsCompletelyFiner. `sphere` is centred at
+  // box.center(). `roi` = box united with the children's ROIs: it contains every descendant.
+  Box3 box;
+  Sphere sphere;
+  NormalCone cone;
+  Box3 roi;
+
+  const Vec3& position(const FragmentTriangle& t, int k) const { return vertices[t.v[k]].p; }
+  VertexId vertex_id(const FragmentTriangle& t, int k) const { return vertices[t.v[k]].id; }
+  /// The link of boundary edge `edge` of triangle `tri`, or nullptr (model boundary).
+  const CoarserLink* coarser_link(std::uint32_t tri, std::uint8_t edge) const;
+
+  friend bool operator==(const Op&, const Op&) = default;
+};
+
+}  // namespace smr

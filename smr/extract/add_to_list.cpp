@@ -1,0 +1,67 @@
+// Refinement operation extraction (Brown 5.1.1, Fig. 5.2; 5.2.1.1 for the reduced variant).
+// AddToList is run with an explicit stack; the set it reaches is the same fixed point.
+#include <algorithm>
+#include <unordered_map>
+#include <vector>
+
+#include "smr/extract/extract.h"
+
+namespace smr {
+
+namespace {
+
+// Caches IsFiner / IsCompletelyFiner per op: each is evaluated at most once per extraction.
+class RcfCache {
+ public:
+  RcfCache(const OpSource& s, const Rcf& r) : source_(s), rcf_(r) {}
+  bool finer(const Op& op) { return get(op, 0); }
+  bool completely_finer(const Op& op) { return get(op, 1); }
+
+ private:
+  bool get(const Op& op, int which) {
+    std::uint8_t& e = cache_[op.id.value];
+    const std::uint8_t known = std::uint8_t(1u << (2 * which)), value = std::uint8_t(2u << (2 * which));
+    if (!(e & known)) {
+      const bool v = which == 0 ? rcf_.is_finer(op, source_.info()) : rcf_.is_completely_finer(op, source_.info());
+      e = std::uint8_t(e | known | (v ? value : 0));
+    }
+    return (e & value) != 0;
+  }
+  const OpSource& source_;
+  const Rcf& rcf_;
+  std::unordered_map<std::uint64_t, std::uint8_t> cache_;
+};
+
+std::vector<OpId> traverse(const OpSource& source, const Rcf& rcf, bool with_ancestors) {
+  RcfCache cache(source, rcf);
+  std::unordered_map<std::uint64_t, bool> in_x;
+  std::vector<OpId> x, stack{kBaseOp};
+  while (!stack.empty()) {
+    const OpId id = stack.back();
+    stack.pop_back();
+    if (!in_x.emplace(id.value, true).second) continue;
+    x.push_back(id);
+    const Op& op = source.op(id);
+    if (!cache.finer(op)) {
+      for (OpId c : op.children) {
+        if (!in_x.count(c.value) && !cache.completely_finer(source.op(c))) stack.push_back(c);
+      }
+    }
+    if (with_ancestors) {
+      for (OpId p : op.parents) {
+        if (!in_x.count(p.value)) stack.push_back(p);
+      }
+    }
+  }
+  std::sort(x.begin(), x.end(), std::greater<>());
+  return x;
+}
+
+}  // namespace
+
+std::vector<OpId> add_to_list(const OpSource& source, const Rcf& rcf) { return traverse(source, rcf, true); }
+std::vector<OpId> add_to_list_reduced(const OpSource& source, const Rcf& rcf) {
+  return traverse(source, rcf, false);
+}
+
+}  // namespace smr

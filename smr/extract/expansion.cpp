@@ -1,0 +1,347 @@
+// Surface expansion (Brown 5.1.2: Fig. 5.6 Infill, Fig. 5.10 PerformExpansion; 5.2.1.2 and
+// Fig. 5.14 for reduced extraction). An advancing front of directed edges, each belonging to one
+// fragment's version of the edge, with the expanded mesh on its left. Ops are visited finest
+// first; a fragment is expanded completely when it is a starting point (no front edge on it and
+// no child encountered, plus, for reduced extraction, a domain disjoint from the expanded mesh);
+// otherwise only its triangles beyond the front are. A front edge with nothing beyond it in its
+// fragment moves to the edge's closest coarser version (the Hypermesh link).
+//
+// Per op, front edges wait on a stack; the edge that continues the current triangle fan is pushed
+// last so it is expanded next (Brown 5.1.2.1), and fans are counted as expanded.
+#include "smr/extract/expansion.h"
+
+#include <algorithm>
+#include <cmath>
+#include <unordered_map>
+#include <unordered_set>
+
+#include "smr/core/invariants.h"
+#include "storage/error.h"
+
+namespace smr {
+
+namespace {
+
+struct FrontKey {
+  std::uint64_t op, u, v;
+  friend bool operator==(const FrontKey&, const FrontKey&) = default;
+};
+struct FrontKeyHash {
+  std::size_t operator()(const FrontKey& k) const {
+    return mix64(k.op * 0x9E3779B97F4A7C15ULL ^ mix64(k.u * 0xC2B2AE3D27D4EB4FULL ^ k.v));
+  }
+};
+struct FrontEntry {
+  std::uint32_t tri;  // a triangle of the op's fragment having the edge
+  std::uint8_t edge;
+};
+
+// Expanded triangles' xy-domains, for reduced extraction's starting-point domain test.
+class DomainIndex {
+ public:
+  explicit DomainIndex(const CrmrInfo& info)
+      : span_{std::max<std::int64_t>(1, info.grid_width - 1), std::max<std::int64_t>(1, info.grid_height - 1)} {}
+  void add(const std::array<GridPoint, 3>& t) {
+    const std::size_t id = tris_.size();
+    tris_.push_back(t);
+    for_cells(t, [&](std::size_t cell) {
+      cells_[cell].push_back(id);
+      return false;
+    });
+  }
+  bool overlaps(const std::array<GridPoint, 3>& t) const {
+    return for_cells(t, [&](std::size_t cell) {
+      auto it = cells_.find(cell);
+      if (it == cells_.end()) return false;
+      for (std::size_t id : it->second) {
+        if (interiors_overlap(tris_[id], t)) return true;
+      }
+      return false;
+    });
+  }
+
+ private:
+  static std::int64_t orient(const GridPoint& a, const GridPoint& b, const GridPoint& c) {
+    return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+  }
+  static bool interiors_overlap(const std::array<GridPoint, 3>& a, const std::array<GridPoint, 3>& b) {
+    auto separated = [](const std::array<GridPoint, 3>& s, const std::array<GridPoint, 3>& o) {
+      for (int k = 0; k < 3; ++k) {
+        bool out = true;
+        for (int j = 0; j < 3 && out; ++j) out = orient(s[k], s[(k + 1) % 3], o[j]) <= 0;
+        if (out) return true;
+      }
+      return false;
+    };
+    return !separated(a, b) && !separated(b, a);
+  }
+  template <class F>
+  bool for_cells(const std::array<GridPoint, 3>& t, F&& f) const {
+    std::int64_t x0 = t[0].x, x1 = t[0].x, y0 = t[0].y, y1 = t[0].y;
+    for (const GridPoint& p : t) {
+      x0 = std::min(x0, p.x), x1 = std::max(x1, p.x), y0 = std::min(y0, p.y), y1 = std::max(y1, p.y);
+    }
+    const std::int64_t c0 = cell_of(x0, span_.x), c1 = cell_of(x1, span_.x);
+    const std::int64_t r0 = cell_of(y0, span_.y), r1 = cell_of(y1, span_.y);
+    for (std::int64_t r = r0; r <= r1; ++r) {
+      for (std::int64_t c = c0; c <= c1; ++c) {
+        if (f(std::size_t(r * kCells + c))) return true;
+      }
+    }
+    return false;
+  }
+  static std::int64_t cell_of(std::int64_t v, std::int64_t span) {
+    return std::clamp<std::int64_t>(v * kCells / span, 0, kCells - 1);
+  }
+  static constexpr std::int64_t kCells = 128;
+  GridPoint span_;
+  std::vector<std::array<GridPoint, 3>> tris_;
+  std::unordered_map<std::size_t, std::vector<std::size_t>> cells_;
+};
+
+class Expander {
+ public:
+  Expander(const OpSource& source, bool reduced, const ExpansionOptions& options)
+      : source_(source), reduced_(reduced), options_(options) {
+    if (reduced_) domain_ = std::make_unique<DomainIndex>(source.info());
+  }
+
+  Extraction run(std::span<const OpId> x) {
+    for (OpId id : x) {
+      if (in_x_.insert(id.value).second) queue_.push_back(id.value);
+    }
+    std::make_heap(queue_.begin(), queue_.end());
+    out_.stats.x = in_x_.size();
+    while (!queue_.empty() && !budget_reached()) {
+      std::pop_heap(queue_.begin(), queue_.end());
+      const OpId id{queue_.back()};
+      queue_.pop_back();
+      infill(id);
+      ++out_.stats.ops_visited;
+    }
+    out_.stats.x_plus = in_x_.size();
+    for (std::uint64_t v : in_x_) out_.x.push_back(OpId{v});
+    std::sort(out_.x.begin(), out_.x.end(), std::greater<>());
+    if (!budget_reached() && !front_.empty()) {
+      throw_internal("surface expansion ended with " + std::to_string(front_.size()) +
+                     " edges left on the active front");
+    }
+    if (anomalies_ != 0) {
+      throw_internal("surface expansion met " + std::to_string(anomalies_) +
+                     " inconsistent front edges (the CRMR violates Brown 4.4.1)");
+    }
+    return std::move(out_);
+  }
+
+ private:
+  bool budget_reached() const {
+    return options_.max_triangles != 0 && out_.triangles.size() >= options_.max_triangles;
+  }
+
+  // Infill (Fig. 5.6).
+  void infill(OpId id) {
+    const Op& op = source_.op(id);
+    std::vector<FrontKey> stack;
+    if (auto it = stacks_.find(id.value); it != stacks_.end()) {
+      stack = std::move(it->second);
+      stacks_.erase(it);
+    }
+    expanded_.assign(op.fragment.size(), 0);
+    bool on_front = false;
+    for (const FrontKey& k : stack) on_front |= front_.count(k) != 0;
+    bool starting = !on_front;
+    if (starting) {
+      for (OpId c : op.children) {
+        if (in_x_.count(c.value)) {
+          starting = false;
+          break;
+        }
+      }
+    }
+    if (starting && reduced_) {
+      ++out_.stats.domain_tests;
+      for (const FragmentTriangle& t : op.fragment) {
+        if (domain_->overlaps(grid_triangle(op, t))) {
+          starting = false;
+          break;
+        }
+      }
+    }
+    if (starting) {
+      ++out_.stats.starting_points;
+      for (std::uint32_t i = 0; i < op.fragment.size() && !budget_reached(); ++i) {
+        if (expanded_[i]) continue;
+        emit(op, i, -1, stack);
+        drain(op, stack);
+      }
+    } else {
+      drain(op, stack);
+    }
+  }
+
+  void drain(const Op& op, std::vector<FrontKey>& stack) {
+    while (!stack.empty() && !budget_reached()) {
+      const FrontKey key = stack.back();
+      stack.pop_back();
+      auto it = front_.find(key);
+      if (it == front_.end()) continue;  // merged away earlier
+      const FrontEntry entry = it->second;
+      front_.erase(it);
+      if (front_.erase(FrontKey{key.op, key.v, key.u}) != 0) continue;  // both sides expanded: merge
+      perform_expansion(op, key, entry, stack);
+    }
+  }
+
+  // PerformExpansion (Fig. 5.10 / 5.14) on the region to the right of front edge u->v.
+  void perform_expansion(const Op& op, const FrontKey& key, const FrontEntry& entry, std::vector<FrontKey>& stack) {
+    const FragmentTriangle& t = op.fragment[entry.tri];
+    const std::uint64_t a = op.vertex_id(t, entry.edge).value;
+    const std::uint64_t b = op.vertex_id(t, (entry.edge + 1) % 3).value;
+    std::int64_t beyond = -1;  // the triangle of F with counter-clockwise edge v->u
+    int beyond_edge = 0;
+    std::uint32_t left = entry.tri;  // the triangle of F with counter-clockwise edge u->v
+    std::uint8_t left_edge = entry.edge;
+    if (a == key.v && b == key.u) {
+      beyond = entry.tri;
+      beyond_edge = entry.edge;
+    } else if (t.nbr[entry.edge] >= 0) {
+      beyond = t.nbr[entry.edge];
+      beyond_edge = edge_of(op, op.fragment[beyond], key.v, key.u);
+    }
+    if (beyond >= 0) {
+      if (expanded_[beyond]) {
+        ++anomalies_;
+        return;
+      }
+      emit(op, static_cast<std::uint32_t>(beyond), beyond_edge, stack);
+      return;
+    }
+    // Nothing beyond in this fragment: hand the edge to its closest coarser version.
+    const CoarserLink* link = op.coarser_link(left, left_edge);
+    if (link == nullptr) return;  // model boundary
+    EdgeRef target = link->coarser;
+    if (!reduced_) {
+      while (!in_x_.count(target.tri.op.value)) {
+        const Op& q = source_.op(target.tri.op);
+        const CoarserLink* next = q.coarser_link(target.tri.index, target.edge);
+        if (next == nullptr) {
+          ++anomalies_;
+          return;
+        }
+        target = next->coarser;
+      }
+    } else if (in_x_.insert(target.tri.op.value).second) {
+      queue_.push_back(target.tri.op.value);
+      std::push_heap(queue_.begin(), queue_.end());
+    }
+    const FrontKey moved{target.tri.op.value, key.u, key.v};
+    if (!front_.emplace(moved, FrontEntry{target.tri.index, target.edge}).second) {
+      ++anomalies_;
+      return;
+    }
+    stacks_[moved.op].push_back(moved);
+  }
+
+  static int edge_of(const Op& op, const FragmentTriangle& t, std::uint64_t u, std::uint64_t v) {
+    for (int k = 0; k < 3; ++k) {
+      if (op.vertex_id(t, k).value == u && op.vertex_id(t, (k + 1) % 3).value == v) return k;
+    }
+    throw_internal("surface expansion: neighbour link without a shared edge in op " + std::to_string(op.id.value));
+  }
+
+  // Adds triangle i of F(op) to the mesh and its other edges to the front. entry_edge is the edge
+  // it was entered through (-1 for a starting point, which puts all three edges on the front).
+  void emit(const Op& op, std::uint32_t i, int entry_edge, std::vector<FrontKey>& stack) {
+    const FragmentTriangle& t = op.fragment[i];
+    expanded_[i] = 1;
+    out_.triangles.push_back({op.id, i});
+    if (t.is_void()) ++out_.stats.void_triangles;
+    track_fan(op, i, entry_edge);
+    if (reduced_) domain_->add(grid_triangle(op, t));
+    // Lprev first, Lnext last: Lnext is popped next and continues the fan.
+    std::array<int, 3> ks{0, 1, 2};
+    int count = 3;
+    if (entry_edge >= 0) {
+      ks = {(entry_edge + 2) % 3, (entry_edge + 1) % 3, 0};
+      count = 2;
+    }
+    for (int n = 0; n < count; ++n) {
+      const int k = ks[n];
+      const FrontKey key{op.id.value, op.vertex_id(t, k).value, op.vertex_id(t, (k + 1) % 3).value};
+      if (!front_.emplace(key, FrontEntry{i, static_cast<std::uint8_t>(k)}).second) {
+        ++anomalies_;
+        continue;
+      }
+      stack.push_back(key);
+    }
+  }
+
+  void track_fan(const Op& op, std::uint32_t i, int entry_edge) {
+    const FragmentTriangle& t = op.fragment[i];
+    bool continues = false;
+    if (entry_edge >= 0 && fan_op_ == op.id && t.nbr[entry_edge] == static_cast<std::int32_t>(fan_last_)) {
+      const std::uint64_t u = op.vertex_id(t, entry_edge).value;
+      const std::uint64_t v = op.vertex_id(t, (entry_edge + 1) % 3).value;
+      if (fan_len_ == 1) {
+        fan_apex_ = {u, v};
+        fan_apex_n_ = 2;
+        continues = true;
+      } else {
+        std::array<std::uint64_t, 2> keep{};
+        int n = 0;
+        for (int j = 0; j < fan_apex_n_; ++j) {
+          if (fan_apex_[j] == u || fan_apex_[j] == v) keep[n++] = fan_apex_[j];
+        }
+        if (n > 0) {
+          fan_apex_ = keep;
+          fan_apex_n_ = n;
+          continues = true;
+        }
+      }
+    }
+    if (continues) {
+      ++fan_len_;
+    } else {
+      out_.fan_starts.push_back(static_cast<std::uint32_t>(out_.triangles.size() - 1));
+      ++out_.stats.fans;
+      fan_len_ = 1;
+      fan_apex_n_ = 0;
+    }
+    fan_op_ = op.id;
+    fan_last_ = i;
+  }
+
+  std::array<GridPoint, 3> grid_triangle(const Op& op, const FragmentTriangle& t) const {
+    return {to_grid(source_.info(), op.position(t, 0)), to_grid(source_.info(), op.position(t, 1)),
+            to_grid(source_.info(), op.position(t, 2))};
+  }
+
+  const OpSource& source_;
+  const bool reduced_;
+  const ExpansionOptions options_;
+  Extraction out_;
+  std::unordered_set<std::uint64_t> in_x_;
+  std::vector<std::uint64_t> queue_;  // max-heap of op ids: finest first
+  std::unordered_map<FrontKey, FrontEntry, FrontKeyHash> front_;
+  std::unordered_map<std::uint64_t, std::vector<FrontKey>> stacks_;
+  std::vector<std::uint8_t> expanded_;
+  std::unique_ptr<DomainIndex> domain_;
+  std::uint64_t anomalies_ = 0;
+  OpId fan_op_;
+  std::uint32_t fan_last_ = 0;
+  std::uint64_t fan_len_ = 0;
+  std::array<std::uint64_t, 2> fan_apex_{};
+  int fan_apex_n_ = 0;
+};
+
+}  // namespace
+
+Extraction run_expansion(const OpSource& source, std::span<const OpId> x, bool reduced,
+                         const ExpansionOptions& options) {
+  Expander e(source, reduced, options);
+  Extraction out = e.run(x);
+  out.stats.triangles = out.triangles.size();
+  return out;
+}
+
+}  // namespace smr

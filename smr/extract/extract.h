@@ -1,0 +1,67 @@
+// Selective mesh refinement (Brown ch. 5): the minimal surface algorithm (5.1: AddToList, then
+// surface expansion by Infill/PerformExpansion as an advancing front, highest resolution first)
+// and reduced extraction for 2.5-D (5.2: X from Eq. 5.5, coarser ops pulled in by the expansion,
+// starting points confirmed by a domain test).
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "smr/core/crmr.h"
+#include "smr/core/mesh.h"
+#include "smr/rcf/rcf.h"
+
+namespace smr {
+
+struct ExtractStats {
+  std::uint64_t x = 0;          // |X| after refinement operation extraction
+  std::uint64_t x_plus = 0;     // |X+| after surface expansion (reduced extraction; = |X| otherwise)
+  std::uint64_t ops_visited = 0;
+  std::uint64_t triangles = 0;  // expanded triangles, void ones included
+  std::uint64_t void_triangles = 0;
+  std::uint64_t fans = 0;
+  std::uint64_t starting_points = 0;
+  std::uint64_t domain_tests = 0;  // reduced extraction's geometric starting-point tests
+  double triangles_per_fan() const { return fans == 0 ? 0.0 : double(triangles) / double(fans); }
+  double extract_seconds = 0.0;  // refinement operation extraction
+  double expand_seconds = 0.0;   // surface expansion
+};
+
+struct Extraction {
+  std::vector<OpId> x;                  // the extracted ops (X, or X+), descending
+  std::vector<TriRef> triangles;        // in expansion order
+  std::vector<std::uint32_t> fan_starts;  // index in `triangles` where each triangle fan begins
+  ExtractStats stats;
+};
+
+struct ExpansionOptions {
+  /// Stop the expansion after this many triangles (0 = no limit). The part expanded first is the
+  /// highest-resolution part (Brown 5.1.2); a stopped expansion does not tile the domain.
+  std::uint64_t max_triangles = 0;
+};
+
+/// Brown 5.1.1 (Fig. 5.2): the smallest X containing R^0, the children of its non-finer members
+/// that are not completely finer, and all ancestors of its members. Sorted descending.
+std::vector<OpId> add_to_list(const OpSource& source, const Rcf& rcf);
+
+/// Brown Eq. 5.5: as add_to_list without the ancestor closure (reduced extraction).
+std::vector<OpId> add_to_list_reduced(const OpSource& source, const Rcf& rcf);
+
+/// Minimal surface SMR (Brown 5.1).
+Extraction extract_minimal_surface(const OpSource& source, const Rcf& rcf, const ExpansionOptions& options = {});
+
+/// Reduced extraction SMR (Brown 5.2), 2.5-D only.
+Extraction extract_reduced(const OpSource& source, const Rcf& rcf, const ExpansionOptions& options = {});
+
+/// Surface expansion of an ancestor-closed X (Brown 5.1.2). `x` in any order.
+Extraction expand(const OpSource& source, std::span<const OpId> x, const ExpansionOptions& options = {});
+
+/// The set formula of Lemma 5.1.1: union of F(R) minus union of PreF(R) over R in X. Sorted.
+std::vector<TriRef> set_formula(const OpSource& source, std::span<const OpId> x);
+
+/// An indexed mesh of the given triangles, vertices shared by id; void triangles are dropped
+/// unless keep_void. triangle_values holds each triangle's death_res.
+TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles, bool keep_void = false);
+
+}  // namespace smr

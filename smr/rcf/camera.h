@@ -1,0 +1,57 @@
+// A pinhole camera: view frustum planes, projection to pixels, and the geometric bounds the RCF
+// needs (Brown 4.6.1: bounding-sphere frustum test, normal-cone back-face test; 4.6.3 projection).
+#pragma once
+
+#include <array>
+#include <optional>
+
+#include "smr/core/geometry.h"
+
+namespace smr {
+
+struct Plane {
+  Vec3 n{0.0};  // unit normal pointing into the frustum
+  double d = 0.0;
+  double signed_distance(const Vec3& p) const { return n.x * p.x + n.y * p.y + n.z * p.z + d; }
+};
+
+struct Camera {
+  Vec3 eye{0.0};
+  Vec3 target{0.0, 1.0, 0.0};
+  Vec3 up{0.0, 0.0, 1.0};
+  double fov_y_deg = 60.0;  // vertical field of view
+  int viewport_w = 1024, viewport_h = 768;
+  double near_distance = 0.0;  // along the view direction
+  double far_distance = 0.0;   // 0 = no far plane
+
+  /// Throws smr::Error (naming the parameter) on a degenerate camera.
+  void validate() const;
+
+  Vec3 forward() const;
+  Vec3 right() const;
+  Vec3 true_up() const;
+  /// Pixels per unit of tan(angle) from the view axis: (viewport_h / 2) / tan(fov_y / 2).
+  double focal_px() const;
+  double tan_half_x() const;
+  double tan_half_y() const;
+  /// Pixel coordinates (x right, y down) of p, or nullopt when p is not in front of the eye.
+  std::optional<Vec2> project(const Vec3& p) const;
+  /// Frustum planes: left, right, bottom, top, near, and far when far_distance > 0.
+  std::array<Plane, 6> planes() const;
+  int plane_count() const { return far_distance > 0.0 ? 6 : 5; }
+};
+
+/// True when the whole sphere lies outside one frustum plane.
+bool sphere_outside(const Camera& cam, const Sphere& s);
+/// True when all eight corners of the box lie outside one frustum plane.
+bool box_outside(const Camera& cam, const Box3& b);
+/// True when every normal of the cone faces away from the eye at every point of the sphere:
+/// angle(axis, c - eye) + cone half-angle + asin(r / |c - eye|) < pi/2 (Hoppe 97's test, exact).
+bool backfacing(const Camera& cam, const Sphere& s, const NormalCone& cone);
+/// Minimum distance from the eye to the box (0 when the eye is inside).
+double distance_to_box(const Vec3& eye, const Box3& b);
+/// Upper bound of sin(angle between `dir` = +z and p - eye) over points p of the box: how much of
+/// a vertical error can face the viewer. Monotone: a larger box never gives a smaller bound.
+double max_sin_vertical(const Vec3& eye, const Box3& b);
+
+}  // namespace smr

@@ -1,0 +1,151 @@
+// Brown 4.6: RCF composition and the frustum, back-face, object- and screen-space components.
+#include "smr/rcf/rcf.h"
+
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include <glm/geometric.hpp>
+
+namespace smr {
+
+Box3 triangle_box(const Op& op, const FragmentTriangle& t) {
+  Box3 b;
+  for (int k = 0; k < 3; ++k) b.add(op.position(t, k));
+  return b;
+}
+
+// ---- culling ----
+bool FrustumCulling::culls(const Op& op) const {
+  return sphere_outside(cam_, op.sphere) || box_outside(cam_, op.box);
+}
+
+// ---- object space ----
+std::string ObjectSpaceCriterion::describe() const {
+  std::string s = "object-space g = max(";
+  for (std::size_t i = 0; i < g_.terms().size(); ++i) s += (i ? ", " : "") + g_.terms()[i]->describe();
+  return s + ")";
+}
+
+bool ObjectSpaceCriterion::fragment_satisfies(const Op& op, const CrmrInfo&) const {
+  for (const FragmentTriangle& t : op.fragment) {
+    if (t.is_void()) continue;
+    const double g = g_.max_over_triangle(xy(op.position(t, 0)), xy(op.position(t, 1)), xy(op.position(t, 2)));
+    if (t.death_res < g) return false;
+  }
+  return true;
+}
+
+bool ObjectSpaceCriterion::pre_satisfies(const Op& op, const CrmrInfo&) const {
+  // D(PreF) = D(F): evaluate g over F's triangles (void ones too: they are part of the domain of
+  // PreF, whose triangles may not be void).
+  for (const FragmentTriangle& t : op.fragment) {
+    const double g = g_.max_over_triangle(xy(op.position(t, 0)), xy(op.position(t, 1)), xy(op.position(t, 2)));
+    if (op.birth_res < g) return false;
+  }
+  return true;
+}
+
+bool ObjectSpaceCriterion::region_satisfies(const Box3& box, double min_birth_res, const CrmrInfo&) const {
+  return min_birth_res >= g_.max_over_rect(xy(box.lo), xy(box.hi));
+}
+
+// ---- screen space ----
+std::string ScreenSpaceCriterion::describe() const {
+  std::ostringstream os;
+  os << "screen-space tau=" << tau_ << "px";
+  if (aoi_) os << " (" << aoi_->pixel_error << "px within " << aoi_->radius_px << "px of " << aoi_->center_px.x << ","
+               << aoi_->center_px.y << ")";
+  return os.str();
+}
+
+double ScreenSpaceCriterion::pixel_error_bound(double error, const Box3& region) const {
+  if (error <= 0.0) return 0.0;
+  const double dist = distance_to_box(cam_.eye, region);
+  if (dist <= 0.0) return std::numeric_limits<double>::infinity();
+  const double s = vertical_ ? max_sin_vertical(cam_.eye, region) : 1.0;
+  return error * s * cam_.focal_px() / dist;
+}
+
+double ScreenSpaceCriterion::tolerance_at(const Vec2& pixel) const {
+  if (aoi_ && glm::length(pixel - aoi_->center_px) <= aoi_->radius_px) return std::min(tau_, aoi_->pixel_error);
+  return tau_;
+}
+
+double ScreenSpaceCriterion::tolerance(const Box3& region) const {
+  if (!aoi_ || aoi_->pixel_error >= tau_) return tau_;
+  const double tau_min = std::min(tau_, aoi_->pixel_error);
+  Vec2 lo{std::numeric_limits<double>::infinity()}, hi{-std::numeric_limits<double>::infinity()};
+  for (int i = 0; i < 8; ++i) {
+    const Vec3 corner{(i & 1) ? region.hi.x : region.lo.x, (i & 2) ? region.hi.y : region.lo.y,
+                      (i & 4) ? region.hi.z : region.lo.z};
+    const auto p = cam_.project(corner);
+    if (!p) return tau_min;  // part of the region is beside or behind the eye
+    lo = glm::min(lo, *p);
+    hi = glm::max(hi, *p);
+  }
+  // The projected region lies in the projection of the box's corners' convex hull, which lies in
+  // [lo, hi] since projection maps the in-front part of a convex set to a convex set.
+  return point_rect_distance2d(aoi_->center_px, lo, hi) <= aoi_->radius_px ? tau_min : tau_;
+}
+
+bool ScreenSpaceCriterion::fragment_satisfies(const Op& op, const CrmrInfo& info) const {
+  for (const FragmentTriangle& t : op.fragment) {
+    if (t.is_void()) continue;
+    const Box3 b = triangle_box(op, t);
+    if (pixel_error_bound(error_at(info, t.death_res), b) > tolerance(b)) return false;
+  }
+  return true;
+}
+
+bool ScreenSpaceCriterion::pre_satisfies(const Op& op, const CrmrInfo& info) const {
+  return pixel_error_bound(error_at(info, op.birth_res), op.box) <= tolerance(op.box);
+}
+
+bool ScreenSpaceCriterion::region_satisfies(const Box3& box, double min_birth_res, const CrmrInfo& info) const {
+  return pixel_error_bound(error_at(info, min_birth_res), box) <= tolerance(box);
+}
+
+// ---- composition ----
+bool Rcf::culled(const Op& op) const {
+  for (const auto& c : culling_) {
+    if (c->culls(op)) return true;
+  }
+  return false;
+}
+
+bool Rcf::is_finer(const Op& op, const CrmrInfo& info) const {
+  if (culled(op)) return true;
+  for (const auto& s : similarity_) {
+    if (!s->fragment_satisfies(op, info)) return false;
+  }
+  return true;
+}
+
+bool Rcf::is_completely_finer(const Op& op, const CrmrInfo& info) const {
+  if (op.id == kBaseOp) return false;
+  if (culled(op)) return true;
+  for (const auto& s : similarity_) {
+    if (!s->pre_satisfies(op, info)) return false;
+  }
+  return true;
+}
+
+bool Rcf::region_completely_finer(const Box3& box, double min_birth_res, const CrmrInfo& info) const {
+  for (const auto& c : culling_) {
+    if (c->culls_region(box)) return true;
+  }
+  for (const auto& s : similarity_) {
+    if (!s->region_satisfies(box, min_birth_res, info)) return false;
+  }
+  return true;
+}
+
+std::string Rcf::describe() const {
+  std::string s;
+  for (const auto& c : culling_) s += (s.empty() ? "" : "; ") + c->describe();
+  for (const auto& c : similarity_) s += (s.empty() ? "" : "; ") + c->describe();
+  return s.empty() ? "coarsest (no criterion)" : s;
+}
+
+}  // namespace smr

@@ -1,0 +1,144 @@
+// The Resolution Control Function (Brown 4.6): an oracle telling whether a refinement operation
+// is finer (its fragment F satisfies the RCF) or completely finer (its pre-operation set PreF
+// already does) than the required resolution. Composed of culling components (view frustum,
+// back-face) and similarity components (object-space g, screen-space tolerance tau), as in
+// Brown's Fig. 4.19:
+//   IsFiner(R)           = culled(R) or every similarity component accepts F(R)
+//   IsCompletelyFiner(R) = R != R^0 and (culled(R) or every component accepts PreF(R))
+// Culling is decided on the op's box/sphere/cone, which cover F and PreF, so a culled op's PreF
+// triangles are culled too and Theorem 5.1.1 holds triangle by triangle.
+// Every component also answers conservatively for an index entry (a box holding the ROIs of many
+// ops, with a minimum birth_res): true only if every such op is completely finer.
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "smr/core/crmr.h"
+#include "smr/rcf/camera.h"
+#include "smr/rcf/object_space.h"
+
+namespace smr {
+
+class CullingComponent {
+ public:
+  virtual ~CullingComponent() = default;
+  virtual std::string describe() const = 0;
+  /// True when F(op) and PreF(op) are invisible.
+  virtual bool culls(const Op& op) const = 0;
+  /// Conservative: true only if every op whose box lies inside `box` is culled.
+  virtual bool culls_region(const Box3& box) const = 0;
+};
+
+class SimilarityComponent {
+ public:
+  virtual ~SimilarityComponent() = default;
+  virtual std::string describe() const = 0;
+  /// Every non-void triangle t of F(op) meets the criterion at death_res(t).
+  virtual bool fragment_satisfies(const Op& op, const CrmrInfo& info) const = 0;
+  /// The region of PreF(op) meets the criterion at birth_res(op).
+  virtual bool pre_satisfies(const Op& op, const CrmrInfo& info) const = 0;
+  /// Conservative: true only if pre_satisfies for every op with box inside `box` and
+  /// birth_res >= min_birth_res.
+  virtual bool region_satisfies(const Box3& box, double min_birth_res, const CrmrInfo& info) const = 0;
+};
+
+class FrustumCulling final : public CullingComponent {
+ public:
+  explicit FrustumCulling(Camera cam) : cam_(std::move(cam)) {}
+  std::string describe() const override { return "frustum-culling"; }
+  bool culls(const Op& op) const override;
+  bool culls_region(const Box3& box) const override { return box_outside(cam_, box); }
+
+ private:
+  Camera cam_;
+};
+
+class BackfaceCulling final : public CullingComponent {
+ public:
+  explicit BackfaceCulling(Camera cam) : cam_(std::move(cam)) {}
+  std::string describe() const override { return "backface-culling"; }
+  bool culls(const Op& op) const override { return backfacing(cam_, op.sphere, op.cone); }
+  bool culls_region(const Box3&) const override { return false; }  // no normals for a region
+
+ private:
+  Camera cam_;
+};
+
+/// Brown 4.6.2: t satisfies g when death_res(t) >= g(p) for every p in its domain D(t); PreF(R)
+/// satisfies g when birth_res(R) >= g(p) on D(PreF(R)) = D(F(R)) (2.5-D ops are complete).
+class ObjectSpaceCriterion final : public SimilarityComponent {
+ public:
+  explicit ObjectSpaceCriterion(ObjectSpaceFunction g) : g_(std::move(g)) {}
+  std::string describe() const override;
+  bool fragment_satisfies(const Op& op, const CrmrInfo& info) const override;
+  bool pre_satisfies(const Op& op, const CrmrInfo& info) const override;
+  bool region_satisfies(const Box3& box, double min_birth_res, const CrmrInfo& info) const override;
+  const ObjectSpaceFunction& function() const { return g_; }
+
+ private:
+  ObjectSpaceFunction g_;
+};
+
+/// A screen-space area of interest: inside the disc (pixels) the tolerance is `pixel_error`.
+struct ScreenAoi {
+  Vec2 center_px{0.0};
+  double radius_px = 0.0;
+  double pixel_error = 0.5;
+};
+
+/// Brown 4.6.3 after Hoppe 97 and Lindstrom: the projected size of a region's error must not
+/// exceed tau(screen position) pixels. For a region B (a box) and error e (data units):
+///   pixels(B, e) = e * s(B) * focal_px / dist(eye, B)
+/// where dist is the minimum distance from the eye to B and s(B) bounds the sine of the angle
+/// between the error direction (vertical for terrain) and the view ray over B (1 for 3-D).
+/// Both are monotone in B, so a bound on a box bounds every region inside it. tau(B) is the
+/// smallest tolerance of any screen position B may project to.
+class ScreenSpaceCriterion final : public SimilarityComponent {
+ public:
+  ScreenSpaceCriterion(Camera cam, double pixel_error, std::optional<ScreenAoi> aoi, bool vertical_error)
+      : cam_(std::move(cam)), tau_(pixel_error), aoi_(aoi), vertical_(vertical_error) {}
+  std::string describe() const override;
+  bool fragment_satisfies(const Op& op, const CrmrInfo& info) const override;
+  bool pre_satisfies(const Op& op, const CrmrInfo& info) const override;
+  bool region_satisfies(const Box3& box, double min_birth_res, const CrmrInfo& info) const override;
+
+  double pixel_error_bound(double error, const Box3& region) const;
+  double tolerance(const Box3& region) const;
+  double tolerance_at(const Vec2& pixel) const;
+  const Camera& camera() const { return cam_; }
+
+ private:
+  Camera cam_;
+  double tau_;
+  std::optional<ScreenAoi> aoi_;
+  bool vertical_;
+};
+
+class Rcf {
+ public:
+  void add(std::shared_ptr<const CullingComponent> c) { culling_.push_back(std::move(c)); }
+  void add(std::shared_ptr<const SimilarityComponent> s) { similarity_.push_back(std::move(s)); }
+
+  bool culled(const Op& op) const;
+  bool is_finer(const Op& op, const CrmrInfo& info) const;
+  bool is_completely_finer(const Op& op, const CrmrInfo& info) const;
+  /// Conservative test for an index entry: true only if every op whose box lies in `box` and whose
+  /// birth_res >= min_birth_res is completely finer than the RCF.
+  bool region_completely_finer(const Box3& box, double min_birth_res, const CrmrInfo& info) const;
+
+  const std::vector<std::shared_ptr<const CullingComponent>>& culling() const { return culling_; }
+  const std::vector<std::shared_ptr<const SimilarityComponent>>& similarity() const { return similarity_; }
+  std::string describe() const;
+
+ private:
+  std::vector<std::shared_ptr<const CullingComponent>> culling_;
+  std::vector<std::shared_ptr<const SimilarityComponent>> similarity_;
+};
+
+/// Box of one fragment triangle.
+Box3 triangle_box(const Op& op, const FragmentTriangle& t);
+
+}  // namespace smr

@@ -1,0 +1,42 @@
+// A user's description of an RCF (what the CLI's options fill in) and the factory that turns it
+// into components. Defaults: with no similarity criterion at all, g = 1 everywhere (the finest
+// mesh); a camera enables frustum and back-face culling unless `cull` is false.
+#pragma once
+
+#include <optional>
+#include <utility>
+#include <vector>
+
+#include "smr/core/crmr.h"
+#include "smr/rcf/rcf.h"
+
+namespace smr {
+
+struct AoiSpec {
+  double x = 0, y = 0, radius = 0, level = 0;
+};
+
+struct RcfSpec {
+  std::optional<Camera> camera;
+  bool cull = true;
+  std::optional<double> pixel_error;      // screen-space tau (needs a camera)
+  std::optional<ScreenAoi> screen_aoi;    // needs pixel_error
+  std::optional<double> floor;            // constant object-space level
+  std::vector<AoiSpec> aois;              // Gaussian areas of interest
+  std::vector<AoiSpec> discs;             // thresholded discs
+  std::optional<double> frustum_level;    // object-space frustum footprint term (needs a camera)
+  std::optional<std::pair<double, double>> centre_cone;  // degrees, level (needs a camera)
+  std::optional<double> critical_level;   // critical-line term (needs the DEM)
+  double critical_relief = 0.0;
+
+  bool has_similarity() const;
+};
+
+/// Throws smr::Error naming the offending option when a value is out of range or inconsistent.
+void validate(const RcfSpec& spec);
+
+/// Builds the RCF. `dem` is needed only for the critical-line term; `kind` selects the
+/// screen-space error direction (vertical for terrain).
+Rcf make_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem);
+
+}  // namespace smr
