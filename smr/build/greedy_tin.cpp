@@ -122,7 +122,12 @@ class Builder {
       close_op();
       if (opt_.progress && (++steps & 0xfff) == 0) report_progress();
     }
-    const double err_final = heap_empty() ? 0.0 : std::max(0.0, top_err());
+    // The finest mesh's error: the largest error of any surviving triangle (those under the stop
+    // tolerance never enter the queue, so scan them all).
+    double err_final = 0.0;
+    for (const BuildTri& t : tris_) {
+      if (t.alive) err_final = std::max(err_final, t.err);
+    }
     return finish(err0, err_final);
   }
 

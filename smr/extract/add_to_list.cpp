@@ -1,4 +1,4 @@
-// Refinement operation extraction (Brown 5.1.1, Fig. 5.2; 5.2.1.1 for the reduced variant).
+// Refinement operation extraction (Brown 5.1.1, Fig. 5.2; Lemma 5.2.1 for the reduced variant).
 // AddToList is run with an explicit stack; the set it reaches is the same fixed point.
 #include <algorithm>
 #include <unordered_map>
@@ -22,7 +22,7 @@ class RcfCache {
     std::uint8_t& e = cache_[op.id.value];
     const std::uint8_t known = std::uint8_t(1u << (2 * which)), value = std::uint8_t(2u << (2 * which));
     if (!(e & known)) {
-      const bool v = which == 0 ? rcf_.is_finer(op, source_.info()) : rcf_.is_completely_finer(op, source_.info());
+      const bool v = which == 0 ? rcf_.is_finer(op, source_) : rcf_.is_completely_finer(op, source_);
       e = std::uint8_t(e | known | (v ? value : 0));
     }
     return (e & value) != 0;
@@ -61,7 +61,17 @@ std::vector<OpId> traverse(const OpSource& source, const Rcf& rcf, bool with_anc
 
 std::vector<OpId> add_to_list(const OpSource& source, const Rcf& rcf) { return traverse(source, rcf, true); }
 std::vector<OpId> add_to_list_reduced(const OpSource& source, const Rcf& rcf) {
-  return traverse(source, rcf, false);
+  // Lemma 5.2.1's form of Eq. 5.5: R^0 and every op not completely finer. The two agree when the
+  // RCF bisects the Hypermesh (Brown 5.2); with screen-space tolerances the traversal of Eq. 5.5
+  // can miss such an op behind a completely-finer-but-not-finer parent, and the output would then
+  // break Theorem 5.2.2. This is also exactly what the R-tree's RCF query returns.
+  std::vector<OpId> x{kBaseOp};
+  for (std::uint64_t i = 1; i < source.op_count(); ++i) {
+    const Op& op = source.op(OpId{i});
+    if (!rcf.is_completely_finer(op, source)) x.push_back(op.id);
+  }
+  std::sort(x.begin(), x.end(), std::greater<>());
+  return x;
 }
 
 }  // namespace smr

@@ -45,7 +45,8 @@ struct ExpansionOptions {
 /// that are not completely finer, and all ancestors of its members. Sorted descending.
 std::vector<OpId> add_to_list(const OpSource& source, const Rcf& rcf);
 
-/// Brown Eq. 5.5: as add_to_list without the ancestor closure (reduced extraction).
+/// Reduced extraction's X (Brown Eq. 5.5 in the form of Lemma 5.2.1): R^0 and every op that is
+/// not completely finer than the RCF. Scans every op; the on-disk store answers it from the index.
 std::vector<OpId> add_to_list_reduced(const OpSource& source, const Rcf& rcf);
 
 /// Minimal surface SMR (Brown 5.1).

@@ -27,27 +27,13 @@ std::string ObjectSpaceCriterion::describe() const {
   return s + ")";
 }
 
-bool ObjectSpaceCriterion::fragment_satisfies(const Op& op, const CrmrInfo&) const {
-  for (const FragmentTriangle& t : op.fragment) {
-    if (t.is_void()) continue;
-    const double g = g_.max_over_triangle(xy(op.position(t, 0)), xy(op.position(t, 1)), xy(op.position(t, 2)));
-    if (t.death_res < g) return false;
-  }
-  return true;
+bool ObjectSpaceCriterion::triangle_satisfies(const Op& owner, const FragmentTriangle& t, double res,
+                                              const CrmrInfo&) const {
+  return res >= g_.max_over_triangle(xy(owner.position(t, 0)), xy(owner.position(t, 1)), xy(owner.position(t, 2)));
 }
 
-bool ObjectSpaceCriterion::pre_satisfies(const Op& op, const CrmrInfo&) const {
-  // D(PreF) = D(F): evaluate g over F's triangles (void ones too: they are part of the domain of
-  // PreF, whose triangles may not be void).
-  for (const FragmentTriangle& t : op.fragment) {
-    const double g = g_.max_over_triangle(xy(op.position(t, 0)), xy(op.position(t, 1)), xy(op.position(t, 2)));
-    if (op.birth_res < g) return false;
-  }
-  return true;
-}
-
-bool ObjectSpaceCriterion::region_satisfies(const Box3& box, double min_birth_res, const CrmrInfo&) const {
-  return min_birth_res >= g_.max_over_rect(xy(box.lo), xy(box.hi));
+bool ObjectSpaceCriterion::region_satisfies(const Box3& box, double min_res, const CrmrInfo&) const {
+  return min_res >= g_.max_over_rect(xy(box.lo), xy(box.hi));
 }
 
 // ---- screen space ----
@@ -89,21 +75,14 @@ double ScreenSpaceCriterion::tolerance(const Box3& region) const {
   return point_rect_distance2d(aoi_->center_px, lo, hi) <= aoi_->radius_px ? tau_min : tau_;
 }
 
-bool ScreenSpaceCriterion::fragment_satisfies(const Op& op, const CrmrInfo& info) const {
-  for (const FragmentTriangle& t : op.fragment) {
-    if (t.is_void()) continue;
-    const Box3 b = triangle_box(op, t);
-    if (pixel_error_bound(error_at(info, t.death_res), b) > tolerance(b)) return false;
-  }
-  return true;
+bool ScreenSpaceCriterion::triangle_satisfies(const Op& owner, const FragmentTriangle& t, double res,
+                                              const CrmrInfo& info) const {
+  const Box3 b = triangle_box(owner, t);
+  return pixel_error_bound(error_at(info, res), b) <= tolerance(b);
 }
 
-bool ScreenSpaceCriterion::pre_satisfies(const Op& op, const CrmrInfo& info) const {
-  return pixel_error_bound(error_at(info, op.birth_res), op.box) <= tolerance(op.box);
-}
-
-bool ScreenSpaceCriterion::region_satisfies(const Box3& box, double min_birth_res, const CrmrInfo& info) const {
-  return pixel_error_bound(error_at(info, min_birth_res), box) <= tolerance(box);
+bool ScreenSpaceCriterion::region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const {
+  return pixel_error_bound(error_at(info, min_res), box) <= tolerance(box);
 }
 
 // ---- composition ----
@@ -114,19 +93,28 @@ bool Rcf::culled(const Op& op) const {
   return false;
 }
 
-bool Rcf::is_finer(const Op& op, const CrmrInfo& info) const {
+bool Rcf::is_finer(const Op& op, const OpSource& source) const {
   if (culled(op)) return true;
-  for (const auto& s : similarity_) {
-    if (!s->fragment_satisfies(op, info)) return false;
+  for (const FragmentTriangle& t : op.fragment) {
+    if (is_final_or_void(t)) continue;
+    for (const auto& s : similarity_) {
+      if (!s->triangle_satisfies(op, t, t.death_res, source.info())) return false;
+    }
   }
   return true;
 }
 
-bool Rcf::is_completely_finer(const Op& op, const CrmrInfo& info) const {
+bool Rcf::is_completely_finer(const Op& op, const OpSource& source) const {
   if (op.id == kBaseOp) return false;
   if (culled(op)) return true;
-  for (const auto& s : similarity_) {
-    if (!s->pre_satisfies(op, info)) return false;
+  for (const TriRef& ref : op.pre) {
+    const Op& creator = source.op(ref.op);
+    const FragmentTriangle& t = creator.fragment[ref.index];
+    if (t.is_void() || similarity_.empty()) continue;
+    if (culled(creator)) continue;
+    for (const auto& s : similarity_) {
+      if (!s->triangle_satisfies(creator, t, op.birth_res, source.info())) return false;
+    }
   }
   return true;
 }

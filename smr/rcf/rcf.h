@@ -5,8 +5,8 @@
 // Brown's Fig. 4.19:
 //   IsFiner(R)           = culled(R) or every similarity component accepts F(R)
 //   IsCompletelyFiner(R) = R != R^0 and (culled(R) or every component accepts PreF(R))
-// Culling is decided on the op's box/sphere/cone, which cover F and PreF, so a culled op's PreF
-// triangles are culled too and Theorem 5.1.1 holds triangle by triangle.
+// evaluated triangle by triangle. Culling is decided on the op's box/sphere/cone, which cover F
+// and PreF, so a culled op's PreF triangles are culled too and Theorem 5.1.1 holds per triangle.
 // Every component also answers conservatively for an index entry (a box holding the ROIs of many
 // ops, with a minimum birth_res): true only if every such op is completely finer.
 #pragma once
@@ -32,17 +32,21 @@ class CullingComponent {
   virtual bool culls_region(const Box3& box) const = 0;
 };
 
+/// A triangle that no op replaces is as fine as the model gets: it satisfies every similarity
+/// criterion (Brown 4.6.2: "or if its fragment has no children"; the proof of Theorem 5.1.1 relies
+/// on it). A void triangle covers no data and is never output.
+inline bool is_final_or_void(const FragmentTriangle& t) { return t.is_void() || !t.killer.valid(); }
+
 class SimilarityComponent {
  public:
   virtual ~SimilarityComponent() = default;
   virtual std::string describe() const = 0;
-  /// Every non-void triangle t of F(op) meets the criterion at death_res(t).
-  virtual bool fragment_satisfies(const Op& op, const CrmrInfo& info) const = 0;
-  /// The region of PreF(op) meets the criterion at birth_res(op).
-  virtual bool pre_satisfies(const Op& op, const CrmrInfo& info) const = 0;
-  /// Conservative: true only if pre_satisfies for every op with box inside `box` and
-  /// birth_res >= min_birth_res.
-  virtual bool region_satisfies(const Box3& box, double min_birth_res, const CrmrInfo& info) const = 0;
+  /// Triangle t of F(owner) meets the criterion when it stands for resolution `res`.
+  virtual bool triangle_satisfies(const Op& owner, const FragmentTriangle& t, double res,
+                                  const CrmrInfo& info) const = 0;
+  /// Conservative: true only if triangle_satisfies for every triangle inside `box` at every
+  /// resolution >= min_res.
+  virtual bool region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const = 0;
 };
 
 class FrustumCulling final : public CullingComponent {
@@ -73,9 +77,8 @@ class ObjectSpaceCriterion final : public SimilarityComponent {
  public:
   explicit ObjectSpaceCriterion(ObjectSpaceFunction g) : g_(std::move(g)) {}
   std::string describe() const override;
-  bool fragment_satisfies(const Op& op, const CrmrInfo& info) const override;
-  bool pre_satisfies(const Op& op, const CrmrInfo& info) const override;
-  bool region_satisfies(const Box3& box, double min_birth_res, const CrmrInfo& info) const override;
+  bool triangle_satisfies(const Op& owner, const FragmentTriangle& t, double res, const CrmrInfo& info) const override;
+  bool region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const override;
   const ObjectSpaceFunction& function() const { return g_; }
 
  private:
@@ -101,9 +104,8 @@ class ScreenSpaceCriterion final : public SimilarityComponent {
   ScreenSpaceCriterion(Camera cam, double pixel_error, std::optional<ScreenAoi> aoi, bool vertical_error)
       : cam_(std::move(cam)), tau_(pixel_error), aoi_(aoi), vertical_(vertical_error) {}
   std::string describe() const override;
-  bool fragment_satisfies(const Op& op, const CrmrInfo& info) const override;
-  bool pre_satisfies(const Op& op, const CrmrInfo& info) const override;
-  bool region_satisfies(const Box3& box, double min_birth_res, const CrmrInfo& info) const override;
+  bool triangle_satisfies(const Op& owner, const FragmentTriangle& t, double res, const CrmrInfo& info) const override;
+  bool region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const override;
 
   double pixel_error_bound(double error, const Box3& region) const;
   double tolerance(const Box3& region) const;
@@ -123,8 +125,14 @@ class Rcf {
   void add(std::shared_ptr<const SimilarityComponent> s) { similarity_.push_back(std::move(s)); }
 
   bool culled(const Op& op) const;
-  bool is_finer(const Op& op, const CrmrInfo& info) const;
-  bool is_completely_finer(const Op& op, const CrmrInfo& info) const;
+  /// Every triangle of F(op) that is not final or void satisfies every similarity component at
+  /// its death_res, or op is culled.
+  bool is_finer(const Op& op, const OpSource& source) const;
+  /// op is not R^0, and op is culled or every non-void triangle t of PreF(op) is culled (by the op
+  /// that created it) or satisfies every component at birth_res(op). Judging PreF triangle by
+  /// triangle, like IsFiner judges F, makes "all parents finer => completely finer" exact, which
+  /// Lemma 5.2.1 (reduced extraction) needs.
+  bool is_completely_finer(const Op& op, const OpSource& source) const;
   /// Conservative test for an index entry: true only if every op whose box lies in `box` and whose
   /// birth_res >= min_birth_res is completely finer than the RCF.
   bool region_completely_finer(const Box3& box, double min_birth_res, const CrmrInfo& info) const;

@@ -1,0 +1,297 @@
+// OBJ / PLY writers and AtomicFile (write to a temporary file, then rename).
+#include "smr/io/mesh_writer.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <bit>
+#include <cctype>
+#include <cerrno>
+#include <charconv>
+#include <cstring>
+#include <filesystem>
+#include <string_view>
+
+#include "storage/error.h"
+
+namespace smr {
+
+namespace {
+
+std::string errno_text(int err) {
+  return std::strerror(err);
+}
+
+std::string lower_extension(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext;
+}
+
+void validate_mesh(const std::string& path, const TriangleMesh& mesh) {
+  const std::size_t n = mesh.positions.size();
+  for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+    for (std::uint32_t v : mesh.triangles[t]) {
+      if (v >= n) {
+        throw_input("cannot write mesh '" + path + "': triangle " + std::to_string(t) +
+                    " references vertex " + std::to_string(v) + " but the mesh has " +
+                    std::to_string(n) + " vertices");
+      }
+    }
+  }
+  if (!mesh.triangle_values.empty() && mesh.triangle_values.size() != mesh.triangles.size()) {
+    throw_input("cannot write mesh '" + path + "': it has " +
+                std::to_string(mesh.triangle_values.size()) + " triangle values for " +
+                std::to_string(mesh.triangles.size()) +
+                " triangles (expected one per triangle or none)");
+  }
+}
+
+// Appends text to a buffer that is flushed to the file in large chunks.
+class TextSink {
+ public:
+  explicit TextSink(AtomicFile& file) : file_(file) { buffer_.reserve(kChunk + 256); }
+  void put(std::string_view s) {
+    buffer_.append(s);
+    maybe_flush();
+  }
+  void put(double v) {
+    char tmp[32];
+    const auto r = std::to_chars(tmp, tmp + sizeof tmp, v);  // shortest exact round trip
+    buffer_.append(tmp, r.ptr);
+  }
+  void put_precise(double v) {  // like %.17g, for ASCII PLY readers that expect fixed precision
+    char tmp[40];
+    const auto r = std::to_chars(tmp, tmp + sizeof tmp, v, std::chars_format::general, 17);
+    buffer_.append(tmp, r.ptr);
+  }
+  void put(std::uint64_t v) {
+    char tmp[24];
+    const auto r = std::to_chars(tmp, tmp + sizeof tmp, v);
+    buffer_.append(tmp, r.ptr);
+  }
+  void put(float v) {
+    char tmp[32];
+    const auto r = std::to_chars(tmp, tmp + sizeof tmp, v);
+    buffer_.append(tmp, r.ptr);
+  }
+  void flush() {
+    file_.write(buffer_.data(), buffer_.size());
+    buffer_.clear();
+  }
+  void maybe_flush() {
+    if (buffer_.size() >= kChunk) flush();
+  }
+
+ private:
+  static constexpr std::size_t kChunk = 1 << 20;
+  AtomicFile& file_;
+  std::string buffer_;
+};
+
+// Little-endian binary output through a chunk buffer.
+class BinarySink {
+ public:
+  explicit BinarySink(AtomicFile& file) : file_(file) { buffer_.reserve(kChunk + 64); }
+  template <typename T>
+  void put(T v) {
+    unsigned char b[sizeof(T)];
+    std::memcpy(b, &v, sizeof(T));
+    if constexpr (std::endian::native == std::endian::big) std::reverse(b, b + sizeof(T));
+    buffer_.insert(buffer_.end(), b, b + sizeof(T));
+    if (buffer_.size() >= kChunk) flush();
+  }
+  void flush() {
+    file_.write(buffer_.data(), buffer_.size());
+    buffer_.clear();
+  }
+
+ private:
+  static constexpr std::size_t kChunk = 1 << 20;
+  AtomicFile& file_;
+  std::vector<unsigned char> buffer_;
+};
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// AtomicFile
+
+AtomicFile::AtomicFile(std::string path) : path_(std::move(path)) {
+  static std::atomic<std::uint64_t> counter{0};
+  const std::filesystem::path target(path_);
+  if (target.filename().empty()) {
+    throw_io("cannot write '" + path_ + "': the path names a directory, expected a file name");
+  }
+  std::error_code ec;
+  if (std::filesystem::is_directory(target, ec)) {
+    throw_io("cannot write '" + path_ + "': it is a directory");
+  }
+  for (int attempt = 0; attempt < 100; ++attempt) {
+    std::string name = ".";
+    name += target.filename().string();
+    name += ".tmp.";
+    name += std::to_string(::getpid());
+    name += '.';
+    name += std::to_string(counter++);
+    const std::filesystem::path temp = target.parent_path() / name;
+    temp_path_ = temp.string();
+    const int fd = ::open(temp_path_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+    if (fd < 0) {
+      if (errno == EEXIST) continue;
+      throw_io("cannot write '" + path_ + "': cannot create a temporary file in its directory (" +
+               errno_text(errno) + ")");
+    }
+    file_ = ::fdopen(fd, "wb");
+    if (file_ == nullptr) {
+      const int err = errno;
+      ::close(fd);
+      ::unlink(temp_path_.c_str());
+      throw_io("cannot write '" + path_ + "': " + errno_text(err));
+    }
+    return;
+  }
+  throw_io("cannot write '" + path_ + "': no free temporary file name in its directory");
+}
+
+AtomicFile::~AtomicFile() {
+  if (file_ != nullptr) std::fclose(file_);
+  if (!committed_) ::unlink(temp_path_.c_str());
+}
+
+void AtomicFile::write(const void* data, std::size_t size) {
+  if (size == 0) return;
+  if (file_ == nullptr) throw_internal("AtomicFile::write after close_stream for '" + path_ + "'");
+  if (std::fwrite(data, 1, size, file_) != size) {
+    throw_io("cannot write '" + path_ + "': " + errno_text(errno));
+  }
+}
+
+void AtomicFile::close_stream() {
+  if (file_ == nullptr) return;
+  std::FILE* f = file_;
+  file_ = nullptr;
+  const bool failed = std::fflush(f) != 0 || std::ferror(f) != 0;
+  const int err = errno;
+  if (std::fclose(f) != 0 || failed) {
+    throw_io("cannot write '" + path_ + "': " + errno_text(failed ? err : errno));
+  }
+}
+
+void AtomicFile::commit() {
+  if (committed_) return;
+  if (file_ != nullptr) {
+    if (std::fflush(file_) != 0 || std::ferror(file_) != 0) {
+      throw_io("cannot write '" + path_ + "': " + errno_text(errno));
+    }
+    if (::fsync(::fileno(file_)) != 0 && errno != EINVAL && errno != EROFS) {
+      throw_io("cannot write '" + path_ + "': " + errno_text(errno));
+    }
+    close_stream();
+  }
+  if (std::rename(temp_path_.c_str(), path_.c_str()) != 0) {
+    throw_io("cannot write '" + path_ + "': cannot rename the temporary file over it (" +
+             errno_text(errno) + ")");
+  }
+  committed_ = true;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Writers
+
+void write_mesh(const std::string& path, const TriangleMesh& mesh) {
+  const std::string ext = lower_extension(path);
+  if (ext == ".obj") return write_obj(path, mesh);
+  if (ext == ".ply") return write_ply(path, mesh, true);
+  throw_input("cannot write mesh '" + path + "': unknown extension '" + ext +
+              "' (expected .obj or .ply)");
+}
+
+void write_obj(const std::string& path, const TriangleMesh& mesh) {
+  validate_mesh(path, mesh);
+  AtomicFile file(path);
+  TextSink out(file);
+  out.put("# smrdb mesh: ");
+  out.put(std::uint64_t{mesh.positions.size()});
+  out.put(" vertices, ");
+  out.put(std::uint64_t{mesh.triangles.size()});
+  out.put(" triangles\n");
+  for (const Vec3& p : mesh.positions) {
+    out.put("v ");
+    out.put(p.x);
+    out.put(" ");
+    out.put(p.y);
+    out.put(" ");
+    out.put(p.z);
+    out.put("\n");
+  }
+  for (const auto& t : mesh.triangles) {
+    out.put("f ");
+    out.put(std::uint64_t{t[0]} + 1);
+    out.put(" ");
+    out.put(std::uint64_t{t[1]} + 1);
+    out.put(" ");
+    out.put(std::uint64_t{t[2]} + 1);
+    out.put("\n");
+  }
+  out.flush();
+  file.commit();
+}
+
+void write_ply(const std::string& path, const TriangleMesh& mesh, bool binary) {
+  validate_mesh(path, mesh);
+  const bool values = !mesh.triangle_values.empty();
+  std::string header = "ply\nformat ";
+  header += binary ? "binary_little_endian" : "ascii";
+  header += " 1.0\ncomment smrdb mesh\nelement vertex " + std::to_string(mesh.positions.size()) +
+            "\nproperty double x\nproperty double y\nproperty double z\nelement face " +
+            std::to_string(mesh.triangles.size()) + "\nproperty list uchar uint vertex_indices\n";
+  if (values) header += "property float value\n";
+  header += "end_header\n";
+
+  AtomicFile file(path);
+  file.write(header);
+  if (binary) {
+    BinarySink out(file);
+    for (const Vec3& p : mesh.positions) {
+      out.put(p.x);
+      out.put(p.y);
+      out.put(p.z);
+    }
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+      out.put(std::uint8_t{3});
+      for (std::uint32_t v : mesh.triangles[t]) out.put(v);
+      if (values) out.put(mesh.triangle_values[t]);
+    }
+    out.flush();
+  } else {
+    TextSink out(file);
+    for (const Vec3& p : mesh.positions) {
+      out.put_precise(p.x);
+      out.put(" ");
+      out.put_precise(p.y);
+      out.put(" ");
+      out.put_precise(p.z);
+      out.put("\n");
+    }
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+      out.put("3");
+      for (std::uint32_t v : mesh.triangles[t]) {
+        out.put(" ");
+        out.put(std::uint64_t{v});
+      }
+      if (values) {
+        out.put(" ");
+        out.put(mesh.triangle_values[t]);
+      }
+      out.put("\n");
+    }
+    out.flush();
+  }
+  file.commit();
+}
+
+}  // namespace smr

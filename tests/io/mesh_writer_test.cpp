@@ -1,0 +1,277 @@
+// Tests of the OBJ / PLY writers and AtomicFile (smr/io/mesh_writer.h): files are parsed back by
+// the small readers below and must give bit-identical vertices, the same triangles and values.
+#include "smr/io/mesh_writer.h"
+
+#include <sys/resource.h>
+
+#include <cmath>
+#include <csignal>
+#include <cstring>
+#include <limits>
+#include <sstream>
+
+#include <gtest/gtest.h>
+
+#include "tests/io/io_test_helpers.h"
+
+namespace smr {
+namespace {
+
+using test::expect_error;
+using test::TempDir;
+
+TriangleMesh sample_mesh() {
+  TriangleMesh m;
+  m.positions = {{-84.41375, 36.73291666666667, 483.0},
+                 {1.0 / 3.0, 2.0 / 3.0, -1e-300},
+                 {1e17, -0.1, 4.9e-324},
+                 {std::nextafter(1.0, 2.0), -0.0, 123456789.123456789},
+                 {0, 0, 0}};
+  m.triangles = {{0, 1, 2}, {2, 3, 0}, {4, 3, 2}};
+  m.triangle_values = {0.25f, 1.0f / 3.0f, -7.5f};
+  return m;
+}
+
+struct ParsedMesh {
+  std::vector<Vec3> positions;
+  std::vector<std::array<std::uint32_t, 3>> triangles;
+  std::vector<float> values;
+};
+
+ParsedMesh parse_obj(const std::string& path) {
+  ParsedMesh m;
+  const std::vector<std::uint8_t> bytes = test::read_bytes(path);
+  std::istringstream in(std::string(bytes.begin(), bytes.end()));
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream ls(line);
+    std::string tag;
+    ls >> tag;
+    if (tag == "v") {
+      std::string x, y, z;
+      ls >> x >> y >> z;
+      m.positions.push_back({std::strtod(x.c_str(), nullptr), std::strtod(y.c_str(), nullptr),
+                             std::strtod(z.c_str(), nullptr)});
+    } else if (tag == "f") {
+      std::uint32_t a, b, c;
+      ls >> a >> b >> c;
+      m.triangles.push_back({a - 1, b - 1, c - 1});
+    } else {
+      EXPECT_TRUE(tag.empty() || tag[0] == '#') << "unexpected OBJ line: " << line;
+    }
+  }
+  return m;
+}
+
+ParsedMesh parse_ply(const std::string& path) {
+  ParsedMesh m;
+  const std::vector<std::uint8_t> bytes = test::read_bytes(path);
+  const std::string text(bytes.begin(), bytes.end());
+  const std::size_t end = text.find("end_header\n");
+  EXPECT_NE(end, std::string::npos);
+  std::istringstream header(text.substr(0, end));
+  std::string line, format;
+  std::size_t nv = 0, nf = 0;
+  bool values = false;
+  while (std::getline(header, line)) {
+    std::istringstream ls(line);
+    std::string a, b, c;
+    ls >> a >> b >> c;
+    if (a == "format") format = b;
+    if (a == "element" && b == "vertex") nv = std::stoul(c);
+    if (a == "element" && b == "face") nf = std::stoul(c);
+    if (a == "property" && b == "float" && c == "value") values = true;
+  }
+  std::size_t p = end + 11;
+  if (format == "binary_little_endian") {
+    const auto take = [&](void* out, std::size_t n) {
+      EXPECT_LE(p + n, bytes.size());
+      if (p + n > bytes.size()) return;
+      std::memcpy(out, bytes.data() + p, n);  // the test machine is little-endian
+      p += n;
+    };
+    for (std::size_t i = 0; i < nv; ++i) {
+      Vec3 v;
+      take(&v.x, 8);
+      take(&v.y, 8);
+      take(&v.z, 8);
+      m.positions.push_back(v);
+    }
+    for (std::size_t i = 0; i < nf; ++i) {
+      std::uint8_t count = 0;
+      take(&count, 1);
+      EXPECT_EQ(count, 3);
+      std::array<std::uint32_t, 3> t{};
+      take(t.data(), 12);
+      m.triangles.push_back(t);
+      if (values) {
+        float v;
+        take(&v, 4);
+        m.values.push_back(v);
+      }
+    }
+    EXPECT_EQ(p, bytes.size());
+  } else {
+    EXPECT_EQ(format, "ascii");
+    std::istringstream body(text.substr(p));
+    for (std::size_t i = 0; i < nv; ++i) {
+      std::string x, y, z;
+      body >> x >> y >> z;
+      m.positions.push_back({std::strtod(x.c_str(), nullptr), std::strtod(y.c_str(), nullptr),
+                             std::strtod(z.c_str(), nullptr)});
+    }
+    for (std::size_t i = 0; i < nf; ++i) {
+      int count;
+      std::array<std::uint32_t, 3> t{};
+      body >> count >> t[0] >> t[1] >> t[2];
+      EXPECT_EQ(count, 3);
+      m.triangles.push_back(t);
+      if (values) {
+        std::string v;
+        body >> v;
+        m.values.push_back(std::strtof(v.c_str(), nullptr));
+      }
+    }
+  }
+  return m;
+}
+
+void expect_same_positions(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    for (int k = 0; k < 3; ++k) {
+      // Bit-identical, so -0.0 and denormals must survive too.
+      EXPECT_EQ(std::memcmp(&a[i][k], &b[i][k], sizeof(double)), 0)
+          << "vertex " << i << " axis " << k << ": " << a[i][k] << " vs " << b[i][k];
+    }
+  }
+}
+
+TEST(MeshWriter, ObjRoundTripIsExact) {
+  TempDir dir;
+  const TriangleMesh mesh = sample_mesh();
+  const std::string path = dir.file("mesh.obj");
+  write_obj(path, mesh);
+  const ParsedMesh back = parse_obj(path);
+  expect_same_positions(back.positions, mesh.positions);
+  EXPECT_EQ(back.triangles, mesh.triangles);
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"mesh.obj"});
+}
+
+TEST(MeshWriter, BinaryAndAsciiPlyRoundTripsAreExact) {
+  TempDir dir;
+  const TriangleMesh mesh = sample_mesh();
+  for (bool binary : {true, false}) {
+    const std::string path = dir.file(binary ? "bin.ply" : "ascii.ply");
+    write_ply(path, mesh, binary);
+    const ParsedMesh back = parse_ply(path);
+    expect_same_positions(back.positions, mesh.positions);
+    EXPECT_EQ(back.triangles, mesh.triangles);
+    EXPECT_EQ(back.values, mesh.triangle_values);
+  }
+  // Without values there is no value property.
+  TriangleMesh plain = sample_mesh();
+  plain.triangle_values.clear();
+  write_ply(dir.file("plain.ply"), plain);
+  const ParsedMesh back = parse_ply(dir.file("plain.ply"));
+  EXPECT_TRUE(back.values.empty());
+  EXPECT_EQ(back.triangles, plain.triangles);
+}
+
+TEST(MeshWriter, WriteMeshDispatchesOnExtension) {
+  TempDir dir;
+  const TriangleMesh mesh = sample_mesh();
+  write_mesh(dir.file("a.OBJ"), mesh);
+  EXPECT_EQ(parse_obj(dir.file("a.OBJ")).triangles, mesh.triangles);
+  write_mesh(dir.file("b.ply"), mesh);
+  const std::vector<std::uint8_t> bytes = test::read_bytes(dir.file("b.ply"));
+  EXPECT_NE(std::string(bytes.begin(), bytes.begin() + 60).find("binary_little_endian"),
+            std::string::npos);
+  expect_error([&] { write_mesh(dir.file("c.stl"), mesh); }, ErrorKind::kInvalidInput,
+               {"c.stl", ".stl", ".obj or .ply"});
+  EXPECT_EQ(dir.entries(), (std::vector<std::string>{"a.OBJ", "b.ply"}));
+}
+
+TEST(MeshWriter, EmptyMeshWritesValidFiles) {
+  TempDir dir;
+  write_obj(dir.file("e.obj"), TriangleMesh{});
+  write_ply(dir.file("e.ply"), TriangleMesh{});
+  EXPECT_TRUE(parse_obj(dir.file("e.obj")).positions.empty());
+  EXPECT_TRUE(parse_ply(dir.file("e.ply")).triangles.empty());
+}
+
+TEST(MeshWriter, BadMeshesAreInvalidInputAndWriteNothing) {
+  TempDir dir;
+  TriangleMesh bad = sample_mesh();
+  bad.triangles.push_back({0, 1, 5});
+  bad.triangle_values.push_back(0);
+  expect_error([&] { write_obj(dir.file("bad.obj"), bad); }, ErrorKind::kInvalidInput,
+               {"bad.obj", "vertex 5", "5 vertices"});
+  TriangleMesh values = sample_mesh();
+  values.triangle_values.pop_back();
+  expect_error([&] { write_ply(dir.file("bad.ply"), values); }, ErrorKind::kInvalidInput,
+               {"bad.ply", "2 triangle values for 3 triangles"});
+  EXPECT_TRUE(dir.entries().empty());
+}
+
+TEST(MeshWriter, UnwritablePathsAreIoErrors) {
+  TempDir dir;
+  const TriangleMesh mesh = sample_mesh();
+  expect_error([&] { write_obj("/nonexistent-smrdb-dir/m.obj", mesh); }, ErrorKind::kIo,
+               {"/nonexistent-smrdb-dir/m.obj"});
+  expect_error([&] { write_ply("/nonexistent-smrdb-dir/m.ply", mesh); }, ErrorKind::kIo,
+               {"/nonexistent-smrdb-dir/m.ply"});
+  expect_error([&] { write_mesh(dir.path().string() + "/", mesh); }, ErrorKind::kInvalidInput, {});
+  std::filesystem::create_directory(dir.path() / "sub.obj");
+  expect_error([&] { write_obj(dir.file("sub.obj"), mesh); }, ErrorKind::kIo,
+               {"sub.obj", "directory"});
+}
+
+TEST(MeshWriter, FailedWriteLeavesNoFile) {
+  // A file-size limit makes write(2) fail with EFBIG part-way, as a full disk would.
+  TempDir dir;
+  TriangleMesh big;
+  for (int i = 0; i < 20000; ++i) big.positions.push_back({i * 0.1, i * 0.2, i * 0.3});
+  rlimit old{};
+  ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &old), 0);
+  const auto old_handler = std::signal(SIGXFSZ, SIG_IGN);
+  rlimit small = old;
+  small.rlim_cur = 64 * 1024;
+  ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &small), 0);
+  const std::string path = dir.file("big.obj");
+  try {
+    write_obj(path, big);
+    ADD_FAILURE() << "expected an error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::kIo);
+    EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+  }
+  setrlimit(RLIMIT_FSIZE, &old);
+  std::signal(SIGXFSZ, old_handler);
+  EXPECT_TRUE(dir.entries().empty());
+}
+
+TEST(AtomicFile, ReplacesOnlyOnCommit) {
+  TempDir dir;
+  const std::string path = dir.file("x.txt");
+  test::write_text(path, "old");
+  {
+    AtomicFile f(path);
+    f.write("new contents");
+    // Before commit the old file is intact and the temporary file sits beside it.
+    EXPECT_EQ(test::read_bytes(path).size(), 3u);
+    EXPECT_EQ(dir.entries().size(), 2u);
+  }  // destroyed without commit: discarded
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"x.txt"});
+  {
+    AtomicFile f(path);
+    f.write("new contents");
+    f.commit();
+  }
+  const std::vector<std::uint8_t> bytes = test::read_bytes(path);
+  EXPECT_EQ(std::string(bytes.begin(), bytes.end()), "new contents");
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"x.txt"});
+}
+
+}  // namespace
+}  // namespace smr
