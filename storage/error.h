@@ -27,7 +27,9 @@ class Error : public std::runtime_error {
 [[noreturn]] inline void throw_input(const std::string& message) {
   throw Error(ErrorKind::kInvalidInput, message);
 }
-[[noreturn]] inline void throw_io(const std::string& message) { throw Error(ErrorKind::kIo, message); }
+[[noreturn]] inline void throw_io(const std::string& message) {
+  throw Error(ErrorKind::kIo, message);
+}
 [[noreturn]] inline void throw_internal(const std::string& message) {
   throw Error(ErrorKind::kInternal, message);
 }

@@ -29,10 +29,12 @@ namespace {
 using smr::throw_input;
 using Clock = std::chrono::steady_clock;
 
-double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
 
-std::vector<double> parse_numbers(const std::string& text, std::size_t count, const std::string& option,
-                                  const std::string& form) {
+std::vector<double> parse_numbers(const std::string& text, std::size_t count,
+                                  const std::string& option, const std::string& form) {
   std::vector<double> out;
   std::stringstream ss(text);
   std::string item;
@@ -43,7 +45,8 @@ std::vector<double> parse_numbers(const std::string& text, std::size_t count, co
       if (used != item.size() || !std::isfinite(v)) throw std::invalid_argument(item);
       out.push_back(v);
     } catch (const std::exception&) {
-      throw_input(option + " expects " + form + ", got '" + text + "' ('" + item + "' is not a finite number)");
+      throw_input(option + " expects " + form + ", got '" + text + "' ('" + item +
+                  "' is not a finite number)");
     }
   }
   if (out.size() != count) throw_input(option + " expects " + form + ", got '" + text + "'");
@@ -77,16 +80,20 @@ struct RcfOptions {
     app.add_option("--near", near, "Near plane distance (0 = at the eye)");
     app.add_option("--far", far, "Far plane distance (0 = none)");
     app.add_flag("--no-cull", no_cull, "Disable view-frustum and back-face culling");
-    app.add_option("--pixel-error", pixel_error, "Screen-space tolerance in pixels (needs a camera)");
+    app.add_option("--pixel-error", pixel_error,
+                   "Screen-space tolerance in pixels (needs a camera)");
     app.add_option("--screen-aoi", screen_aoi,
                    "Screen area of interest u,v,radius_px,pixel_error: lower tolerance inside");
     app.add_option("--floor", floor, "Constant object-space resolution level in [0,1]");
     app.add_option("--aoi", aois, "Gaussian area of interest x,y,radius,level (repeatable)");
     app.add_option("--disc", discs, "Thresholded disc x,y,radius,level (repeatable)");
-    app.add_option("--frustum-level", frustum_level, "Object-space level inside the view frustum's footprint");
+    app.add_option("--frustum-level", frustum_level,
+                   "Object-space level inside the view frustum's footprint");
     app.add_option("--centre-cone", centre_cone, "Screen-centre cone half_angle_deg,level");
-    app.add_option("--critical-lines", critical_level, "Level on Peucker-Douglas ridge/channel samples");
-    app.add_option("--critical-relief", critical_relief, "Keep critical samples with 3x3 relief >= this");
+    app.add_option("--critical-lines", critical_level,
+                   "Level on Peucker-Douglas ridge/channel samples");
+    app.add_option("--critical-relief", critical_relief,
+                   "Keep critical samples with 3x3 relief >= this");
   }
 
   smr::RcfSpec spec() const {
@@ -152,17 +159,21 @@ std::string extension_of(const std::string& path) {
 }
 
 int cmd_build(const std::string& dem_path, double max_error, std::uint64_t max_vertices,
-              std::uint64_t base_vertices, const RcfOptions& rcf_options, const std::string& algorithm,
-              const std::string& out, const std::string& png, bool json, bool quiet, bool verify) {
+              std::uint64_t base_vertices, const RcfOptions& rcf_options,
+              const std::string& algorithm, const std::string& out, const std::string& png,
+              bool json, bool quiet, bool verify) {
   // Check everything the user typed before any long work.
-  if (!(max_error >= 0.0) || !std::isfinite(max_error)) throw_input("--max-error must be >= 0 (data units)");
+  if (!(max_error >= 0.0) || !std::isfinite(max_error))
+    throw_input("--max-error must be >= 0 (data units)");
   if (base_vertices < 4) throw_input("--base-vertices must be at least 4 (the corners)");
   if (algorithm != "minimal" && algorithm != "reduced") {
     throw_input("--algorithm must be 'minimal' or 'reduced', got '" + algorithm + "'");
   }
   const std::string ext = extension_of(out);
-  if (ext != ".obj" && ext != ".ply") throw_input("-o " + out + ": the output must end in .obj or .ply");
-  if (!png.empty() && extension_of(png) != ".png") throw_input("--png " + png + ": must end in .png");
+  if (ext != ".obj" && ext != ".ply")
+    throw_input("-o " + out + ": the output must end in .obj or .ply");
+  if (!png.empty() && extension_of(png) != ".png")
+    throw_input("--png " + png + ": must end in .png");
   const smr::RcfSpec spec = rcf_options.spec();
 
   nlohmann::json report;
@@ -204,8 +215,8 @@ int cmd_build(const std::string& dem_path, double max_error, std::uint64_t max_v
   }
 
   const smr::Rcf rcf = smr::make_rcf(spec, smr::ModelKind::kTerrain, &dem);
-  const smr::Extraction e =
-      algorithm == "reduced" ? smr::extract_reduced(crmr, rcf) : smr::extract_minimal_surface(crmr, rcf);
+  const smr::Extraction e = algorithm == "reduced" ? smr::extract_reduced(crmr, rcf)
+                                                   : smr::extract_minimal_surface(crmr, rcf);
   report["rcf"] = rcf.describe();
   report["extraction"] = stats_json(e.stats);
   report["extraction"]["algorithm"] = algorithm;
@@ -216,7 +227,8 @@ int cmd_build(const std::string& dem_path, double max_error, std::uint64_t max_v
 
   const smr::TriangleMesh mesh = smr::to_mesh(crmr, e.triangles);
   smr::write_mesh(out, mesh);
-  report["output"] = {{"path", out}, {"vertices", mesh.positions.size()}, {"triangles", mesh.triangles.size()}};
+  report["output"] = {
+      {"path", out}, {"vertices", mesh.positions.size()}, {"triangles", mesh.triangles.size()}};
   if (!png.empty()) {
     smr::RenderOptions ro;
     ro.geographic = dem.georef.geographic;
@@ -226,31 +238,35 @@ int cmd_build(const std::string& dem_path, double max_error, std::uint64_t max_v
   if (json) {
     std::cout << report.dump(2) << "\n";
   } else if (!quiet) {
-    std::fprintf(stderr, "%s: %llu ops, %llu output triangles (|X| = %llu) -> %s\n", dem_path.c_str(),
-                 static_cast<unsigned long long>(crmr.ops.size()),
+    std::fprintf(stderr, "%s: %llu ops, %llu output triangles (|X| = %llu) -> %s\n",
+                 dem_path.c_str(), static_cast<unsigned long long>(crmr.ops.size()),
                  static_cast<unsigned long long>(mesh.triangles.size()),
                  static_cast<unsigned long long>(e.stats.x), out.c_str());
   }
   return 0;
 }
 
-int cmd_synth(int width, int height, std::uint64_t seed, double range, double spacing, const std::string& out,
-              bool quiet) {
+int cmd_synth(int width, int height, std::uint64_t seed, double range, double spacing,
+              const std::string& out, bool quiet) {
   if (width < 2 || height < 2 || width > 65536 || height > 65536) {
-    throw_input("--size/--height must be in [2, 65536], got " + std::to_string(width) + "x" + std::to_string(height));
+    throw_input("--size/--height must be in [2, 65536], got " + std::to_string(width) + "x" +
+                std::to_string(height));
   }
-  if (!(range > 0.0) || !std::isfinite(range)) throw_input("--range must be a positive height range");
+  if (!(range > 0.0) || !std::isfinite(range))
+    throw_input("--range must be a positive height range");
   if (!(spacing > 0.0) || !std::isfinite(spacing)) throw_input("--spacing must be positive");
   const std::string ext = extension_of(out);
-  if (ext != ".tif" && ext != ".tiff" && ext != ".npy") throw_input("-o " + out + ": must end in .tif or .npy");
+  if (ext != ".tif" && ext != ".tiff" && ext != ".npy")
+    throw_input("-o " + out + ": must end in .tif or .npy");
   smr::Heightfield h = smr::make_fbm(width, height, seed, range, 0, 0.5, spacing);
   if (ext == ".npy") {
     smr::write_npy(out, h);
   } else {
     smr::write_geotiff(out, h);
   }
-  if (!quiet) std::fprintf(stderr, "%s: %dx%d fBm, seed %llu, range %g\n", out.c_str(), width, height,
-                           static_cast<unsigned long long>(seed), range);
+  if (!quiet)
+    std::fprintf(stderr, "%s: %dx%d fBm, seed %llu, range %g\n", out.c_str(), width, height,
+                 static_cast<unsigned long long>(seed), range);
   return 0;
 }
 
@@ -267,14 +283,19 @@ int main(int argc, char** argv) {
   bool json = false, quiet = false, verify = false;
   RcfOptions rcf;
   CLI::App* build = app.add_subcommand(
-      "build", "Build a CRMR from a DEM in memory and extract a selectively refined mesh for an RCF");
-  build->add_option("dem", dem, "DEM: GeoTIFF or any GDAL raster (one band), .npy or .npz")->required();
-  build->add_option("--max-error", max_error, "Stop refining at this vertical error (data units; 0 = lossless)")
+      "build",
+      "Build a CRMR from a DEM in memory and extract a selectively refined mesh for an RCF");
+  build->add_option("dem", dem, "DEM: GeoTIFF or any GDAL raster (one band), .npy or .npz")
+      ->required();
+  build
+      ->add_option("--max-error", max_error,
+                   "Stop refining at this vertical error (data units; 0 = lossless)")
       ->capture_default_str();
   build->add_option("--max-vertices", max_vertices, "Stop at this many vertices (0 = no limit)");
   build->add_option("--base-vertices", base_vertices, "Vertices of the base mesh (4 = the corners)")
       ->capture_default_str();
-  build->add_option("--algorithm", algorithm, "minimal (Brown 5.1) or reduced (Brown 5.2)")->capture_default_str();
+  build->add_option("--algorithm", algorithm, "minimal (Brown 5.1) or reduced (Brown 5.2)")
+      ->capture_default_str();
   build->add_option("-o,--output", out, "Output mesh (.obj or .ply)")->required();
   build->add_option("--png", png, "Also write a top-down picture of the mesh (.png)");
   build->add_flag("--json", json, "Print statistics as JSON on stdout");
@@ -286,7 +307,8 @@ int main(int argc, char** argv) {
   std::uint64_t seed = 1;
   double range = 1600.0, spacing = 1.0;
   std::string synth_out;
-  CLI::App* synth = app.add_subcommand("synth", "Write a deterministic fractional Brownian motion DEM");
+  CLI::App* synth =
+      app.add_subcommand("synth", "Write a deterministic fractional Brownian motion DEM");
   synth->add_option("--size", width, "Width in samples")->capture_default_str();
   synth->add_option("--height", height, "Height in samples (default: = size)");
   synth->add_option("--seed", seed, "Random seed")->capture_default_str();
@@ -307,9 +329,11 @@ int main(int argc, char** argv) {
   }
   try {
     if (*build) {
-      return cmd_build(dem, max_error, max_vertices, base_vertices, rcf, algorithm, out, png, json, quiet, verify);
+      return cmd_build(dem, max_error, max_vertices, base_vertices, rcf, algorithm, out, png, json,
+                       quiet, verify);
     }
-    if (*synth) return cmd_synth(width, height == 0 ? width : height, seed, range, spacing, synth_out, quiet);
+    if (*synth)
+      return cmd_synth(width, height == 0 ? width : height, seed, range, spacing, synth_out, quiet);
   } catch (const smr::Error& e) {
     std::fprintf(stderr, "smrdb: error: %s\n", e.what());
     return e.exit_code();

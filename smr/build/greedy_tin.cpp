@@ -61,7 +61,9 @@ std::int64_t floor_div(std::int64_t n, std::int64_t d) {  // d > 0
   if ((n % d != 0) && (n < 0)) --q;
   return q;
 }
-std::int64_t ceil_div(std::int64_t n, std::int64_t d) { return -floor_div(-n, d); }
+std::int64_t ceil_div(std::int64_t n, std::int64_t d) {
+  return -floor_div(-n, d);
+}
 
 class Builder {
  public:
@@ -184,8 +186,10 @@ class Builder {
     const double z[3] = {p[0]->world.z, p[1]->world.z, p[2]->world.z};
     // Plane z = a*x + b*y + c through the three vertices (in grid units).
     const double det = double((x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]));
-    const double a = ((z[1] - z[0]) * double(y[2] - y[0]) - (z[2] - z[0]) * double(y[1] - y[0])) / det;
-    const double b = ((z[2] - z[0]) * double(x[1] - x[0]) - (z[1] - z[0]) * double(x[2] - x[0])) / det;
+    const double a =
+        ((z[1] - z[0]) * double(y[2] - y[0]) - (z[2] - z[0]) * double(y[1] - y[0])) / det;
+    const double b =
+        ((z[2] - z[0]) * double(x[1] - x[0]) - (z[1] - z[0]) * double(x[2] - x[0])) / det;
     const double c = z[0] - a * double(x[0]) - b * double(y[0]);
     const double cx = double(x[0] + x[1] + x[2]) / 3.0, cy = double(y[0] + y[1] + y[2]) / 3.0;
 
@@ -251,7 +255,8 @@ class Builder {
           continue;
         }
         // This sample must become a vertex for the hole boundary to be exact.
-        const double d2 = (double(col) - cx) * (double(col) - cx) + (double(row) - cy) * (double(row) - cy);
+        const double d2 =
+            (double(col) - cx) * (double(col) - cx) + (double(row) - cy) * (double(row) - cy);
         if (!mixed || d2 < mixed_d2) {
           mixed = true;
           mixed_d2 = d2;
@@ -287,8 +292,8 @@ class Builder {
 
     conflicts_.clear();
     boundary_.clear();
-    dt_.get_conflicts_and_boundary(p, std::back_inserter(conflicts_),
-                                   std::back_inserter(boundary_), tris_[tid].face);
+    dt_.get_conflicts_and_boundary(p, std::back_inserter(conflicts_), std::back_inserter(boundary_),
+                                   tris_[tid].face);
     if (conflicts_.empty()) throw_internal("greedy TIN: empty conflict zone");
     for (FaceHandle f : conflicts_) {
       if (f->info() != kNone) kill(f->info());
@@ -337,7 +342,8 @@ class Builder {
     std::vector<std::uint32_t> order = op_new_vertices_;
     std::sort(op_new_vertices_.begin(), op_new_vertices_.end());
     for (std::uint32_t v : others) {
-      if (!std::binary_search(op_new_vertices_.begin(), op_new_vertices_.end(), v)) order.push_back(v);
+      if (!std::binary_search(op_new_vertices_.begin(), op_new_vertices_.end(), v))
+        order.push_back(v);
     }
     op.new_vertex_count = static_cast<std::uint32_t>(op_new_vertices_.size());
     for (std::uint32_t v : order) {
@@ -402,7 +408,8 @@ class Builder {
     crmr_.ops.push_back(std::move(op));
   }
 
-  void add_geometry(const BuildTri& t, std::vector<Vec3>& points, std::vector<Vec3>& normals) const {
+  void add_geometry(const BuildTri& t, std::vector<Vec3>& points,
+                    std::vector<Vec3>& normals) const {
     const Vec3& a = verts_[t.v[0]].world;
     const Vec3& b = verts_[t.v[1]].world;
     const Vec3& c = verts_[t.v[2]].world;

@@ -26,8 +26,12 @@ double resolution_of(const CrmrInfo& info, double error) {
   return std::clamp(1.0 - (error - info.err_final) / span, 0.0, 1.0);
 }
 
-double OpSource::error_at(double res) const { return smr::error_at(info(), res); }
-double OpSource::resolution_of(double error) const { return smr::resolution_of(info(), error); }
+double OpSource::error_at(double res) const {
+  return smr::error_at(info(), res);
+}
+double OpSource::resolution_of(double error) const {
+  return smr::resolution_of(info(), error);
+}
 
 std::uint64_t Crmr::triangle_count() const {
   std::uint64_t n = 0;

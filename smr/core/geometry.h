@@ -58,7 +58,9 @@ struct NormalCone {
 inline double orient2d(const Vec2& a, const Vec2& b, const Vec2& c) {
   return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
 }
-inline Vec2 xy(const Vec3& p) { return {p.x, p.y}; }
+inline Vec2 xy(const Vec3& p) {
+  return {p.x, p.y};
+}
 
 /// Distance from p to the closed triangle (a, b, c) in the plane (0 when inside).
 double point_triangle_distance2d(const Vec2& p, const Vec2& a, const Vec2& b, const Vec2& c);

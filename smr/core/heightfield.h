@@ -29,7 +29,7 @@ struct Georef {
 struct Heightfield {
   int width = 0;
   int height = 0;
-  std::vector<float> z;          // width * height, row-major, row 0 = south
+  std::vector<float> z;             // width * height, row-major, row 0 = south
   std::vector<std::uint8_t> valid;  // empty = all valid; else 0 marks no data
   Georef georef;
   std::string source;  // file name or generator description, for messages

@@ -87,7 +87,9 @@ struct DirectedEdge {
   friend bool operator==(const DirectedEdge&, const DirectedEdge&) = default;
 };
 struct EdgeHash {
-  std::size_t operator()(const DirectedEdge& e) const { return mix64(e.a * 0x9E3779B97F4A7C15ULL ^ e.b); }
+  std::size_t operator()(const DirectedEdge& e) const {
+    return mix64(e.a * 0x9E3779B97F4A7C15ULL ^ e.b);
+  }
 };
 
 // Boundary of a triangle set as directed edges (those whose reverse is not in the set).
@@ -103,7 +105,9 @@ std::vector<DirectedEdge> boundary_of(const std::vector<GridTri>& tris) {
   return out;
 }
 
-std::string op_name(OpId id) { return "op " + std::to_string(id.value); }
+std::string op_name(OpId id) {
+  return "op " + std::to_string(id.value);
+}
 
 void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
                     std::unordered_map<std::uint64_t, std::pair<OpId, Vec3>>& vertex_owner) {
@@ -124,8 +128,8 @@ void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
     } else if (it == vertex_owner.end()) {
       r.fail(name + ": vertex " + std::to_string(v.id.value) + " used before it is introduced");
     } else if (it->second.second != v.p) {
-      r.fail(name + ": vertex " + std::to_string(v.id.value) + " has a different position than in " +
-             op_name(it->second.first));
+      r.fail(name + ": vertex " + std::to_string(v.id.value) +
+             " has a different position than in " + op_name(it->second.first));
     }
   }
   std::vector<GridTri> f, pre;
@@ -155,7 +159,8 @@ void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
         if (!found) r.fail(name + ": asymmetric neighbour link at triangle " + std::to_string(i));
         continue;
       }
-      const CoarserLink* link = op.coarser_link(static_cast<std::uint32_t>(i), static_cast<std::uint8_t>(k));
+      const CoarserLink* link =
+          op.coarser_link(static_cast<std::uint32_t>(i), static_cast<std::uint8_t>(k));
       const bool model_boundary = on_domain_boundary(info, f.back().p[k], f.back().p[(k + 1) % 3]);
       if (model_boundary) {
         if (link != nullptr) r.fail(name + ": model boundary edge has a coarser link");
@@ -163,7 +168,8 @@ void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
       }
       if (link == nullptr) {
         if (op.id != kBaseOp) {
-          r.fail(name + ": fragment boundary edge of triangle " + std::to_string(i) + " has no coarser version");
+          r.fail(name + ": fragment boundary edge of triangle " + std::to_string(i) +
+                 " has no coarser version");
         }
         continue;
       }
@@ -176,7 +182,8 @@ void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
       const int e = link->coarser.edge;
       const VertexId ta = target.vertex_id(tt, e), tb = target.vertex_id(tt, (e + 1) % 3);
       if (!((ta == a && tb == b) || (ta == b && tb == a))) {
-        r.fail(name + ": coarser link of triangle " + std::to_string(i) + " names a different edge");
+        r.fail(name + ": coarser link of triangle " + std::to_string(i) +
+               " names a different edge");
       }
     }
   }
@@ -245,7 +252,8 @@ void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
     std::sort(e1.begin(), e1.end(), less);
     std::sort(e2.begin(), e2.end(), less);
     if (!s1.empty() && e1 == e2) {
-      r.fail(name + " is not minimal: part of PreF is replaced by part of F with the same boundary");
+      r.fail(name +
+             " is not minimal: part of PreF is replaced by part of F with the same boundary");
       break;
     }
   }
@@ -265,17 +273,20 @@ void check_geometry(const Crmr& crmr, const Op& op, InvariantReport& r) {
         r.fail(name + ": bounding sphere does not contain a vertex");
       }
     }
-    const Vec3 nrm = triangle_normal(owner.position(t, 0), owner.position(t, 1), owner.position(t, 2));
+    const Vec3 nrm =
+        triangle_normal(owner.position(t, 0), owner.position(t, 1), owner.position(t, 2));
     if (op.cone.half_angle < M_PI &&
         std::acos(std::clamp(glm::dot(nrm, op.cone.axis), -1.0, 1.0)) > op.cone.half_angle + 1e-9) {
       r.fail(name + ": normal cone does not contain a triangle normal");
     }
   };
   for (const FragmentTriangle& t : op.fragment) check_tri(op, t);
-  for (const TriRef& t : op.pre) check_tri(crmr.ops[t.op.value], crmr.ops[t.op.value].fragment[t.index]);
+  for (const TriRef& t : op.pre)
+    check_tri(crmr.ops[t.op.value], crmr.ops[t.op.value].fragment[t.index]);
   if (!op.roi.contains(op.box)) r.fail(name + ": ROI does not contain its own box");
   for (OpId c : op.children) {
-    if (!op.roi.contains(crmr.ops[c.value].roi)) r.fail(name + ": ROI does not contain a child's ROI");
+    if (!op.roi.contains(crmr.ops[c.value].roi))
+      r.fail(name + ": ROI does not contain a child's ROI");
   }
 }
 
@@ -295,8 +306,10 @@ InvariantReport check_crmr(const Crmr& crmr) {
   for (std::size_t i = 0; i < crmr.ops.size(); ++i) {
     const Op& op = crmr.ops[i];
     ++r.checked;
-    if (op.id.value != i) r.fail("op at position " + std::to_string(i) + " has id " + std::to_string(op.id.value));
-    if (!(op.birth_res >= 0.0 && op.birth_res <= 1.0)) r.fail(op_name(op.id) + ": birth_res outside [0,1]");
+    if (op.id.value != i)
+      r.fail("op at position " + std::to_string(i) + " has id " + std::to_string(op.id.value));
+    if (!(op.birth_res >= 0.0 && op.birth_res <= 1.0))
+      r.fail(op_name(op.id) + ": birth_res outside [0,1]");
     if (i > 0 && op.birth_res < crmr.ops[i - 1].birth_res) {
       r.fail(op_name(op.id) + ": birth_res decreases (" + std::to_string(op.birth_res) + " after " +
              std::to_string(crmr.ops[i - 1].birth_res) + ")");
@@ -313,25 +326,31 @@ InvariantReport check_crmr(const Crmr& crmr) {
         continue;
       }
       OpId& k = killers[t.op.value][t.index];
-      if (k.valid()) r.fail(op_name(op.id) + ": replaces a triangle already replaced by " + op_name(k));
+      if (k.valid())
+        r.fail(op_name(op.id) + ": replaces a triangle already replaced by " + op_name(k));
       k = op.id;
       parents.push_back(t.op);
     }
     std::sort(parents.begin(), parents.end());
     parents.erase(std::unique(parents.begin(), parents.end()), parents.end());
-    if (parents != op.parents) r.fail(op_name(op.id) + ": parents differ from those implied by PreF");
+    if (parents != op.parents)
+      r.fail(op_name(op.id) + ": parents differ from those implied by PreF");
     for (OpId p : parents) children[p.value].push_back(op.id);
   }
   for (std::size_t i = 0; i < crmr.ops.size(); ++i) {
     const Op& op = crmr.ops[i];
-    if (children[i] != op.children) r.fail(op_name(op.id) + ": children differ from those implied by PreF");
+    if (children[i] != op.children)
+      r.fail(op_name(op.id) + ": children differ from those implied by PreF");
     for (std::size_t j = 0; j < op.fragment.size(); ++j) {
       const FragmentTriangle& t = op.fragment[j];
       const OpId k = killers[i][j];
       const double expect = k.valid() ? crmr.ops[k.value].birth_res : 1.0;
-      if (t.killer != k) r.fail(op_name(op.id) + ": triangle " + std::to_string(j) + " names the wrong killer");
-      if (t.death_res != expect) r.fail(op_name(op.id) + ": triangle " + std::to_string(j) + " has the wrong death_res");
-      if (t.death_res < op.birth_res) r.fail(op_name(op.id) + ": a triangle dies before it is born");
+      if (t.killer != k)
+        r.fail(op_name(op.id) + ": triangle " + std::to_string(j) + " names the wrong killer");
+      if (t.death_res != expect)
+        r.fail(op_name(op.id) + ": triangle " + std::to_string(j) + " has the wrong death_res");
+      if (t.death_res < op.birth_res)
+        r.fail(op_name(op.id) + ": a triangle dies before it is born");
     }
     check_op_local(crmr, op, r, vertex_owner);
     if (r.failures > 200) return r;
@@ -369,18 +388,22 @@ InvariantReport check_tiling(const OpSource& source, std::span<const TriRef> tri
     const Op& op = source.op(ref.op);
     const GridTri g = grid_tri(info, op, op.fragment.at(ref.index));
     const std::int64_t a2 = orient(g.p[0], g.p[1], g.p[2]);
-    if (a2 <= 0) r.fail("triangle " + op_name(ref.op) + "/" + std::to_string(ref.index) + " is not counter-clockwise");
+    if (a2 <= 0)
+      r.fail("triangle " + op_name(ref.op) + "/" + std::to_string(ref.index) +
+             " is not counter-clockwise");
     area += a2;
     for (int k = 0; k < 3; ++k) {
       pos[g.id[k].value] = g.p[k];
       const DirectedEdge e{g.id[k].value, g.id[(k + 1) % 3].value};
-      if (!edges.emplace(e, 1).second) r.fail("directed edge " + std::to_string(e.a) + "-" + std::to_string(e.b) + " used twice (overlap)");
+      if (!edges.emplace(e, 1).second)
+        r.fail("directed edge " + std::to_string(e.a) + "-" + std::to_string(e.b) +
+               " used twice (overlap)");
     }
   }
   const i128 domain = i128(2) * (info.grid_width - 1) * (info.grid_height - 1);
   if (area != domain) {
-    r.fail("triangle areas sum to " + std::to_string(double(area) / 2) + " grid cells, the domain has " +
-           std::to_string(double(domain) / 2));
+    r.fail("triangle areas sum to " + std::to_string(double(area) / 2) +
+           " grid cells, the domain has " + std::to_string(double(domain) / 2));
   }
   for (const auto& [e, count] : edges) {
     if (edges.count({e.b, e.a})) continue;

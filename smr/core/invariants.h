@@ -15,7 +15,7 @@ struct InvariantReport {
   std::vector<std::string> errors;  // empty = every invariant holds
   std::uint64_t checked = 0;        // number of items examined
   bool ok() const { return errors.empty(); }
-  void fail(std::string message);   // keeps the first 50 messages, counts the rest
+  void fail(std::string message);  // keeps the first 50 messages, counts the rest
   std::uint64_t failures = 0;
   std::string summary() const;
 };

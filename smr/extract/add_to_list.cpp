@@ -20,9 +20,11 @@ class RcfCache {
  private:
   bool get(const Op& op, int which) {
     std::uint8_t& e = cache_[op.id.value];
-    const std::uint8_t known = std::uint8_t(1u << (2 * which)), value = std::uint8_t(2u << (2 * which));
+    const std::uint8_t known = std::uint8_t(1u << (2 * which)),
+                       value = std::uint8_t(2u << (2 * which));
     if (!(e & known)) {
-      const bool v = which == 0 ? rcf_.is_finer(op, source_) : rcf_.is_completely_finer(op, source_);
+      const bool v =
+          which == 0 ? rcf_.is_finer(op, source_) : rcf_.is_completely_finer(op, source_);
       e = std::uint8_t(e | known | (v ? value : 0));
     }
     return (e & value) != 0;
@@ -59,7 +61,9 @@ std::vector<OpId> traverse(const OpSource& source, const Rcf& rcf, bool with_anc
 
 }  // namespace
 
-std::vector<OpId> add_to_list(const OpSource& source, const Rcf& rcf) { return traverse(source, rcf, true); }
+std::vector<OpId> add_to_list(const OpSource& source, const Rcf& rcf) {
+  return traverse(source, rcf, true);
+}
 std::vector<OpId> add_to_list_reduced(const OpSource& source, const Rcf& rcf) {
   // Lemma 5.2.1's form of Eq. 5.5: R^0 and every op not completely finer. The two agree when the
   // RCF bisects the Hypermesh (Brown 5.2); with screen-space tolerances the traversal of Eq. 5.5

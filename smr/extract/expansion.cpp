@@ -40,7 +40,8 @@ struct FrontEntry {
 class DomainIndex {
  public:
   explicit DomainIndex(const CrmrInfo& info)
-      : span_{std::max<std::int64_t>(1, info.grid_width - 1), std::max<std::int64_t>(1, info.grid_height - 1)} {}
+      : span_{std::max<std::int64_t>(1, info.grid_width - 1),
+              std::max<std::int64_t>(1, info.grid_height - 1)} {}
   void add(const std::array<GridPoint, 3>& t) {
     const std::size_t id = tris_.size();
     tris_.push_back(t);
@@ -64,7 +65,8 @@ class DomainIndex {
   static std::int64_t orient(const GridPoint& a, const GridPoint& b, const GridPoint& c) {
     return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
   }
-  static bool interiors_overlap(const std::array<GridPoint, 3>& a, const std::array<GridPoint, 3>& b) {
+  static bool interiors_overlap(const std::array<GridPoint, 3>& a,
+                                const std::array<GridPoint, 3>& b) {
     auto separated = [](const std::array<GridPoint, 3>& s, const std::array<GridPoint, 3>& o) {
       for (int k = 0; k < 3; ++k) {
         bool out = true;
@@ -79,7 +81,8 @@ class DomainIndex {
   bool for_cells(const std::array<GridPoint, 3>& t, F&& f) const {
     std::int64_t x0 = t[0].x, x1 = t[0].x, y0 = t[0].y, y1 = t[0].y;
     for (const GridPoint& p : t) {
-      x0 = std::min(x0, p.x), x1 = std::max(x1, p.x), y0 = std::min(y0, p.y), y1 = std::max(y1, p.y);
+      x0 = std::min(x0, p.x), x1 = std::max(x1, p.x), y0 = std::min(y0, p.y),
+      y1 = std::max(y1, p.y);
     }
     const std::int64_t c0 = cell_of(x0, span_.x), c1 = cell_of(x1, span_.x);
     const std::int64_t r0 = cell_of(y0, span_.y), r1 = cell_of(y1, span_.y);
@@ -187,13 +190,15 @@ class Expander {
       if (it == front_.end()) continue;  // merged away earlier
       const FrontEntry entry = it->second;
       front_.erase(it);
-      if (front_.erase(FrontKey{key.op, key.v, key.u}) != 0) continue;  // both sides expanded: merge
+      if (front_.erase(FrontKey{key.op, key.v, key.u}) != 0)
+        continue;  // both sides expanded: merge
       perform_expansion(op, key, entry, stack);
     }
   }
 
   // PerformExpansion (Fig. 5.10 / 5.14) on the region to the right of front edge u->v.
-  void perform_expansion(const Op& op, const FrontKey& key, const FrontEntry& entry, std::vector<FrontKey>& stack) {
+  void perform_expansion(const Op& op, const FrontKey& key, const FrontEntry& entry,
+                         std::vector<FrontKey>& stack) {
     const FragmentTriangle& t = op.fragment[entry.tri];
     const std::uint64_t a = op.vertex_id(t, entry.edge).value;
     const std::uint64_t b = op.vertex_id(t, (entry.edge + 1) % 3).value;
@@ -246,7 +251,8 @@ class Expander {
     for (int k = 0; k < 3; ++k) {
       if (op.vertex_id(t, k).value == u && op.vertex_id(t, (k + 1) % 3).value == v) return k;
     }
-    throw_internal("surface expansion: neighbour link without a shared edge in op " + std::to_string(op.id.value));
+    throw_internal("surface expansion: neighbour link without a shared edge in op " +
+                   std::to_string(op.id.value));
   }
 
   // Adds triangle i of F(op) to the mesh and its other edges to the front. entry_edge is the edge
@@ -279,7 +285,8 @@ class Expander {
   void track_fan(const Op& op, std::uint32_t i, int entry_edge) {
     const FragmentTriangle& t = op.fragment[i];
     bool continues = false;
-    if (entry_edge >= 0 && fan_op_ == op.id && t.nbr[entry_edge] == static_cast<std::int32_t>(fan_last_)) {
+    if (entry_edge >= 0 && fan_op_ == op.id &&
+        t.nbr[entry_edge] == static_cast<std::int32_t>(fan_last_)) {
       const std::uint64_t u = op.vertex_id(t, entry_edge).value;
       const std::uint64_t v = op.vertex_id(t, (entry_edge + 1) % 3).value;
       if (fan_len_ == 1) {

@@ -16,11 +16,13 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 }
 }  // namespace
 
-Extraction expand(const OpSource& source, std::span<const OpId> x, const ExpansionOptions& options) {
+Extraction expand(const OpSource& source, std::span<const OpId> x,
+                  const ExpansionOptions& options) {
   return run_expansion(source, x, false, options);
 }
 
-Extraction extract_minimal_surface(const OpSource& source, const Rcf& rcf, const ExpansionOptions& options) {
+Extraction extract_minimal_surface(const OpSource& source, const Rcf& rcf,
+                                   const ExpansionOptions& options) {
   auto t0 = std::chrono::steady_clock::now();
   const std::vector<OpId> x = add_to_list(source, rcf);
   const double t_extract = seconds_since(t0);
@@ -31,7 +33,8 @@ Extraction extract_minimal_surface(const OpSource& source, const Rcf& rcf, const
   return e;
 }
 
-Extraction extract_reduced(const OpSource& source, const Rcf& rcf, const ExpansionOptions& options) {
+Extraction extract_reduced(const OpSource& source, const Rcf& rcf,
+                           const ExpansionOptions& options) {
   auto t0 = std::chrono::steady_clock::now();
   const std::vector<OpId> x = add_to_list_reduced(source, rcf);
   const double t_extract = seconds_since(t0);
@@ -69,7 +72,8 @@ TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles, 
     std::array<std::uint32_t, 3> tri{};
     for (int k = 0; k < 3; ++k) {
       const Vertex& v = op.vertices[t.v[k]];
-      auto [it, fresh] = index.emplace(v.id.value, static_cast<std::uint32_t>(mesh.positions.size()));
+      auto [it, fresh] =
+          index.emplace(v.id.value, static_cast<std::uint32_t>(mesh.positions.size()));
       if (fresh) mesh.positions.push_back(v.p);
       tri[k] = it->second;
     }

@@ -15,8 +15,8 @@
 namespace smr {
 
 struct ExtractStats {
-  std::uint64_t x = 0;          // |X| after refinement operation extraction
-  std::uint64_t x_plus = 0;     // |X+| after surface expansion (reduced extraction; = |X| otherwise)
+  std::uint64_t x = 0;       // |X| after refinement operation extraction
+  std::uint64_t x_plus = 0;  // |X+| after surface expansion (reduced extraction; = |X| otherwise)
   std::uint64_t ops_visited = 0;
   std::uint64_t triangles = 0;  // expanded triangles, void ones included
   std::uint64_t void_triangles = 0;
@@ -29,8 +29,8 @@ struct ExtractStats {
 };
 
 struct Extraction {
-  std::vector<OpId> x;                  // the extracted ops (X, or X+), descending
-  std::vector<TriRef> triangles;        // in expansion order
+  std::vector<OpId> x;                    // the extracted ops (X, or X+), descending
+  std::vector<TriRef> triangles;          // in expansion order
   std::vector<std::uint32_t> fan_starts;  // index in `triangles` where each triangle fan begins
   ExtractStats stats;
 };
@@ -50,19 +50,23 @@ std::vector<OpId> add_to_list(const OpSource& source, const Rcf& rcf);
 std::vector<OpId> add_to_list_reduced(const OpSource& source, const Rcf& rcf);
 
 /// Minimal surface SMR (Brown 5.1).
-Extraction extract_minimal_surface(const OpSource& source, const Rcf& rcf, const ExpansionOptions& options = {});
+Extraction extract_minimal_surface(const OpSource& source, const Rcf& rcf,
+                                   const ExpansionOptions& options = {});
 
 /// Reduced extraction SMR (Brown 5.2), 2.5-D only.
-Extraction extract_reduced(const OpSource& source, const Rcf& rcf, const ExpansionOptions& options = {});
+Extraction extract_reduced(const OpSource& source, const Rcf& rcf,
+                           const ExpansionOptions& options = {});
 
 /// Surface expansion of an ancestor-closed X (Brown 5.1.2). `x` in any order.
-Extraction expand(const OpSource& source, std::span<const OpId> x, const ExpansionOptions& options = {});
+Extraction expand(const OpSource& source, std::span<const OpId> x,
+                  const ExpansionOptions& options = {});
 
 /// The set formula of Lemma 5.1.1: union of F(R) minus union of PreF(R) over R in X. Sorted.
 std::vector<TriRef> set_formula(const OpSource& source, std::span<const OpId> x);
 
 /// An indexed mesh of the given triangles, vertices shared by id; void triangles are dropped
 /// unless keep_void. triangle_values holds each triangle's death_res.
-TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles, bool keep_void = false);
+TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles,
+                     bool keep_void = false);
 
 }  // namespace smr

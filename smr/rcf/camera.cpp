@@ -10,7 +10,9 @@
 namespace smr {
 
 namespace {
-bool finite(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+bool finite(const Vec3& v) {
+  return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
 }  // namespace
 
 void Camera::validate() const {
@@ -21,8 +23,8 @@ void Camera::validate() const {
     throw_input("--fov must be in (0, 179) degrees, got " + std::to_string(fov_y_deg));
   }
   if (viewport_w <= 0 || viewport_h <= 0 || viewport_w > 1 << 16 || viewport_h > 1 << 16) {
-    throw_input("--viewport must be WxH with 1..65536 pixels each, got " + std::to_string(viewport_w) +
-                "x" + std::to_string(viewport_h));
+    throw_input("--viewport must be WxH with 1..65536 pixels each, got " +
+                std::to_string(viewport_w) + "x" + std::to_string(viewport_h));
   }
   if (!(near_distance >= 0.0) || !std::isfinite(near_distance)) throw_input("--near must be >= 0");
   if (!(far_distance >= 0.0) || !std::isfinite(far_distance) ||
@@ -31,7 +33,9 @@ void Camera::validate() const {
   }
 }
 
-Vec3 Camera::forward() const { return glm::normalize(target - eye); }
+Vec3 Camera::forward() const {
+  return glm::normalize(target - eye);
+}
 Vec3 Camera::right() const {
   const Vec3 f = forward();
   Vec3 r = glm::cross(f, up);
@@ -39,10 +43,18 @@ Vec3 Camera::right() const {
   if (glm::length(r) < 1e-9) r = glm::cross(f, Vec3{1.0, 0.0, 0.0});
   return glm::normalize(r);
 }
-Vec3 Camera::true_up() const { return glm::cross(right(), forward()); }
-double Camera::tan_half_y() const { return std::tan(fov_y_deg * M_PI / 360.0); }
-double Camera::tan_half_x() const { return tan_half_y() * double(viewport_w) / double(viewport_h); }
-double Camera::focal_px() const { return 0.5 * double(viewport_h) / tan_half_y(); }
+Vec3 Camera::true_up() const {
+  return glm::cross(right(), forward());
+}
+double Camera::tan_half_y() const {
+  return std::tan(fov_y_deg * M_PI / 360.0);
+}
+double Camera::tan_half_x() const {
+  return tan_half_y() * double(viewport_w) / double(viewport_h);
+}
+double Camera::focal_px() const {
+  return 0.5 * double(viewport_h) / tan_half_y();
+}
 
 std::optional<Vec2> Camera::project(const Vec3& p) const {
   const Vec3 d = p - eye;

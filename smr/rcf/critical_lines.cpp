@@ -46,7 +46,8 @@ CriticalLines CriticalLines::detect(const Heightfield& dem, const CriticalLineOp
         for (int dr = -1; dr <= 1; ++dr) {
           for (int dc = -1; dc <= 1; ++dc) {
             const int cc = c + dc, rr = r + dr;
-            if (cc < 0 || rr < 0 || cc >= dem.width || rr >= dem.height || !dem.has_data(cc, rr)) continue;
+            if (cc < 0 || rr < 0 || cc >= dem.width || rr >= dem.height || !dem.has_data(cc, rr))
+              continue;
             lo = std::min(lo, dem.at(cc, rr));
             hi = std::max(hi, dem.at(cc, rr));
           }
@@ -73,7 +74,8 @@ CriticalLines CriticalLines::detect(const Heightfield& dem, const CriticalLineOp
       }
       const std::size_t w = cl.bw_ + 1;
       cl.block_sat_[(br + 1) * w + bc + 1] = s + cl.block_sat_[br * w + bc + 1] +
-                                             cl.block_sat_[(br + 1) * w + bc] - cl.block_sat_[br * w + bc];
+                                             cl.block_sat_[(br + 1) * w + bc] -
+                                             cl.block_sat_[br * w + bc];
     }
   }
   return cl;
@@ -103,8 +105,8 @@ std::uint64_t CriticalLines::count_in_rect(int c0, int r0, int c1, int r1) const
     return s;
   }
   const std::size_t w = bw_ + 1;
-  std::uint64_t s = block_sat_[br1 * w + bc1] - block_sat_[br0 * w + bc1] - block_sat_[br1 * w + bc0] +
-                    block_sat_[br0 * w + bc0];
+  std::uint64_t s = block_sat_[br1 * w + bc1] - block_sat_[br0 * w + bc1] -
+                    block_sat_[br1 * w + bc0] + block_sat_[br0 * w + bc0];
   for (int r = r0; r <= r1; ++r) {
     if (r >= br0 * kBlock && r < br1 * kBlock) {
       s += count_in_row(r, c0, bc0 * kBlock - 1) + count_in_row(r, bc1 * kBlock, c1);

@@ -46,15 +46,21 @@ bool in_triangle(const Vec2& p, const Vec2& a, const Vec2& b, const Vec2& c) {
 }  // namespace
 
 // ---- constant ----
-std::string ConstantTerm::describe() const { return fmt("floor", {level_}); }
+std::string ConstantTerm::describe() const {
+  return fmt("floor", {level_});
+}
 
 // ---- Gaussian ----
-std::string GaussianTerm::describe() const { return fmt("aoi", {c_.x, c_.y, r_, level_}); }
+std::string GaussianTerm::describe() const {
+  return fmt("aoi", {c_.x, c_.y, r_, level_});
+}
 double GaussianTerm::at_distance(double d) const {
   if (r_ <= 0.0) return d <= 0.0 ? level_ : 0.0;
   return level_ * std::exp(-(d * d) / (2.0 * r_ * r_));
 }
-double GaussianTerm::value(const Vec2& p) const { return at_distance(glm::length(p - c_)); }
+double GaussianTerm::value(const Vec2& p) const {
+  return at_distance(glm::length(p - c_));
+}
 double GaussianTerm::max_over_triangle(const Vec2& a, const Vec2& b, const Vec2& c) const {
   // The maximum is at the point of the triangle nearest the centre; shrink the distance by a hair
   // so rounding never puts it below a sampled value.
@@ -66,8 +72,12 @@ double GaussianTerm::max_over_rect(const Vec2& lo, const Vec2& hi) const {
 }
 
 // ---- disc ----
-std::string DiscTerm::describe() const { return fmt("disc", {c_.x, c_.y, r_, level_}); }
-double DiscTerm::value(const Vec2& p) const { return glm::length(p - c_) <= r_ ? level_ : 0.0; }
+std::string DiscTerm::describe() const {
+  return fmt("disc", {c_.x, c_.y, r_, level_});
+}
+double DiscTerm::value(const Vec2& p) const {
+  return glm::length(p - c_) <= r_ ? level_ : 0.0;
+}
 double DiscTerm::max_over_triangle(const Vec2& a, const Vec2& b, const Vec2& c) const {
   const double d = point_triangle_distance2d(c_, a, b, c);
   return d <= r_ * (1.0 + 1e-12) + 1e-12 ? level_ : 0.0;
@@ -77,7 +87,8 @@ double DiscTerm::max_over_rect(const Vec2& lo, const Vec2& hi) const {
 }
 
 // ---- wedge ----
-WedgeTerm::WedgeTerm(Vec2 apex, double a0, double a1, double level, bool full_plane, std::string label)
+WedgeTerm::WedgeTerm(Vec2 apex, double a0, double a1, double level, bool full_plane,
+                     std::string label)
     : apex_(apex), a0_(a0), a1_(a1), level_(level), full_(full_plane), label_(std::move(label)) {}
 
 WedgeTerm WedgeTerm::from_rays(const Camera& cam, const std::vector<Vec3>& rays, double level,
@@ -116,7 +127,8 @@ WedgeTerm WedgeTerm::frustum_footprint(const Camera& cam, double level) {
   const Vec3 f = cam.forward(), r = cam.right(), u = cam.true_up();
   std::vector<Vec3> rays;
   for (double sx : {-1.0, 1.0}) {
-    for (double sy : {-1.0, 1.0}) rays.push_back(f + sx * cam.tan_half_x() * r + sy * cam.tan_half_y() * u);
+    for (double sy : {-1.0, 1.0})
+      rays.push_back(f + sx * cam.tan_half_x() * r + sy * cam.tan_half_y() * u);
   }
   return from_rays(cam, rays, level, fmt("frustum", {level}));
 }
@@ -132,7 +144,9 @@ WedgeTerm WedgeTerm::centre_cone(const Camera& cam, double cone_deg, double leve
   return from_rays(cam, rays, level, fmt("centre-cone", {cone_deg, level}));
 }
 
-std::string WedgeTerm::describe() const { return label_; }
+std::string WedgeTerm::describe() const {
+  return label_;
+}
 
 bool WedgeTerm::contains(const Vec2& p, double slack) const {
   if (full_) return true;
@@ -143,7 +157,9 @@ bool WedgeTerm::contains(const Vec2& p, double slack) const {
   return a <= a1_ + slack;
 }
 
-double WedgeTerm::value(const Vec2& p) const { return contains(p, 0.0) ? level_ : 0.0; }
+double WedgeTerm::value(const Vec2& p) const {
+  return contains(p, 0.0) ? level_ : 0.0;
+}
 
 bool WedgeTerm::meets_triangle(const Vec2& a, const Vec2& b, const Vec2& c) const {
   if (full_) return true;
@@ -151,7 +167,8 @@ bool WedgeTerm::meets_triangle(const Vec2& a, const Vec2& b, const Vec2& c) cons
   if (contains(a, slack) || contains(b, slack) || contains(c, slack)) return true;
   if (in_triangle(apex_, a, b, c)) return true;
   // A boundary ray crossing an edge: clip the rays at a length beyond the triangle.
-  const double reach = 2.0 * (glm::length(a - apex_) + glm::length(b - apex_) + glm::length(c - apex_)) + 1.0;
+  const double reach =
+      2.0 * (glm::length(a - apex_) + glm::length(b - apex_) + glm::length(c - apex_)) + 1.0;
   for (double ang : {a0_, a1_}) {
     const Vec2 end = apex_ + reach * Vec2{std::cos(ang), std::sin(ang)};
     if (segments_meet(apex_, end, a, b) || segments_meet(apex_, end, b, c) ||
@@ -223,8 +240,10 @@ double CriticalLineTerm::max_over_triangle(const Vec2& a, const Vec2& b, const V
 
 double CriticalLineTerm::max_over_rect(const Vec2& lo, const Vec2& hi) const {
   const Georef& g = lines_->georef();
-  const int c0 = int(std::ceil((lo.x - g.x0) / g.dx - 1e-7)), c1 = int(std::floor((hi.x - g.x0) / g.dx + 1e-7));
-  const int r0 = int(std::ceil((lo.y - g.y0) / g.dy - 1e-7)), r1 = int(std::floor((hi.y - g.y0) / g.dy + 1e-7));
+  const int c0 = int(std::ceil((lo.x - g.x0) / g.dx - 1e-7)),
+            c1 = int(std::floor((hi.x - g.x0) / g.dx + 1e-7));
+  const int r0 = int(std::ceil((lo.y - g.y0) / g.dy - 1e-7)),
+            r1 = int(std::floor((hi.y - g.y0) / g.dy + 1e-7));
   return lines_->count_in_rect(c0, r0, c1, r1) > 0 ? level_ : 0.0;
 }
 

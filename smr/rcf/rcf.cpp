@@ -23,16 +23,19 @@ bool FrustumCulling::culls(const Op& op) const {
 // ---- object space ----
 std::string ObjectSpaceCriterion::describe() const {
   std::string s = "object-space g = max(";
-  for (std::size_t i = 0; i < g_.terms().size(); ++i) s += (i ? ", " : "") + g_.terms()[i]->describe();
+  for (std::size_t i = 0; i < g_.terms().size(); ++i)
+    s += (i ? ", " : "") + g_.terms()[i]->describe();
   return s + ")";
 }
 
-bool ObjectSpaceCriterion::triangle_satisfies(const Op& owner, const FragmentTriangle& t, double res,
-                                              const CrmrInfo&) const {
-  return res >= g_.max_over_triangle(xy(owner.position(t, 0)), xy(owner.position(t, 1)), xy(owner.position(t, 2)));
+bool ObjectSpaceCriterion::triangle_satisfies(const Op& owner, const FragmentTriangle& t,
+                                              double res, const CrmrInfo&) const {
+  return res >= g_.max_over_triangle(xy(owner.position(t, 0)), xy(owner.position(t, 1)),
+                                     xy(owner.position(t, 2)));
 }
 
-bool ObjectSpaceCriterion::region_satisfies(const Box3& box, double min_res, const CrmrInfo&) const {
+bool ObjectSpaceCriterion::region_satisfies(const Box3& box, double min_res,
+                                            const CrmrInfo&) const {
   return min_res >= g_.max_over_rect(xy(box.lo), xy(box.hi));
 }
 
@@ -40,8 +43,9 @@ bool ObjectSpaceCriterion::region_satisfies(const Box3& box, double min_res, con
 std::string ScreenSpaceCriterion::describe() const {
   std::ostringstream os;
   os << "screen-space tau=" << tau_ << "px";
-  if (aoi_) os << " (" << aoi_->pixel_error << "px within " << aoi_->radius_px << "px of " << aoi_->center_px.x << ","
-               << aoi_->center_px.y << ")";
+  if (aoi_)
+    os << " (" << aoi_->pixel_error << "px within " << aoi_->radius_px << "px of "
+       << aoi_->center_px.x << "," << aoi_->center_px.y << ")";
   return os.str();
 }
 
@@ -54,7 +58,8 @@ double ScreenSpaceCriterion::pixel_error_bound(double error, const Box3& region)
 }
 
 double ScreenSpaceCriterion::tolerance_at(const Vec2& pixel) const {
-  if (aoi_ && glm::length(pixel - aoi_->center_px) <= aoi_->radius_px) return std::min(tau_, aoi_->pixel_error);
+  if (aoi_ && glm::length(pixel - aoi_->center_px) <= aoi_->radius_px)
+    return std::min(tau_, aoi_->pixel_error);
   return tau_;
 }
 
@@ -75,13 +80,14 @@ double ScreenSpaceCriterion::tolerance(const Box3& region) const {
   return point_rect_distance2d(aoi_->center_px, lo, hi) <= aoi_->radius_px ? tau_min : tau_;
 }
 
-bool ScreenSpaceCriterion::triangle_satisfies(const Op& owner, const FragmentTriangle& t, double res,
-                                              const CrmrInfo& info) const {
+bool ScreenSpaceCriterion::triangle_satisfies(const Op& owner, const FragmentTriangle& t,
+                                              double res, const CrmrInfo& info) const {
   const Box3 b = triangle_box(owner, t);
   return pixel_error_bound(error_at(info, res), b) <= tolerance(b);
 }
 
-bool ScreenSpaceCriterion::region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const {
+bool ScreenSpaceCriterion::region_satisfies(const Box3& box, double min_res,
+                                            const CrmrInfo& info) const {
   return pixel_error_bound(error_at(info, min_res), box) <= tolerance(box);
 }
 
@@ -119,7 +125,8 @@ bool Rcf::is_completely_finer(const Op& op, const OpSource& source) const {
   return true;
 }
 
-bool Rcf::region_completely_finer(const Box3& box, double min_birth_res, const CrmrInfo& info) const {
+bool Rcf::region_completely_finer(const Box3& box, double min_birth_res,
+                                  const CrmrInfo& info) const {
   for (const auto& c : culling_) {
     if (c->culls_region(box)) return true;
   }

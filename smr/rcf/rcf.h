@@ -35,7 +35,9 @@ class CullingComponent {
 /// A triangle that no op replaces is as fine as the model gets: it satisfies every similarity
 /// criterion (Brown 4.6.2: "or if its fragment has no children"; the proof of Theorem 5.1.1 relies
 /// on it). A void triangle covers no data and is never output.
-inline bool is_final_or_void(const FragmentTriangle& t) { return t.is_void() || !t.killer.valid(); }
+inline bool is_final_or_void(const FragmentTriangle& t) {
+  return t.is_void() || !t.killer.valid();
+}
 
 class SimilarityComponent {
  public:
@@ -77,7 +79,8 @@ class ObjectSpaceCriterion final : public SimilarityComponent {
  public:
   explicit ObjectSpaceCriterion(ObjectSpaceFunction g) : g_(std::move(g)) {}
   std::string describe() const override;
-  bool triangle_satisfies(const Op& owner, const FragmentTriangle& t, double res, const CrmrInfo& info) const override;
+  bool triangle_satisfies(const Op& owner, const FragmentTriangle& t, double res,
+                          const CrmrInfo& info) const override;
   bool region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const override;
   const ObjectSpaceFunction& function() const { return g_; }
 
@@ -101,10 +104,12 @@ struct ScreenAoi {
 /// smallest tolerance of any screen position B may project to.
 class ScreenSpaceCriterion final : public SimilarityComponent {
  public:
-  ScreenSpaceCriterion(Camera cam, double pixel_error, std::optional<ScreenAoi> aoi, bool vertical_error)
+  ScreenSpaceCriterion(Camera cam, double pixel_error, std::optional<ScreenAoi> aoi,
+                       bool vertical_error)
       : cam_(std::move(cam)), tau_(pixel_error), aoi_(aoi), vertical_(vertical_error) {}
   std::string describe() const override;
-  bool triangle_satisfies(const Op& owner, const FragmentTriangle& t, double res, const CrmrInfo& info) const override;
+  bool triangle_satisfies(const Op& owner, const FragmentTriangle& t, double res,
+                          const CrmrInfo& info) const override;
   bool region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const override;
 
   double pixel_error_bound(double error, const Box3& region) const;
@@ -138,7 +143,9 @@ class Rcf {
   bool region_completely_finer(const Box3& box, double min_birth_res, const CrmrInfo& info) const;
 
   const std::vector<std::shared_ptr<const CullingComponent>>& culling() const { return culling_; }
-  const std::vector<std::shared_ptr<const SimilarityComponent>>& similarity() const { return similarity_; }
+  const std::vector<std::shared_ptr<const SimilarityComponent>>& similarity() const {
+    return similarity_;
+  }
   std::string describe() const;
 
  private:

@@ -10,7 +10,8 @@ namespace smr {
 
 namespace {
 void check_level(double v, const std::string& option) {
-  if (!(v >= 0.0 && v <= 1.0)) throw_input(option + ": resolution level must be in [0, 1], got " + std::to_string(v));
+  if (!(v >= 0.0 && v <= 1.0))
+    throw_input(option + ": resolution level must be in [0, 1], got " + std::to_string(v));
 }
 void check_aoi(const AoiSpec& a, const std::string& option) {
   if (!std::isfinite(a.x) || !std::isfinite(a.y)) throw_input(option + ": centre must be finite");
@@ -31,7 +32,8 @@ void validate(const RcfSpec& s) {
   if (s.pixel_error) {
     if (!s.camera) throw_input("--pixel-error needs a camera (--eye and --target)");
     if (!(*s.pixel_error > 0.0) || !std::isfinite(*s.pixel_error)) {
-      throw_input("--pixel-error must be a positive number of pixels, got " + std::to_string(*s.pixel_error));
+      throw_input("--pixel-error must be a positive number of pixels, got " +
+                  std::to_string(*s.pixel_error));
     }
   }
   if (s.screen_aoi) {
@@ -70,10 +72,13 @@ Rcf make_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem) {
   }
   ObjectSpaceFunction g;
   if (spec.floor) g.add(std::make_shared<ConstantTerm>(*spec.floor));
-  for (const AoiSpec& a : spec.aois) g.add(std::make_shared<GaussianTerm>(Vec2{a.x, a.y}, a.radius, a.level));
-  for (const AoiSpec& a : spec.discs) g.add(std::make_shared<DiscTerm>(Vec2{a.x, a.y}, a.radius, a.level));
+  for (const AoiSpec& a : spec.aois)
+    g.add(std::make_shared<GaussianTerm>(Vec2{a.x, a.y}, a.radius, a.level));
+  for (const AoiSpec& a : spec.discs)
+    g.add(std::make_shared<DiscTerm>(Vec2{a.x, a.y}, a.radius, a.level));
   if (spec.frustum_level) {
-    g.add(std::make_shared<WedgeTerm>(WedgeTerm::frustum_footprint(*spec.camera, *spec.frustum_level)));
+    g.add(std::make_shared<WedgeTerm>(
+        WedgeTerm::frustum_footprint(*spec.camera, *spec.frustum_level)));
   }
   if (spec.centre_cone) {
     g.add(std::make_shared<WedgeTerm>(
@@ -81,7 +86,8 @@ Rcf make_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem) {
   }
   if (spec.critical_level) {
     if (dem == nullptr) throw_input("--critical-lines needs the source DEM");
-    auto lines = std::make_shared<CriticalLines>(CriticalLines::detect(*dem, {spec.critical_relief}));
+    auto lines =
+        std::make_shared<CriticalLines>(CriticalLines::detect(*dem, {spec.critical_relief}));
     g.add(std::make_shared<CriticalLineTerm>(lines, *spec.critical_level));
   }
   if (!spec.has_similarity()) g.add(std::make_shared<ConstantTerm>(1.0));

@@ -19,14 +19,14 @@ struct AoiSpec {
 struct RcfSpec {
   std::optional<Camera> camera;
   bool cull = true;
-  std::optional<double> pixel_error;      // screen-space tau (needs a camera)
-  std::optional<ScreenAoi> screen_aoi;    // needs pixel_error
-  std::optional<double> floor;            // constant object-space level
-  std::vector<AoiSpec> aois;              // Gaussian areas of interest
-  std::vector<AoiSpec> discs;             // thresholded discs
-  std::optional<double> frustum_level;    // object-space frustum footprint term (needs a camera)
+  std::optional<double> pixel_error;    // screen-space tau (needs a camera)
+  std::optional<ScreenAoi> screen_aoi;  // needs pixel_error
+  std::optional<double> floor;          // constant object-space level
+  std::vector<AoiSpec> aois;            // Gaussian areas of interest
+  std::vector<AoiSpec> discs;           // thresholded discs
+  std::optional<double> frustum_level;  // object-space frustum footprint term (needs a camera)
   std::optional<std::pair<double, double>> centre_cone;  // degrees, level (needs a camera)
-  std::optional<double> critical_level;   // critical-line term (needs the DEM)
+  std::optional<double> critical_level;                  // critical-line term (needs the DEM)
   double critical_relief = 0.0;
 
   bool has_similarity() const;

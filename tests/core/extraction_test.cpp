@@ -36,8 +36,10 @@ std::vector<NamedSpec> rcf_spread(const CrmrInfo& info) {
   };
   // Oblique from the south-west corner, above the highest point; looking north past the domain
   // (part of it out of view); straight down from above.
-  const Camera oblique = camera({b.lo.x - 0.2 * w, b.lo.y - 0.2 * h, b.hi.z + 0.5 * zr}, {c.x, c.y, b.lo.z});
-  const Camera aside = camera({c.x, b.lo.y + 0.3 * h, b.hi.z + 0.2 * zr}, {c.x + 0.3 * w, b.hi.y + h, b.lo.z});
+  const Camera oblique =
+      camera({b.lo.x - 0.2 * w, b.lo.y - 0.2 * h, b.hi.z + 0.5 * zr}, {c.x, c.y, b.lo.z});
+  const Camera aside =
+      camera({c.x, b.lo.y + 0.3 * h, b.hi.z + 0.2 * zr}, {c.x + 0.3 * w, b.hi.y + h, b.lo.z});
   const Camera down = camera({c.x, c.y, b.hi.z + 2 * zr}, {c.x, c.y + 1e-3 * h, b.lo.z});
 
   std::vector<NamedSpec> out;
@@ -114,7 +116,8 @@ std::vector<NamedSpec> rcf_spread(const CrmrInfo& info) {
 }
 
 struct Summary {
-  std::uint64_t cases = 0, interior_edges = 0, non_delaunay = 0, minimality_checks = 0, reduced_x_larger = 0;
+  std::uint64_t cases = 0, interior_edges = 0, non_delaunay = 0, minimality_checks = 0,
+                reduced_x_larger = 0;
 };
 
 class Spread : public ::testing::TestWithParam<std::string> {};
@@ -147,7 +150,8 @@ TEST_P(Spread, MinimalSurfaceAndReducedExtractionMeetEveryInvariant) {
     const test::OracleResult opwise = test::check_rcf_opwise(m, e.triangles, rcf);
     EXPECT_TRUE(opwise.ok()) << opwise.first_failure;
     const test::OracleResult pointwise = test::check_rcf_pointwise(m, e.triangles, ns.spec, d.dem);
-    EXPECT_TRUE(pointwise.ok()) << pointwise.failures << " failures; first: " << pointwise.first_failure;
+    EXPECT_TRUE(pointwise.ok()) << pointwise.failures
+                                << " failures; first: " << pointwise.first_failure;
 
     // The stored error of every output triangle bounds its deviation from the source.
     const test::OracleResult bound = test::check_error_bound(m, e.triangles, d.dem);
@@ -157,7 +161,8 @@ TEST_P(Spread, MinimalSurfaceAndReducedExtractionMeetEveryInvariant) {
     const DelaunayReport del = check_delaunay(m, e.triangles);
     sum.interior_edges += del.interior_edges;
     sum.non_delaunay += del.non_delaunay_edges;
-    EXPECT_EQ(del.non_delaunay_edges, 0u) << "first pair: op " << (del.examples.empty() ? 0 : del.examples[0].first.op.value);
+    EXPECT_EQ(del.non_delaunay_edges, 0u)
+        << "first pair: op " << (del.examples.empty() ? 0 : del.examples[0].first.op.value);
 
     // Theorem 5.1.3: dropping any starting point (an op of X with no child in X) breaks the RCF.
     std::unordered_set<std::uint64_t> in_x;
@@ -166,13 +171,16 @@ TEST_P(Spread, MinimalSurfaceAndReducedExtractionMeetEveryInvariant) {
     for (OpId id : e.x) {
       if (id == kBaseOp || sampled >= 6) continue;
       const Op& op = m.op(id);
-      if (std::any_of(op.children.begin(), op.children.end(), [&](OpId c) { return in_x.count(c.value) != 0; })) continue;
+      if (std::any_of(op.children.begin(), op.children.end(),
+                      [&](OpId c) { return in_x.count(c.value) != 0; }))
+        continue;
       std::vector<OpId> fewer;
       for (OpId o : e.x) {
         if (o != id) fewer.push_back(o);
       }
       const auto tris = set_formula(m, fewer);
-      EXPECT_FALSE(test::check_rcf_opwise(m, tris, rcf).ok()) << "dropping op " << id.value << " still satisfies the RCF";
+      EXPECT_FALSE(test::check_rcf_opwise(m, tris, rcf).ok())
+          << "dropping op " << id.value << " still satisfies the RCF";
       ++sampled;
       ++sum.minimality_checks;
     }
@@ -203,7 +211,9 @@ TEST_P(Spread, MinimalSurfaceAndReducedExtractionMeetEveryInvariant) {
     EXPECT_EQ(check_delaunay(m, r.triangles).non_delaunay_edges, 0u);
   }
   RecordProperty("cases", std::to_string(sum.cases));
-  RecordProperty("non_delaunay_share", std::to_string(double(sum.non_delaunay) / double(std::max<std::uint64_t>(1, sum.interior_edges))));
+  RecordProperty("non_delaunay_share",
+                 std::to_string(double(sum.non_delaunay) /
+                                double(std::max<std::uint64_t>(1, sum.interior_edges))));
   RecordProperty("screen_space_cases_with_reduced_x_larger", std::to_string(sum.reduced_x_larger));
   EXPECT_GT(sum.minimality_checks, 10u);
 }
@@ -227,7 +237,8 @@ TEST(Extraction, FloorOneGivesTheFinestMeshAndFloorZeroTheBase) {
   EXPECT_EQ(got, finest);
   EXPECT_EQ(fine.stats.x, d.crmr.ops.size());
   s.floor = 0.0;
-  const Extraction coarse = extract_minimal_surface(d.crmr, make_rcf(s, ModelKind::kTerrain, &d.dem));
+  const Extraction coarse =
+      extract_minimal_surface(d.crmr, make_rcf(s, ModelKind::kTerrain, &d.dem));
   EXPECT_EQ(coarse.stats.x, 1u);
   EXPECT_EQ(coarse.triangles.size(), d.crmr.ops[0].fragment.size());
 }
@@ -251,13 +262,15 @@ TEST(Extraction, FansAndStatistics) {
     for (std::size_t i = e.fan_starts[f]; i < end; ++i) {
       const Op& op = d.crmr.op(e.triangles[i].op);
       const FragmentTriangle& t = op.fragment[e.triangles[i].index];
-      std::vector<std::uint64_t> ids{op.vertex_id(t, 0).value, op.vertex_id(t, 1).value, op.vertex_id(t, 2).value};
+      std::vector<std::uint64_t> ids{op.vertex_id(t, 0).value, op.vertex_id(t, 1).value,
+                                     op.vertex_id(t, 2).value};
       std::sort(ids.begin(), ids.end());
       if (i == e.fan_starts[f]) {
         common = ids;
       } else {
         std::vector<std::uint64_t> keep;
-        std::set_intersection(common.begin(), common.end(), ids.begin(), ids.end(), std::back_inserter(keep));
+        std::set_intersection(common.begin(), common.end(), ids.begin(), ids.end(),
+                              std::back_inserter(keep));
         common = keep;
       }
     }
@@ -282,7 +295,8 @@ TEST(Extraction, TriangleBudgetExpandsTheFinestPartFirst) {
   for (std::size_t i = 0; i < full.triangles.size(); ++i) {
     (i < part.triangles.size() ? part_res : rest_res) += d.crmr.op(full.triangles[i].op).birth_res;
   }
-  EXPECT_GT(part_res / double(part.triangles.size()), rest_res / double(full.triangles.size() - part.triangles.size()));
+  EXPECT_GT(part_res / double(part.triangles.size()),
+            rest_res / double(full.triangles.size() - part.triangles.size()));
 }
 
 TEST(Extraction, ToMeshSharesVerticesAndDropsVoid) {
@@ -303,7 +317,9 @@ TEST(Extraction, ToMeshSharesVerticesAndDropsVoid) {
       edges.insert(std::min(a, b) << 32 | std::max(a, b));
     }
   }
-  EXPECT_EQ(std::int64_t(all.positions.size()) - std::int64_t(edges.size()) + std::int64_t(all.triangles.size()), 1);
+  EXPECT_EQ(std::int64_t(all.positions.size()) - std::int64_t(edges.size()) +
+                std::int64_t(all.triangles.size()),
+            1);
 }
 
 }  // namespace

@@ -10,8 +10,8 @@
 #include <unordered_set>
 
 #include "smr/io/synthetic.h"
-#include "storage/error.h"
 #include "smr/rcf/spec.h"
+#include "storage/error.h"
 #include "tests/support/datasets.h"
 
 namespace smr {
@@ -45,7 +45,8 @@ TEST(ObjectSpace, TermMaximaBoundPointValues) {
   for (int trial = 0; trial < 3000; ++trial) {
     Vec2 a{u(rng), u(rng)}, b{u(rng), u(rng)}, c{u(rng), u(rng)};
     if (trial % 3 == 0) {  // grid-aligned triangles, as in a CRMR
-      a = glm::round(a / 10.0) * 10.0, b = glm::round(b / 10.0) * 10.0, c = glm::round(c / 10.0) * 10.0;
+      a = glm::round(a / 10.0) * 10.0, b = glm::round(b / 10.0) * 10.0,
+      c = glm::round(c / 10.0) * 10.0;
     }
     const Vec2 lo = glm::min(a, glm::min(b, c)), hi = glm::max(a, glm::max(b, c));
     for (const auto& t : terms) {
@@ -75,7 +76,8 @@ TEST(ObjectSpace, WedgeFootprintCoversTheFrustum) {
   std::uniform_real_distribution<double> u(-1, 1), t(1, 2000);
   for (int i = 0; i < 2000; ++i) {
     // A point inside the 3-D frustum projects into the footprint.
-    const Vec3 dir = cam.forward() + u(rng) * cam.tan_half_x() * cam.right() + u(rng) * cam.tan_half_y() * cam.true_up();
+    const Vec3 dir = cam.forward() + u(rng) * cam.tan_half_x() * cam.right() +
+                     u(rng) * cam.tan_half_y() * cam.true_up();
     const Vec3 p = cam.eye + t(rng) * dir;
     EXPECT_EQ(w.value(xy(p)), 1.0);
   }

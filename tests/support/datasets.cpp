@@ -11,7 +11,9 @@
 
 namespace smr::test {
 
-std::vector<std::string> dataset_names() { return {"jacksboro", "topobathy", "elev", "fbm129", "fbm257"}; }
+std::vector<std::string> dataset_names() {
+  return {"jacksboro", "topobathy", "elev", "fbm129", "fbm257"};
+}
 
 const Heightfield& dem(const std::string& name) {
   static std::map<std::string, std::unique_ptr<Heightfield>> cache;

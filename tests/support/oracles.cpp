@@ -22,14 +22,17 @@ template <class F>
 void for_samples(const CrmrInfo& info, const Op& op, const FragmentTriangle& t, F&& f) {
   GridPoint p[3];
   for (int k = 0; k < 3; ++k) p[k] = to_grid(info, op.position(t, k));
-  const std::int64_t x0 = std::min({p[0].x, p[1].x, p[2].x}), x1 = std::max({p[0].x, p[1].x, p[2].x});
-  const std::int64_t y0 = std::min({p[0].y, p[1].y, p[2].y}), y1 = std::max({p[0].y, p[1].y, p[2].y});
+  const std::int64_t x0 = std::min({p[0].x, p[1].x, p[2].x}),
+                     x1 = std::max({p[0].x, p[1].x, p[2].x});
+  const std::int64_t y0 = std::min({p[0].y, p[1].y, p[2].y}),
+                     y1 = std::max({p[0].y, p[1].y, p[2].y});
   auto orient = [](GridPoint a, GridPoint b, std::int64_t x, std::int64_t y) {
     return (b.x - a.x) * (y - a.y) - (b.y - a.y) * (x - a.x);
   };
   for (std::int64_t y = y0; y <= y1; ++y) {
     for (std::int64_t x = x0; x <= x1; ++x) {
-      if (orient(p[0], p[1], x, y) >= 0 && orient(p[1], p[2], x, y) >= 0 && orient(p[2], p[0], x, y) >= 0) {
+      if (orient(p[0], p[1], x, y) >= 0 && orient(p[1], p[2], x, y) >= 0 &&
+          orient(p[2], p[0], x, y) >= 0) {
         f(int(x), int(y));
       }
     }
@@ -37,7 +40,8 @@ void for_samples(const CrmrInfo& info, const Op& op, const FragmentTriangle& t, 
 }
 }  // namespace
 
-OracleResult check_error_bound(const OpSource& source, std::span<const TriRef> triangles, const Heightfield& dem) {
+OracleResult check_error_bound(const OpSource& source, std::span<const TriRef> triangles,
+                               const Heightfield& dem) {
   OracleResult r;
   const CrmrInfo& info = source.info();
   const double tol = exact_tolerance(dem) * 10;
@@ -50,7 +54,8 @@ OracleResult check_error_bound(const OpSource& source, std::span<const TriRef> t
     for_samples(info, op, t, [&](int col, int row) {
       ++r.checked;
       if (!dem.has_data(col, row)) {
-        r.fail(tri_name(ref) + " covers the no-data sample (" + std::to_string(col) + "," + std::to_string(row) + ")");
+        r.fail(tri_name(ref) + " covers the no-data sample (" + std::to_string(col) + "," +
+               std::to_string(row) + ")");
         return;
       }
       // Barycentric interpolation in world xy.
@@ -62,7 +67,8 @@ OracleResult check_error_bound(const OpSource& source, std::span<const TriRef> t
       if (dev > bound + tol * (1.0 + std::abs(z))) {
         r.worst = std::max(r.worst, dev - bound);
         std::ostringstream os;
-        os << tri_name(ref) << ": sample (" << col << "," << row << ") deviates " << dev << " > bound " << bound;
+        os << tri_name(ref) << ": sample (" << col << "," << row << ") deviates " << dev
+           << " > bound " << bound;
         r.fail(os.str());
       }
     });
@@ -70,8 +76,8 @@ OracleResult check_error_bound(const OpSource& source, std::span<const TriRef> t
   return r;
 }
 
-OracleResult check_rcf_pointwise(const OpSource& source, std::span<const TriRef> triangles, const RcfSpec& spec,
-                                 const Heightfield& dem) {
+OracleResult check_rcf_pointwise(const OpSource& source, std::span<const TriRef> triangles,
+                                 const RcfSpec& spec, const Heightfield& dem) {
   OracleResult r;
   const CrmrInfo& info = source.info();
   const Rcf rcf = make_rcf(spec, info.kind, &dem);
@@ -127,7 +133,8 @@ OracleResult check_rcf_pointwise(const OpSource& source, std::span<const TriRef>
     const double err = error_at(info, death);
     auto fail_at = [&](const Vec3& p, const std::string& what) {
       std::ostringstream os;
-      os << tri_name(ref) << " (death_res " << death << ") fails " << what << " at (" << p.x << "," << p.y << ")";
+      os << tri_name(ref) << " (death_res " << death << ") fails " << what << " at (" << p.x << ","
+         << p.y << ")";
       r.fail(os.str());
     };
     for (const Vec3& p : pts) {
@@ -147,7 +154,8 @@ OracleResult check_rcf_pointwise(const OpSource& source, std::span<const TriRef>
         double tau = *spec.pixel_error;
         if (spec.screen_aoi) {
           const auto proj = cam.project(p);
-          if (!proj || glm::length(*proj - spec.screen_aoi->center_px) <= spec.screen_aoi->radius_px) {
+          if (!proj ||
+              glm::length(*proj - spec.screen_aoi->center_px) <= spec.screen_aoi->radius_px) {
             tau = std::min(tau, spec.screen_aoi->pixel_error);
           }
         }
@@ -160,7 +168,8 @@ OracleResult check_rcf_pointwise(const OpSource& source, std::span<const TriRef>
     if (lines && object) {
       for_samples(info, op, t, [&](int col, int row) {
         if (lines->flagged(col, row) && death < *spec.critical_level) {
-          fail_at(dem.world(col, row), "critical line sample (" + std::to_string(col) + "," + std::to_string(row) + ")");
+          fail_at(dem.world(col, row),
+                  "critical line sample (" + std::to_string(col) + "," + std::to_string(row) + ")");
         }
       });
     }
@@ -168,19 +177,23 @@ OracleResult check_rcf_pointwise(const OpSource& source, std::span<const TriRef>
   return r;
 }
 
-OracleResult check_rcf_opwise(const OpSource& source, std::span<const TriRef> triangles, const Rcf& rcf) {
+OracleResult check_rcf_opwise(const OpSource& source, std::span<const TriRef> triangles,
+                              const Rcf& rcf) {
   OracleResult r;
   for (const TriRef& ref : triangles) {
     ++r.checked;
     const FragmentTriangle& t = source.triangle(ref);
     const bool ok = !t.killer.valid() || rcf.is_finer(source.op(ref.op), source) ||
                     (t.killer.valid() && rcf.is_completely_finer(source.op(t.killer), source));
-    if (!ok) r.fail(tri_name(ref) + " is replaced, but satisfies neither IsFiner(creator) nor IsCompletelyFiner(killer)");
+    if (!ok)
+      r.fail(tri_name(ref) +
+             " is replaced, but satisfies neither IsFiner(creator) nor IsCompletelyFiner(killer)");
   }
   return r;
 }
 
-OracleResult check_x_definition(const OpSource& source, std::span<const OpId> x, const Rcf& rcf, bool ancestors) {
+OracleResult check_x_definition(const OpSource& source, std::span<const OpId> x, const Rcf& rcf,
+                                bool ancestors) {
   OracleResult r;
   if (!ancestors) {  // Lemma 5.2.1: exactly R^0 and the ops that are not completely finer
     std::unordered_set<std::uint64_t> in;
@@ -188,7 +201,9 @@ OracleResult check_x_definition(const OpSource& source, std::span<const OpId> x,
     for (std::uint64_t i = 0; i < source.op_count(); ++i) {
       ++r.checked;
       const bool want = i == 0 || !rcf.is_completely_finer(source.op(OpId{i}), source);
-      if (want != (in.count(i) != 0)) r.fail("op " + std::to_string(i) + (want ? " is missing from X" : " is in X without a reason"));
+      if (want != (in.count(i) != 0))
+        r.fail("op " + std::to_string(i) +
+               (want ? " is missing from X" : " is in X without a reason"));
     }
     return r;
   }
@@ -200,14 +215,15 @@ OracleResult check_x_definition(const OpSource& source, std::span<const OpId> x,
     const Op& op = source.op(id);
     if (ancestors) {
       for (OpId p : op.parents) {
-        if (!in.count(p.value)) r.fail("op " + std::to_string(id.value) + " is in X but its parent is not");
+        if (!in.count(p.value))
+          r.fail("op " + std::to_string(id.value) + " is in X but its parent is not");
       }
     }
     if (!rcf.is_finer(op, source)) {
       for (OpId c : op.children) {
         if (!in.count(c.value) && !rcf.is_completely_finer(source.op(c), source)) {
-          r.fail("op " + std::to_string(c.value) + " is a needed child of op " + std::to_string(id.value) +
-                 " but not in X");
+          r.fail("op " + std::to_string(c.value) + " is a needed child of op " +
+                 std::to_string(id.value) + " but not in X");
         }
       }
     }

@@ -28,22 +28,25 @@ struct OracleResult {
 
 /// Every grid sample in the closed (non-void) triangle deviates from the triangle's plane by no
 /// more than error_at(death_res) (+ a float-rounding tolerance). No-data samples are skipped.
-OracleResult check_error_bound(const OpSource& source, std::span<const TriRef> triangles, const Heightfield& dem);
+OracleResult check_error_bound(const OpSource& source, std::span<const TriRef> triangles,
+                               const Heightfield& dem);
 
 /// Per triangle, from the RCF spec's definitions evaluated at points (vertices, edge points,
 /// centroid, grid samples inside, the point nearest each AOI centre): either the triangle is
 /// culled (all vertices outside one frustum plane, or its normal faces away from the eye at every
 /// vertex) or g(p) <= death_res and the projected error at p <= tau(p) pixels, or it is final
 /// (no op replaces it: the finest the model offers, Brown 4.6.2).
-OracleResult check_rcf_pointwise(const OpSource& source, std::span<const TriRef> triangles, const RcfSpec& spec,
-                                 const Heightfield& dem);
+OracleResult check_rcf_pointwise(const OpSource& source, std::span<const TriRef> triangles,
+                                 const RcfSpec& spec, const Heightfield& dem);
 
 /// Theorem 5.1.1: t is in F(R) with R finer, or in PreF(R') with R' completely finer, or no op
 /// replaces t (it is the finest the model has: Brown 4.6.2, "or if its fragment has no children").
-OracleResult check_rcf_opwise(const OpSource& source, std::span<const TriRef> triangles, const Rcf& rcf);
+OracleResult check_rcf_opwise(const OpSource& source, std::span<const TriRef> triangles,
+                              const Rcf& rcf);
 
 /// X is exactly the set of Brown 5.1.1 (minimal: R^0, closure conditions, every member justified)
 /// or of Lemma 5.2.1 (reduced: R^0 and every op not completely finer).
-OracleResult check_x_definition(const OpSource& source, std::span<const OpId> x, const Rcf& rcf, bool ancestors);
+OracleResult check_x_definition(const OpSource& source, std::span<const OpId> x, const Rcf& rcf,
+                                bool ancestors);
 
 }  // namespace smr::test

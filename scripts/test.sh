@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# The whole test suite: install, fetch the real datasets, build the release and the
+# AddressSanitizer/UndefinedBehaviorSanitizer presets, run every test in both, check formatting.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+scripts/install-deps.sh
+scripts/fetch-data.sh data
+export SMRDB_DATA_DIR="$PWD/data"
+scripts/build.sh release
+ctest --preset release -j"$(nproc)"
+scripts/build.sh asan
+ctest --preset asan -j"$(nproc)"
+files=$(git ls-files '*.h' '*.cpp' | grep -v '^benchmarks/peers/')
+clang-format --dry-run -Werror $files
+echo "all tests passed"
