@@ -33,7 +33,8 @@ struct TriRef {
   friend constexpr auto operator<=>(const TriRef&, const TriRef&) = default;
 };
 
-inline std::uint64_t mix64(std::uint64_t x) {
+/// splitmix64 finaliser (Steele et al. 2014): the project's one integer hash.
+constexpr std::uint64_t mix64(std::uint64_t x) {
   x ^= x >> 30;
   x *= 0xbf58476d1ce4e5b9ULL;
   x ^= x >> 27;

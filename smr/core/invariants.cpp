@@ -26,6 +26,22 @@ std::string InvariantReport::summary() const {
   return os.str();
 }
 
+std::int64_t orient(const GridPoint& a, const GridPoint& b, const GridPoint& c) {
+  return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+}
+
+bool interiors_overlap(const GridTriangle& a, const GridTriangle& b) {
+  auto separated_by = [](const GridTriangle& s, const GridTriangle& o) {
+    for (int k = 0; k < 3; ++k) {
+      bool all_out = true;
+      for (int j = 0; j < 3 && all_out; ++j) all_out = orient(s[k], s[(k + 1) % 3], o[j]) <= 0;
+      if (all_out) return true;
+    }
+    return false;
+  };
+  return !separated_by(a, b) && !separated_by(b, a);
+}
+
 GridPoint to_grid(const CrmrInfo& info, const Vec3& p) {
   return {std::llround((p.x - info.georef.x0) / info.georef.dx),
           std::llround((p.y - info.georef.y0) / info.georef.dy)};
@@ -34,10 +50,6 @@ GridPoint to_grid(const CrmrInfo& info, const Vec3& p) {
 namespace {
 
 __extension__ typedef __int128 i128;
-
-std::int64_t orient(const GridPoint& a, const GridPoint& b, const GridPoint& c) {
-  return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
-}
 
 // > 0 when d is strictly inside the circumcircle of counter-clockwise (a, b, c).
 i128 incircle(const GridPoint& a, const GridPoint& b, const GridPoint& c, const GridPoint& d) {
@@ -61,19 +73,8 @@ GridTri grid_tri(const CrmrInfo& info, const Op& op, const FragmentTriangle& t) 
   return g;
 }
 
-// True when the open interiors of two counter-clockwise triangles intersect (separating axis).
 bool interiors_overlap(const GridTri& a, const GridTri& b) {
-  auto separated_by = [](const GridTri& s, const GridTri& o) {
-    for (int k = 0; k < 3; ++k) {
-      const GridPoint& p = s.p[k];
-      const GridPoint& q = s.p[(k + 1) % 3];
-      bool all_out = true;
-      for (int j = 0; j < 3 && all_out; ++j) all_out = orient(p, q, o.p[j]) <= 0;
-      if (all_out) return true;
-    }
-    return false;
-  };
-  return !separated_by(a, b) && !separated_by(b, a);
+  return smr::interiors_overlap(a.p, b.p);
 }
 
 bool on_domain_boundary(const CrmrInfo& info, const GridPoint& a, const GridPoint& b) {

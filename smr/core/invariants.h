@@ -2,6 +2,7 @@
 // selective refinement (Brown 5.1.4, 5.2.2; DESIGN.md section 8). Used by tests and `verify`.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -32,6 +33,11 @@ struct GridPoint {
   friend bool operator==(const GridPoint&, const GridPoint&) = default;
 };
 GridPoint to_grid(const CrmrInfo& info, const Vec3& p);
+using GridTriangle = std::array<GridPoint, 3>;
+/// Twice the signed area of (a, b, c), exactly.
+std::int64_t orient(const GridPoint& a, const GridPoint& b, const GridPoint& c);
+/// True when the open interiors of two counter-clockwise triangles intersect (separating axes).
+bool interiors_overlap(const GridTriangle& a, const GridTriangle& b);
 
 /// Checks that `triangles` tile the terrain's rectangular domain (Brown Theorem 5.2.1): every
 /// triangle counter-clockwise, twice-areas sum exactly to the domain's, every interior edge shared

@@ -62,21 +62,6 @@ class DomainIndex {
   }
 
  private:
-  static std::int64_t orient(const GridPoint& a, const GridPoint& b, const GridPoint& c) {
-    return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
-  }
-  static bool interiors_overlap(const std::array<GridPoint, 3>& a,
-                                const std::array<GridPoint, 3>& b) {
-    auto separated = [](const std::array<GridPoint, 3>& s, const std::array<GridPoint, 3>& o) {
-      for (int k = 0; k < 3; ++k) {
-        bool out = true;
-        for (int j = 0; j < 3 && out; ++j) out = orient(s[k], s[(k + 1) % 3], o[j]) <= 0;
-        if (out) return true;
-      }
-      return false;
-    };
-    return !separated(a, b) && !separated(b, a);
-  }
   template <class F>
   bool for_cells(const std::array<GridPoint, 3>& t, F&& f) const {
     std::int64_t x0 = t[0].x, x1 = t[0].x, y0 = t[0].y, y1 = t[0].y;

@@ -10,20 +10,12 @@
 #include <thread>
 #include <vector>
 
+#include "smr/core/ids.h"
 #include "storage/error.h"
 
 namespace smr {
 
 namespace {
-
-constexpr std::uint64_t mix64(std::uint64_t x) {  // splitmix64 finaliser (Steele et al. 2014)
-  x ^= x >> 30;
-  x *= 0xbf58476d1ce4e5b9ULL;
-  x ^= x >> 27;
-  x *= 0x94d049bb133111ebULL;
-  x ^= x >> 31;
-  return x;
-}
 
 // Eight unit gradients (literals, not cos/sin, so no libm difference can change the output).
 constexpr double kS = 0.70710678118654752440;
