@@ -15,6 +15,8 @@
 
 #include "benchmarks/bench_common.h"
 #include "smr/build/greedy_tin.h"
+#include "smr/extract/extract.h"
+#include "smr/io/mesh_writer.h"
 #include "smr/io/npy.h"
 
 int main(int argc, char** argv) {
@@ -28,10 +30,14 @@ int main(int argc, char** argv) {
   app.add_option("--seed", in_opt.seed, "fBm seed")->capture_default_str();
   app.add_option("--range", in_opt.range, "fBm height range")->capture_default_str();
   app.add_option("--spacing", in_opt.spacing, "fBm sample spacing")->capture_default_str();
-  app.add_option("--max-error", max_error, "Max vertical error (data units); default: a fraction of the height range");
-  app.add_option("--max-error-fraction", max_error_fraction, "Default max error as a fraction of the height range")
+  app.add_option("--max-error", max_error,
+                 "Max vertical error (data units); default: a fraction of the height range");
+  app.add_option("--max-error-fraction", max_error_fraction,
+                 "Default max error as a fraction of the height range")
       ->capture_default_str();
-  app.add_option("--write-mesh", write_mesh, "Write the finest mesh as a SMRGRID1 dump (see bench_common.h)");
+  app.add_option(
+      "--write-mesh", write_mesh,
+      "Write the finest mesh: .obj/.ply (smr::write_mesh), else a SMRGRID1 dump (bench_common.h)");
   app.add_option("--write-npy", write_npy, "Write the input DEM as float32 .npy (for the peers)");
   app.add_flag("--skip-check", skip_check, "Do not check the error bound");
   app.add_flag("--skip-build", skip_build, "Only load/generate (and --write-npy) the DEM");
@@ -75,27 +81,40 @@ int main(int argc, char** argv) {
       }
     }
     const smr::bench::GridMesh mesh = smr::bench::finest_mesh(crmr, dem);
-    report["build"] = {{"seconds", build_seconds},
-                       {"vertices", crmr.header.vertex_count},
-                       {"finest_vertices", mesh.vertices.size()},
-                       {"finest_triangles", finest},
-                       {"finest_void_triangles", finest_void},
-                       {"ops", crmr.ops.size()},
-                       {"fragment_triangles", crmr.triangle_count()},
-                       {"base_triangles", crmr.ops[0].fragment.size()},
-                       {"err0", crmr.header.err0},
-                       {"err_final", crmr.header.err_final},
-                       {"vertices_per_second", double(crmr.header.vertex_count) / build_seconds},
-                       {"sample_fraction", double(crmr.header.vertex_count) / double(dem.sample_count())}};
+    report["build"] = {
+        {"seconds", build_seconds},
+        {"vertices", crmr.header.vertex_count},
+        {"finest_vertices", mesh.vertices.size()},
+        {"finest_triangles", finest},
+        {"finest_void_triangles", finest_void},
+        {"ops", crmr.ops.size()},
+        {"fragment_triangles", crmr.triangle_count()},
+        {"base_triangles", crmr.ops[0].fragment.size()},
+        {"err0", crmr.header.err0},
+        {"err_final", crmr.header.err_final},
+        {"vertices_per_second", double(crmr.header.vertex_count) / build_seconds},
+        {"sample_fraction", double(crmr.header.vertex_count) / double(dem.sample_count())}};
     report["rss_peak_after_build_mb"] = peak_after_build;
 
     if (!write_mesh.empty()) {
-      smr::bench::write_grid_mesh(write_mesh, mesh);
+      const std::string ext = write_mesh.size() > 4 ? write_mesh.substr(write_mesh.size() - 4) : "";
+      if (ext == ".obj" || ext == ".ply") {
+        std::vector<smr::TriRef> refs;
+        for (const smr::Op& op : crmr.ops) {
+          for (std::uint32_t i = 0; i < op.fragment.size(); ++i) {
+            if (!op.fragment[i].killer.valid()) refs.push_back({op.id, i});
+          }
+        }
+        smr::write_mesh(write_mesh, smr::to_mesh(crmr, refs));
+      } else {
+        smr::bench::write_grid_mesh(write_mesh, mesh);
+      }
       report["mesh_dump"] = write_mesh;
     }
     bool ok = true;
     if (!skip_check) {
-      const smr::bench::ErrorBoundReport check = smr::bench::check_error_bound(mesh, dem, max_error);
+      const smr::bench::ErrorBoundReport check =
+          smr::bench::check_error_bound(mesh, dem, max_error);
       report["error_check"] = check.to_json();
       ok = check.ok();
     }

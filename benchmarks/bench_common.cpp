@@ -32,7 +32,9 @@ std::uint64_t now_ns() {
                                         .count());
 }
 
-double seconds_since(std::uint64_t start_ns) { return double(now_ns() - start_ns) * 1e-9; }
+double seconds_since(std::uint64_t start_ns) {
+  return double(now_ns() - start_ns) * 1e-9;
+}
 
 std::pair<double, double> z_range(const Heightfield& dem) {
   double lo = std::numeric_limits<double>::infinity(), hi = -lo;
@@ -50,12 +52,9 @@ Input load_input(const InputOptions& options) {
   if (options.fbm_size > 0) {
     in.dem = make_fbm(options.fbm_size, options.fbm_size, options.seed, options.range, 0, 0.5,
                       options.spacing);
-    in.description = {{"generator", "fbm"},
-                      {"size", options.fbm_size},
-                      {"seed", options.seed},
-                      {"range", options.range},
-                      {"spacing", options.spacing},
-                      {"generate_seconds", seconds_since(t0)}};
+    in.description = {{"generator", "fbm"},         {"size", options.fbm_size},
+                      {"seed", options.seed},       {"range", options.range},
+                      {"spacing", options.spacing}, {"generate_seconds", seconds_since(t0)}};
   } else {
     in.dem = read_dem(options.path);
     in.description = {{"path", options.path}, {"read_seconds", seconds_since(t0)}};
@@ -130,7 +129,8 @@ double current_rss_mb() {
 
 GridMesh finest_mesh(const Crmr& crmr, const Heightfield& dem) {
   GridMesh m;
-  std::vector<std::uint32_t> index_of(crmr.header.vertex_count, std::numeric_limits<std::uint32_t>::max());
+  std::vector<std::uint32_t> index_of(crmr.header.vertex_count,
+                                      std::numeric_limits<std::uint32_t>::max());
   const Georef& g = dem.georef;
   auto to_grid = [&](double w, double origin, double step, int n, const char* axis) {
     const double f = (w - origin) / step;
@@ -149,7 +149,8 @@ GridMesh finest_mesh(const Crmr& crmr, const Heightfield& dem) {
       std::array<std::uint32_t, 3> tri{};
       for (int k = 0; k < 3; ++k) {
         const VertexId id = op.vertex_id(t, k);
-        if (id.value >= index_of.size()) index_of.resize(id.value + 1, std::numeric_limits<std::uint32_t>::max());
+        if (id.value >= index_of.size())
+          index_of.resize(id.value + 1, std::numeric_limits<std::uint32_t>::max());
         std::uint32_t& slot = index_of[id.value];
         if (slot == std::numeric_limits<std::uint32_t>::max()) {
           const Vec3& p = op.position(t, k);
@@ -191,7 +192,8 @@ GridMesh read_grid_mesh(const std::string& path) {
   in.read(magic, 8);
   in.read(reinterpret_cast<char*>(&nv), 4);
   in.read(reinterpret_cast<char*>(&nt), 4);
-  if (!in || std::memcmp(magic, kMagic, 8) != 0) throw std::runtime_error(path + ": not a SMRGRID1 mesh dump");
+  if (!in || std::memcmp(magic, kMagic, 8) != 0)
+    throw std::runtime_error(path + ": not a SMRGRID1 mesh dump");
   GridMesh m;
   m.vertices.resize(nv);
   m.triangles.resize(nt);
@@ -250,14 +252,16 @@ ErrorBoundReport check_error_bound(const GridMesh& mesh, const Heightfield& dem,
   r.dem_has_nodata = dem.has_nodata();
 
   const std::int64_t W = dem.width, H = dem.height;
-  for (std::size_t i = 0; i < dem.z.size(); ++i) r.samples += dem.valid.empty() || dem.valid[i] != 0;
+  for (std::size_t i = 0; i < dem.z.size(); ++i)
+    r.samples += dem.valid.empty() || dem.valid[i] != 0;
 
   std::vector<std::uint8_t> bad(mesh.vertices.size(), 0);
   for (std::size_t i = 0; i < mesh.vertices.size(); ++i) {
     const auto [c, w] = mesh.vertices[i];
     if (c >= W || w >= H) {
       bad[i] = 1;
-    } else if (!mesh.z.empty() && dem.has_data(int(c), int(w)) && mesh.z[i] != double(dem.at(int(c), int(w)))) {
+    } else if (!mesh.z.empty() && dem.has_data(int(c), int(w)) &&
+               mesh.z[i] != double(dem.at(int(c), int(w)))) {
       bad[i] = 1;
     }
     r.bad_vertices += bad[i];
@@ -339,8 +343,8 @@ ErrorBoundReport check_error_bound(const GridMesh& mesh, const Heightfield& dem,
           if (r.violations++ == 0) {
             std::ostringstream os;
             os.precision(17);
-            os << "triangle " << ti << ": sample (" << col << "," << row << ") deviates " << dev << " > "
-               << bound;
+            os << "triangle " << ti << ": sample (" << col << "," << row << ") deviates " << dev
+               << " > " << bound;
             r.first_violation = os.str();
           }
         }

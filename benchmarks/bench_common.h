@@ -25,11 +25,11 @@ namespace smr::bench {
 // ---- input ----------------------------------------------------------------------------------
 
 struct InputOptions {
-  std::string path;          // a DEM file (read_dem), or empty for fBm
-  int fbm_size = 0;          // > 0: generate a fbm_size x fbm_size fBm instead
+  std::string path;  // a DEM file (read_dem), or empty for fBm
+  int fbm_size = 0;  // > 0: generate a fbm_size x fbm_size fBm instead
   std::uint64_t seed = 1;
-  double range = 1600.0;     // fBm height range
-  double spacing = 1.0;      // fBm sample spacing
+  double range = 1600.0;  // fBm height range
+  double spacing = 1.0;   // fBm sample spacing
 };
 
 struct Input {
@@ -86,16 +86,16 @@ struct ErrorBoundReport {
   double bound = 0.0;      // the max error the mesh must honour
   double tolerance = 0.0;  // float-rounding slack added to the bound
   std::uint64_t triangles = 0;
-  std::uint64_t degenerate_triangles = 0;   // zero area: skipped, counted as failures
-  std::uint64_t bad_vertices = 0;           // outside the grid, or stored z != DEM sample
+  std::uint64_t degenerate_triangles = 0;     // zero area: skipped, counted as failures
+  std::uint64_t bad_vertices = 0;             // outside the grid, or stored z != DEM sample
   std::uint64_t nodata_vertex_triangles = 0;  // a vertex without data: treated as void, skipped
-  std::uint64_t sample_visits = 0;          // (triangle, sample) pairs evaluated
-  std::uint64_t samples = 0;                // samples with data in the DEM
-  std::uint64_t samples_covered = 0;        // of those, covered by at least one triangle
+  std::uint64_t sample_visits = 0;            // (triangle, sample) pairs evaluated
+  std::uint64_t samples = 0;                  // samples with data in the DEM
+  std::uint64_t samples_covered = 0;          // of those, covered by at least one triangle
   bool dem_has_nodata = false;  // then a valid sample with no valid neighbour may stay uncovered
-  std::uint64_t nodata_samples_covered = 0; // no-data samples inside a non-void triangle
-  std::uint64_t violations = 0;             // sample visits deviating more than bound + tolerance
-  std::uint64_t over_bound_strict = 0;      // ... more than bound (no tolerance)
+  std::uint64_t nodata_samples_covered = 0;  // no-data samples inside a non-void triangle
+  std::uint64_t violations = 0;              // sample visits deviating more than bound + tolerance
+  std::uint64_t over_bound_strict = 0;       // ... more than bound (no tolerance)
   double max_deviation = 0.0;
   double rms_deviation = 0.0;  // over covered samples (each counted once)
   std::string first_violation;

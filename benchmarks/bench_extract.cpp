@@ -151,7 +151,9 @@ json measure(const smr::Crmr& crmr, const smr::Rcf& rcf, bool reduced, int repea
 }
 
 void print_row(const std::string& label, const json& r) {
-  std::fprintf(stderr, "  %-24s %-7s |X| %8llu |X+| %8llu |F| %9llu  tri/fan %.2f  ext %.3fs exp %.3fs total %.3fs\n",
+  std::fprintf(stderr,
+               "  %-24s %-7s |X| %8llu |X+| %8llu |F| %9llu  tri/fan %.2f  ext %.3fs exp %.3fs "
+               "total %.3fs\n",
                label.c_str(), r["algorithm"].get<std::string>().c_str(),
                static_cast<unsigned long long>(r["x"].get<std::uint64_t>()),
                static_cast<unsigned long long>(r["x_plus"].get<std::uint64_t>()),
@@ -176,14 +178,16 @@ int main(int argc, char** argv) {
   app.add_option("--real-max-error-fraction", real_fraction,
                  "Build tolerance of the real DEMs, as a fraction of their height range")
       ->capture_default_str();
-  app.add_option("--fbm-max-error-fraction", fbm_fraction, "Build tolerance of the fBm (fraction of range)")
+  app.add_option("--fbm-max-error-fraction", fbm_fraction,
+                 "Build tolerance of the fBm (fraction of range)")
       ->capture_default_str();
   app.add_option("--repeat", repeat, "Runs per table row (median reported)")->capture_default_str();
   app.add_option("--throughput-repeat", throughput_repeat, "Runs for the throughput figure (>= 5)")
       ->capture_default_str();
   app.add_flag("--skip-fbm", skip_fbm, "Only the real DEMs");
   app.add_flag("--skip-real", skip_real, "Only the synthetic terrain");
-  app.add_flag("--verify", verify, "Check that every output tiles the domain (slow on large outputs)");
+  app.add_flag("--verify", verify,
+               "Check that every output tiles the domain (slow on large outputs)");
   CLI11_PARSE(app, argc, argv);
   repeat = std::max(repeat, 1);
   throughput_repeat = std::max(throughput_repeat, 5);
@@ -218,8 +222,8 @@ int main(int argc, char** argv) {
       const smr::Heightfield dem = smr::bench::to_local_metres(input.dem);
       input.dem = {};
       const double max_error = d.max_error_fraction * (input.z_max - input.z_min);
-      std::fprintf(stderr, "%s: %dx%d, max error %.4g (%.3g %% of range)\n", d.name.c_str(), dem.width,
-                   dem.height, max_error, 100 * d.max_error_fraction);
+      std::fprintf(stderr, "%s: %dx%d, max error %.4g (%.3g %% of range)\n", d.name.c_str(),
+                   dem.width, dem.height, max_error, 100 * d.max_error_fraction);
 
       smr::GreedyTinOptions opt;
       opt.max_error = max_error;
@@ -242,12 +246,14 @@ int main(int argc, char** argv) {
                  {"fragments", crmr.ops.size() - 1},
                  {"ops_including_base", crmr.ops.size()},
                  {"fragment_triangles", crmr.triangle_count()},
-                 {"vertices_per_fragment", double(crmr.header.vertex_count - crmr.ops[0].new_vertex_count) /
-                                               double(std::max<std::size_t>(crmr.ops.size() - 1, 1))},
+                 {"vertices_per_fragment",
+                  double(crmr.header.vertex_count - crmr.ops[0].new_vertex_count) /
+                      double(std::max<std::size_t>(crmr.ops.size() - 1, 1))},
                  {"err0", crmr.header.err0},
                  {"err_final", crmr.header.err_final},
                  {"build_seconds", build_seconds}};
-      std::fprintf(stderr, "  samples %zu, M^m %llu vertices %llu triangles, %zu fragments, build %.2fs\n",
+      std::fprintf(stderr,
+                   "  samples %zu, M^m %llu vertices %llu triangles, %zu fragments, build %.2fs\n",
                    dem.sample_count(), static_cast<unsigned long long>(crmr.header.vertex_count),
                    static_cast<unsigned long long>(finest), crmr.ops.size() - 1, build_seconds);
 
@@ -273,16 +279,18 @@ int main(int argc, char** argv) {
       ds["rows"] = rows;
 
       if (d.input.fbm_size > 0 && view_rcf) {
-        json tp = {{"dataset", d.name}, {"rcf", "screen 1px, culling"}, {"repeats", throughput_repeat}};
+        json tp = {
+            {"dataset", d.name}, {"rcf", "screen 1px, culling"}, {"repeats", throughput_repeat}};
         for (bool reduced : {false, true}) {
           std::vector<double> totals;
           json row = measure(crmr, *view_rcf, reduced, throughput_repeat, false, &totals);
           row["total_seconds_all"] = totals;
           tp[reduced ? "reduced" : "minimal"] = row;
-          std::fprintf(stderr, "  throughput (%s): %llu triangles in %.3f s median = %.3g triangles/s\n",
-                       reduced ? "reduced" : "minimal",
-                       static_cast<unsigned long long>(row["triangles"].get<std::uint64_t>()),
-                       row["total_seconds"].get<double>(), row["triangles_per_second"].get<double>());
+          std::fprintf(
+              stderr, "  throughput (%s): %llu triangles in %.3f s median = %.3g triangles/s\n",
+              reduced ? "reduced" : "minimal",
+              static_cast<unsigned long long>(row["triangles"].get<std::uint64_t>()),
+              row["total_seconds"].get<double>(), row["triangles_per_second"].get<double>());
         }
         report["throughput"] = tp;
       }
