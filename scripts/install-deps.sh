@@ -9,5 +9,6 @@ $SUDO apt-get install -y -qq --no-install-recommends \
   build-essential cmake g++ git ca-certificates \
   libcgal-dev libgmp-dev libmpfr-dev libboost-dev \
   libgdal-dev gdal-bin libglm-dev libcli11-dev nlohmann-json3-dev libpng-dev zlib1g-dev \
+  liblmdb-dev lmdb-utils libdraco-dev libxxhash-dev libzstd-dev \
   libgtest-dev libgmock-dev libbenchmark-dev clang-format >/dev/null
 echo "dependencies installed"

@@ -39,6 +39,24 @@ std::uint64_t Crmr::triangle_count() const {
   return n;
 }
 
+void compute_op_bounds(Op& op) {
+  std::vector<Vec3> points, normals;
+  points.reserve(3 * (op.fragment.size() + op.pre_tris.size()));
+  normals.reserve(op.fragment.size() + op.pre_tris.size());
+  auto add = [&](const Vec3& a, const Vec3& b, const Vec3& c) {
+    points.insert(points.end(), {a, b, c});
+    normals.push_back(triangle_normal(a, b, c));
+  };
+  for (const FragmentTriangle& t : op.fragment)
+    add(op.position(t, 0), op.position(t, 1), op.position(t, 2));
+  for (const PreTriangle& t : op.pre_tris)
+    add(op.position(t, 0), op.position(t, 1), op.position(t, 2));
+  op.box = Box3{};
+  for (const Vec3& p : points) op.box.add(p);
+  op.sphere = bounding_sphere(points);
+  op.cone = normal_cone(normals);
+}
+
 void link_dag(Crmr& crmr) {
   const std::uint64_t m = crmr.ops.size();
   auto ref_error = [&](const Op& op, const std::string& what) {
@@ -48,7 +66,14 @@ void link_dag(Crmr& crmr) {
     op.parents.clear();
     op.children.clear();
   }
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> local;  // (vertex id, index in op.vertices)
   for (Op& op : crmr.ops) {
+    local.clear();
+    for (std::uint32_t i = 0; i < op.vertices.size(); ++i)
+      local.push_back({op.vertices[i].id.value, i});
+    std::sort(local.begin(), local.end());
+    op.pre_tris.clear();
+    op.pre_tris.reserve(op.pre.size());
     for (const TriRef& t : op.pre) {
       if (t.op.value >= m || t.op >= op.id) ref_error(op, "PreF names a triangle of a later op");
       Op& parent = crmr.ops[t.op.value];
@@ -58,7 +83,18 @@ void link_dag(Crmr& crmr) {
       tri.killer = op.id;
       tri.death_res = op.birth_res;
       op.parents.push_back(t.op);
+      PreTriangle pt;
+      pt.flags = tri.flags;
+      for (int k = 0; k < 3; ++k) {
+        const std::uint64_t vid = parent.vertex_id(tri, k).value;
+        auto it = std::lower_bound(local.begin(), local.end(), std::pair(vid, std::uint32_t{0}));
+        if (it == local.end() || it->first != vid)
+          ref_error(op, "a PreF corner is not a vertex of F");
+        pt.v[k] = it->second;
+      }
+      op.pre_tris.push_back(pt);
     }
+    compute_op_bounds(op);
     std::sort(op.parents.begin(), op.parents.end());
     op.parents.erase(std::unique(op.parents.begin(), op.parents.end()), op.parents.end());
     for (OpId p : op.parents) crmr.ops[p.value].children.push_back(op.id);

@@ -9,6 +9,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -32,16 +33,21 @@ struct CrmrInfo {
   friend bool operator==(const CrmrInfo&, const CrmrInfo&) = default;
 };
 
-/// Read access to a CRMR, in memory or (later) paged from disk. References returned by op() stay
-/// valid for the lifetime of the source object.
+/// A handle on an op that keeps it alive: an op paged in from disk stays in memory while a handle
+/// on it exists, even if the page cache evicts its page. In-memory sources hand out non-owning
+/// handles (no reference count is touched).
+using OpRef = std::shared_ptr<const Op>;
+
+/// Read access to a CRMR, in memory or paged from disk (smr/db).
 class OpSource {
  public:
   virtual ~OpSource() = default;
   virtual const CrmrInfo& info() const = 0;
   virtual std::uint64_t op_count() const = 0;
-  virtual const Op& op(OpId id) const = 0;
+  /// The op; throws smr::Error if `id` is out of range or its record cannot be read.
+  virtual OpRef op(OpId id) const = 0;
 
-  const FragmentTriangle& triangle(TriRef t) const { return op(t.op).fragment[t.index]; }
+  FragmentTriangle triangle(TriRef t) const { return op(t.op)->fragment.at(t.index); }
   double error_at(double res) const;
   double resolution_of(double error) const;
 };
@@ -53,15 +59,20 @@ class Crmr final : public OpSource {
 
   const CrmrInfo& info() const override { return header; }
   std::uint64_t op_count() const override { return ops.size(); }
-  const Op& op(OpId id) const override { return ops.at(id.value); }
+  OpRef op(OpId id) const override { return OpRef(OpRef{}, &ops.at(id.value)); }
   std::uint64_t triangle_count() const;  // over all fragments
 };
 
 double error_at(const CrmrInfo& info, double res);
 double resolution_of(const CrmrInfo& info, double error);
 
-/// Derives parents/children from PreF, killer/death_res of every triangle, and ROIs (children
-/// before parents). Builders call it once all ops exist. Throws on dangling references.
+/// Sets op.box, op.sphere and op.cone from the op's own record: the corners and normals of F
+/// then of PreF (via pre_tris), in that order. Deterministic, so the store recomputes them.
+void compute_op_bounds(Op& op);
+
+/// Derives parents/children from PreF, killer/death_res of every triangle, pre_tris, the bounds
+/// (compute_op_bounds) and ROIs (children before parents). Builders call it once all ops exist.
+/// Throws on dangling references.
 void link_dag(Crmr& crmr);
 
 }  // namespace smr

@@ -16,6 +16,7 @@ namespace smr {
 
 using Vec2 = glm::dvec2;
 using Vec3 = glm::dvec3;
+using Triangle3 = std::array<Vec3, 3>;  // corners, counter-clockwise seen from above / outside
 
 /// Axis-aligned box. Empty when lo > hi on any axis.
 struct Box3 {

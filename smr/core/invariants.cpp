@@ -188,9 +188,22 @@ void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
       }
     }
   }
-  for (const TriRef& t : op.pre) {
+  if (op.pre_tris.size() != op.pre.size()) r.fail(name + ": pre_tris does not match PreF");
+  for (std::size_t i = 0; i < op.pre.size(); ++i) {
+    const TriRef& t = op.pre[i];
     const Op& p = crmr.ops.at(t.op.value);
-    pre.push_back(grid_tri(info, p, p.fragment.at(t.index)));
+    const FragmentTriangle& pt = p.fragment.at(t.index);
+    pre.push_back(grid_tri(info, p, pt));
+    if (i >= op.pre_tris.size()) continue;
+    const PreTriangle& mine = op.pre_tris[i];
+    bool same = mine.flags == pt.flags;
+    for (int k = 0; k < 3 && same; ++k) {
+      same = mine.v[k] < op.vertices.size() && op.vertices[mine.v[k]] == p.vertices[pt.v[k]];
+    }
+    if (!same) {
+      r.fail(name + ": PreF triangle " + std::to_string(i) +
+             " differs from the triangle of its creator (corners or flags)");
+    }
   }
   if (op.id == kBaseOp) return;
 
@@ -386,7 +399,8 @@ InvariantReport check_tiling(const OpSource& source, std::span<const TriRef> tri
       r.fail("triangle " + op_name(ref.op) + "/" + std::to_string(ref.index) + " appears twice");
       continue;
     }
-    const Op& op = source.op(ref.op);
+    const OpRef op_ref = source.op(ref.op);
+    const Op& op = *op_ref;
     const GridTri g = grid_tri(info, op, op.fragment.at(ref.index));
     const std::int64_t a2 = orient(g.p[0], g.p[1], g.p[2]);
     if (a2 <= 0)
@@ -427,7 +441,8 @@ DelaunayReport check_delaunay(const OpSource& source, std::span<const TriRef> tr
   };
   std::unordered_map<DirectedEdge, Side, EdgeHash> edges;
   for (const TriRef& ref : triangles) {
-    const Op& op = source.op(ref.op);
+    const OpRef op_ref = source.op(ref.op);
+    const Op& op = *op_ref;
     const GridTri g = grid_tri(info, op, op.fragment.at(ref.index));
     for (int k = 0; k < 3; ++k) edges[{g.id[k].value, g.id[(k + 1) % 3].value}] = {ref, g, k};
   }

@@ -51,6 +51,16 @@ struct FragmentTriangle {
   friend bool operator==(const FragmentTriangle&, const FragmentTriangle&) = default;
 };
 
+/// A triangle of PreF(R) as R sees it: its corners as indices into R's own `vertices` (no vertex
+/// disappears in a refinement, so every corner of PreF is a vertex of F) and its flags. With it an
+/// op answers IsCompletelyFiner from its own record: smr/db pages an op in without its parents.
+struct PreTriangle {
+  std::array<std::uint32_t, 3> v{};  // same corners, same rotation as in the creator's fragment
+  std::uint8_t flags = 0;
+  bool is_void() const { return (flags & FragmentTriangle::kVoid) != 0; }
+  friend bool operator==(const PreTriangle&, const PreTriangle&) = default;
+};
+
 struct Op {
   OpId id;
   double birth_res = 0.0;  // resolution of M^{i-1} just before this op (Brown 4.4.2)
@@ -63,6 +73,7 @@ struct Op {
 
   std::vector<FragmentTriangle> fragment;  // F(R^i)
   std::vector<TriRef> pre;                 // PreF(R^i): triangles of parents' fragments it replaces
+  std::vector<PreTriangle> pre_tris;       // parallel to `pre` (filled by link_dag)
   std::vector<CoarserLink> coarser;        // one per boundary edge of F that is not model boundary
 
   std::vector<OpId> parents;   // sorted: ops whose fragments meet PreF (Brown 4.5.2)
@@ -77,6 +88,7 @@ struct Op {
   Box3 roi;
 
   const Vec3& position(const FragmentTriangle& t, int k) const { return vertices[t.v[k]].p; }
+  const Vec3& position(const PreTriangle& t, int k) const { return vertices[t.v[k]].p; }
   VertexId vertex_id(const FragmentTriangle& t, int k) const { return vertices[t.v[k]].id; }
   /// The link of boundary edge `edge` of triangle `tri`, or nullptr (model boundary).
   const CoarserLink* coarser_link(std::uint32_t tri, std::uint8_t edge) const;

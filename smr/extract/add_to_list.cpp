@@ -43,10 +43,11 @@ std::vector<OpId> traverse(const OpSource& source, const Rcf& rcf, bool with_anc
     stack.pop_back();
     if (!in_x.emplace(id.value, true).second) continue;
     x.push_back(id);
-    const Op& op = source.op(id);
+    const OpRef op_ref = source.op(id);
+    const Op& op = *op_ref;
     if (!cache.finer(op)) {
       for (OpId c : op.children) {
-        if (!in_x.count(c.value) && !cache.completely_finer(source.op(c))) stack.push_back(c);
+        if (!in_x.count(c.value) && !cache.completely_finer(*source.op(c))) stack.push_back(c);
       }
     }
     if (with_ancestors) {
@@ -71,7 +72,8 @@ std::vector<OpId> add_to_list_reduced(const OpSource& source, const Rcf& rcf) {
   // break Theorem 5.2.2. This is also exactly what the R-tree's RCF query returns.
   std::vector<OpId> x{kBaseOp};
   for (std::uint64_t i = 1; i < source.op_count(); ++i) {
-    const Op& op = source.op(OpId{i});
+    const OpRef op_ref = source.op(OpId{i});
+    const Op& op = *op_ref;
     if (!rcf.is_completely_finer(op, source)) x.push_back(op.id);
   }
   std::sort(x.begin(), x.end(), std::greater<>());

@@ -128,7 +128,8 @@ class Expander {
 
   // Infill (Fig. 5.6).
   void infill(OpId id) {
-    const Op& op = source_.op(id);
+    const OpRef op_ref = source_.op(id);
+    const Op& op = *op_ref;
     std::vector<FrontKey> stack;
     if (auto it = stacks_.find(id.value); it != stacks_.end()) {
       stack = std::move(it->second);
@@ -212,7 +213,8 @@ class Expander {
     EdgeRef target = link->coarser;
     if (!reduced_) {
       while (!in_x_.count(target.tri.op.value)) {
-        const Op& q = source_.op(target.tri.op);
+        const OpRef q_ref = source_.op(target.tri.op);
+        const Op& q = *q_ref;
         const CoarserLink* next = q.coarser_link(target.tri.index, target.edge);
         if (next == nullptr) {
           ++anomalies_;

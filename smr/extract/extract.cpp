@@ -49,11 +49,12 @@ Extraction extract_reduced(const OpSource& source, const Rcf& rcf,
 std::vector<TriRef> set_formula(const OpSource& source, std::span<const OpId> x) {
   std::unordered_set<TriRef> replaced;
   for (OpId id : x) {
-    for (const TriRef& t : source.op(id).pre) replaced.insert(t);
+    for (const TriRef& t : source.op(id)->pre) replaced.insert(t);
   }
   std::vector<TriRef> out;
   for (OpId id : x) {
-    const Op& op = source.op(id);
+    const OpRef op_ref = source.op(id);
+    const Op& op = *op_ref;
     for (std::uint32_t i = 0; i < op.fragment.size(); ++i) {
       if (!replaced.count({id, i})) out.push_back({id, i});
     }
@@ -66,7 +67,8 @@ TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles, 
   TriangleMesh mesh;
   std::unordered_map<std::uint64_t, std::uint32_t> index;
   for (const TriRef& ref : triangles) {
-    const Op& op = source.op(ref.op);
+    const OpRef op_ref = source.op(ref.op);
+    const Op& op = *op_ref;
     const FragmentTriangle& t = op.fragment[ref.index];
     if (t.is_void() && !keep_void) continue;
     std::array<std::uint32_t, 3> tri{};

@@ -7,17 +7,45 @@
 
 #include <glm/geometric.hpp>
 
+#include "storage/error.h"
+
 namespace smr {
 
-Box3 triangle_box(const Op& op, const FragmentTriangle& t) {
+Triangle3 corners(const Op& op, const FragmentTriangle& t) {
+  return {op.position(t, 0), op.position(t, 1), op.position(t, 2)};
+}
+Triangle3 corners(const Op& op, const PreTriangle& t) {
+  return {op.position(t, 0), op.position(t, 1), op.position(t, 2)};
+}
+Box3 triangle_box(const Triangle3& v) {
   Box3 b;
-  for (int k = 0; k < 3; ++k) b.add(op.position(t, k));
+  for (const Vec3& p : v) b.add(p);
   return b;
 }
 
 // ---- culling ----
 bool FrustumCulling::culls(const Op& op) const {
   return sphere_outside(cam_, op.sphere) || box_outside(cam_, op.box);
+}
+
+bool FrustumCulling::culls_triangle(const Triangle3& v) const {
+  // Every corner strictly outside one plane. A sphere or box outside that plane holds no point
+  // inside it, so culls(op) implies this for each triangle of the op.
+  const auto planes = cam_.planes();
+  for (int i = 0; i < cam_.plane_count(); ++i) {
+    if (planes[i].signed_distance(v[0]) < 0 && planes[i].signed_distance(v[1]) < 0 &&
+        planes[i].signed_distance(v[2]) < 0)
+      return true;
+  }
+  return false;
+}
+
+bool BackfaceCulling::culls_triangle(const Triangle3& v) const {
+  // The eye is strictly behind the triangle's plane as seen from each corner; implied by a
+  // backfacing normal cone around a sphere holding the corners.
+  const Vec3 n = triangle_normal(v[0], v[1], v[2]);
+  return glm::dot(n, v[0] - cam_.eye) > 0 && glm::dot(n, v[1] - cam_.eye) > 0 &&
+         glm::dot(n, v[2] - cam_.eye) > 0;
 }
 
 // ---- object space ----
@@ -28,10 +56,9 @@ std::string ObjectSpaceCriterion::describe() const {
   return s + ")";
 }
 
-bool ObjectSpaceCriterion::triangle_satisfies(const Op& owner, const FragmentTriangle& t,
-                                              double res, const CrmrInfo&) const {
-  return res >= g_.max_over_triangle(xy(owner.position(t, 0)), xy(owner.position(t, 1)),
-                                     xy(owner.position(t, 2)));
+bool ObjectSpaceCriterion::triangle_satisfies(const Triangle3& v, double res,
+                                              const CrmrInfo&) const {
+  return res >= g_.max_over_triangle(xy(v[0]), xy(v[1]), xy(v[2]));
 }
 
 bool ObjectSpaceCriterion::region_satisfies(const Box3& box, double min_res,
@@ -80,9 +107,9 @@ double ScreenSpaceCriterion::tolerance(const Box3& region) const {
   return point_rect_distance2d(aoi_->center_px, lo, hi) <= aoi_->radius_px ? tau_min : tau_;
 }
 
-bool ScreenSpaceCriterion::triangle_satisfies(const Op& owner, const FragmentTriangle& t,
-                                              double res, const CrmrInfo& info) const {
-  const Box3 b = triangle_box(owner, t);
+bool ScreenSpaceCriterion::triangle_satisfies(const Triangle3& v, double res,
+                                              const CrmrInfo& info) const {
+  const Box3 b = triangle_box(v);
   return pixel_error_bound(error_at(info, res), b) <= tolerance(b);
 }
 
@@ -99,12 +126,20 @@ bool Rcf::culled(const Op& op) const {
   return false;
 }
 
+bool Rcf::triangle_culled(const Triangle3& v) const {
+  for (const auto& c : culling_) {
+    if (c->culls_triangle(v)) return true;
+  }
+  return false;
+}
+
 bool Rcf::is_finer(const Op& op, const OpSource& source) const {
   if (culled(op)) return true;
   for (const FragmentTriangle& t : op.fragment) {
     if (is_final_or_void(t)) continue;
+    const Triangle3 v = corners(op, t);
     for (const auto& s : similarity_) {
-      if (!s->triangle_satisfies(op, t, t.death_res, source.info())) return false;
+      if (!s->triangle_satisfies(v, t.death_res, source.info())) return false;
     }
   }
   return true;
@@ -113,13 +148,15 @@ bool Rcf::is_finer(const Op& op, const OpSource& source) const {
 bool Rcf::is_completely_finer(const Op& op, const OpSource& source) const {
   if (op.id == kBaseOp) return false;
   if (culled(op)) return true;
-  for (const TriRef& ref : op.pre) {
-    const Op& creator = source.op(ref.op);
-    const FragmentTriangle& t = creator.fragment[ref.index];
-    if (t.is_void() || similarity_.empty()) continue;
-    if (culled(creator)) continue;
+  if (similarity_.empty()) return true;
+  if (op.pre_tris.size() != op.pre.size())
+    throw_internal("op " + std::to_string(op.id.value) + " has no PreF corners (link_dag not run)");
+  for (const PreTriangle& t : op.pre_tris) {
+    if (t.is_void()) continue;
+    const Triangle3 v = corners(op, t);
+    if (triangle_culled(v)) continue;
     for (const auto& s : similarity_) {
-      if (!s->triangle_satisfies(creator, t, op.birth_res, source.info())) return false;
+      if (!s->triangle_satisfies(v, op.birth_res, source.info())) return false;
     }
   }
   return true;

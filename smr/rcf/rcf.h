@@ -5,8 +5,10 @@
 // Brown's Fig. 4.19:
 //   IsFiner(R)           = culled(R) or every similarity component accepts F(R)
 //   IsCompletelyFiner(R) = R != R^0 and (culled(R) or every component accepts PreF(R))
-// evaluated triangle by triangle. Culling is decided on the op's box/sphere/cone, which cover F
-// and PreF, so a culled op's PreF triangles are culled too and Theorem 5.1.1 holds per triangle.
+// evaluated triangle by triangle. Culling of an op is decided on its box/sphere/cone, which cover
+// F and PreF; a PreF triangle is culled when its own corners are (all outside one frustum plane, or
+// facing away). A culled op's triangles are culled by the triangle test too, which keeps
+// "all parents finer => completely finer" exact, and every test needs only the op's own record.
 // Every component also answers conservatively for an index entry (a box holding the ROIs of many
 // ops, with a minimum birth_res): true only if every such op is completely finer.
 #pragma once
@@ -30,6 +32,9 @@ class CullingComponent {
   virtual bool culls(const Op& op) const = 0;
   /// Conservative: true only if every op whose box lies inside `box` is culled.
   virtual bool culls_region(const Box3& box) const = 0;
+  /// The triangle with these corners is invisible. Implied by culls(op) for every triangle of
+  /// F(op) and PreF(op).
+  virtual bool culls_triangle(const Triangle3& v) const = 0;
 };
 
 /// A triangle that no op replaces is as fine as the model gets: it satisfies every similarity
@@ -43,9 +48,8 @@ class SimilarityComponent {
  public:
   virtual ~SimilarityComponent() = default;
   virtual std::string describe() const = 0;
-  /// Triangle t of F(owner) meets the criterion when it stands for resolution `res`.
-  virtual bool triangle_satisfies(const Op& owner, const FragmentTriangle& t, double res,
-                                  const CrmrInfo& info) const = 0;
+  /// The triangle with corners v meets the criterion when it stands for resolution `res`.
+  virtual bool triangle_satisfies(const Triangle3& v, double res, const CrmrInfo& info) const = 0;
   /// Conservative: true only if triangle_satisfies for every triangle inside `box` at every
   /// resolution >= min_res.
   virtual bool region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const = 0;
@@ -57,6 +61,7 @@ class FrustumCulling final : public CullingComponent {
   std::string describe() const override { return "frustum-culling"; }
   bool culls(const Op& op) const override;
   bool culls_region(const Box3& box) const override { return box_outside(cam_, box); }
+  bool culls_triangle(const Triangle3& v) const override;
 
  private:
   Camera cam_;
@@ -68,6 +73,7 @@ class BackfaceCulling final : public CullingComponent {
   std::string describe() const override { return "backface-culling"; }
   bool culls(const Op& op) const override { return backfacing(cam_, op.sphere, op.cone); }
   bool culls_region(const Box3&) const override { return false; }  // no normals for a region
+  bool culls_triangle(const Triangle3& v) const override;
 
  private:
   Camera cam_;
@@ -79,8 +85,7 @@ class ObjectSpaceCriterion final : public SimilarityComponent {
  public:
   explicit ObjectSpaceCriterion(ObjectSpaceFunction g) : g_(std::move(g)) {}
   std::string describe() const override;
-  bool triangle_satisfies(const Op& owner, const FragmentTriangle& t, double res,
-                          const CrmrInfo& info) const override;
+  bool triangle_satisfies(const Triangle3& v, double res, const CrmrInfo& info) const override;
   bool region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const override;
   const ObjectSpaceFunction& function() const { return g_; }
 
@@ -108,8 +113,7 @@ class ScreenSpaceCriterion final : public SimilarityComponent {
                        bool vertical_error)
       : cam_(std::move(cam)), tau_(pixel_error), aoi_(aoi), vertical_(vertical_error) {}
   std::string describe() const override;
-  bool triangle_satisfies(const Op& owner, const FragmentTriangle& t, double res,
-                          const CrmrInfo& info) const override;
+  bool triangle_satisfies(const Triangle3& v, double res, const CrmrInfo& info) const override;
   bool region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const override;
 
   double pixel_error_bound(double error, const Box3& region) const;
@@ -130,11 +134,12 @@ class Rcf {
   void add(std::shared_ptr<const SimilarityComponent> s) { similarity_.push_back(std::move(s)); }
 
   bool culled(const Op& op) const;
+  bool triangle_culled(const Triangle3& v) const;
   /// Every triangle of F(op) that is not final or void satisfies every similarity component at
   /// its death_res, or op is culled.
   bool is_finer(const Op& op, const OpSource& source) const;
-  /// op is not R^0, and op is culled or every non-void triangle t of PreF(op) is culled (by the op
-  /// that created it) or satisfies every component at birth_res(op). Judging PreF triangle by
+  /// op is not R^0, and op is culled or every non-void triangle t of PreF(op) is culled (its own
+  /// corners) or satisfies every component at birth_res(op). Judging PreF triangle by
   /// triangle, like IsFiner judges F, makes "all parents finer => completely finer" exact, which
   /// Lemma 5.2.1 (reduced extraction) needs.
   bool is_completely_finer(const Op& op, const OpSource& source) const;
@@ -153,7 +158,9 @@ class Rcf {
   std::vector<std::shared_ptr<const SimilarityComponent>> similarity_;
 };
 
-/// Box of one fragment triangle.
-Box3 triangle_box(const Op& op, const FragmentTriangle& t);
+/// Corners of a triangle of F(op) or PreF(op).
+Triangle3 corners(const Op& op, const FragmentTriangle& t);
+Triangle3 corners(const Op& op, const PreTriangle& t);
+Box3 triangle_box(const Triangle3& v);
 
 }  // namespace smr

@@ -36,6 +36,17 @@ TEST_P(PerDataset, InvariantsHoldAfterBuild) {
   EXPECT_LE(d.crmr.header.err_final, d.max_error);
 }
 
+TEST(Checker, NoticesPreFCornersThatDisagreeWithTheCreator) {
+  Crmr m = test::dataset("jacksboro").crmr;
+  Op& op = m.ops.at(m.ops.size() / 2);
+  ASSERT_FALSE(op.pre_tris.empty());
+  std::swap(op.pre_tris[0].v[0], op.pre_tris[0].v[1]);  // the same corners, other orientation
+  EXPECT_FALSE(check_crmr(m).ok());
+  std::swap(op.pre_tris[0].v[0], op.pre_tris[0].v[1]);
+  op.pre_tris.pop_back();
+  EXPECT_FALSE(check_crmr(m).ok());
+}
+
 TEST_P(PerDataset, FinestMeshMeetsTheStoredErrorBound) {
   const test::Dataset& d = test::dataset(GetParam());
   const auto tris = finest(d.crmr);

@@ -170,7 +170,8 @@ TEST_P(Spread, MinimalSurfaceAndReducedExtractionMeetEveryInvariant) {
     int sampled = 0;
     for (OpId id : e.x) {
       if (id == kBaseOp || sampled >= 6) continue;
-      const Op& op = m.op(id);
+      const OpRef op_ref = m.op(id);
+      const Op& op = *op_ref;
       if (std::any_of(op.children.begin(), op.children.end(),
                       [&](OpId c) { return in_x.count(c.value) != 0; }))
         continue;
@@ -260,7 +261,8 @@ TEST(Extraction, FansAndStatistics) {
     const std::size_t end = f + 1 < e.fan_starts.size() ? e.fan_starts[f + 1] : e.triangles.size();
     std::vector<std::uint64_t> common;
     for (std::size_t i = e.fan_starts[f]; i < end; ++i) {
-      const Op& op = d.crmr.op(e.triangles[i].op);
+      const OpRef op_ref = d.crmr.op(e.triangles[i].op);
+      const Op& op = *op_ref;
       const FragmentTriangle& t = op.fragment[e.triangles[i].index];
       std::vector<std::uint64_t> ids{op.vertex_id(t, 0).value, op.vertex_id(t, 1).value,
                                      op.vertex_id(t, 2).value};
@@ -293,7 +295,7 @@ TEST(Extraction, TriangleBudgetExpandsTheFinestPartFirst) {
   EXPECT_TRUE(std::equal(part.triangles.begin(), part.triangles.end(), full.triangles.begin()));
   double part_res = 0, rest_res = 0;
   for (std::size_t i = 0; i < full.triangles.size(); ++i) {
-    (i < part.triangles.size() ? part_res : rest_res) += d.crmr.op(full.triangles[i].op).birth_res;
+    (i < part.triangles.size() ? part_res : rest_res) += d.crmr.op(full.triangles[i].op)->birth_res;
   }
   EXPECT_GT(part_res / double(part.triangles.size()),
             rest_res / double(full.triangles.size() - part.triangles.size()));

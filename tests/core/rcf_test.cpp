@@ -161,7 +161,8 @@ TEST(Rcf, RegionTestIsConservative) {
       std::vector<OpId> stack{op.id};
       std::unordered_set<std::uint64_t> seen;
       while (!stack.empty()) {
-        const Op& q = m.op(stack.back());
+        const OpRef q_ref = m.op(stack.back());
+        const Op& q = *q_ref;
         stack.pop_back();
         if (!seen.insert(q.id.value).second) continue;
         ASSERT_TRUE(rcf.is_completely_finer(q, m)) << rcf.describe() << ": op " << q.id.value;

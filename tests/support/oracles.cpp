@@ -46,7 +46,8 @@ OracleResult check_error_bound(const OpSource& source, std::span<const TriRef> t
   const CrmrInfo& info = source.info();
   const double tol = exact_tolerance(dem) * 10;
   for (const TriRef& ref : triangles) {
-    const Op& op = source.op(ref.op);
+    const OpRef op_ref = source.op(ref.op);
+    const Op& op = *op_ref;
     const FragmentTriangle& t = op.fragment[ref.index];
     if (t.is_void()) continue;
     const double bound = error_at(info, t.death_res);
@@ -93,7 +94,8 @@ OracleResult check_rcf_pointwise(const OpSource& source, std::span<const TriRef>
   if (spec.critical_level) lines = CriticalLines::detect(dem, {spec.critical_relief});
 
   for (const TriRef& ref : triangles) {
-    const Op& op = source.op(ref.op);
+    const OpRef op_ref = source.op(ref.op);
+    const Op& op = *op_ref;
     const FragmentTriangle& t = op.fragment[ref.index];
     if (t.is_void()) continue;
     ++r.checked;
@@ -182,9 +184,9 @@ OracleResult check_rcf_opwise(const OpSource& source, std::span<const TriRef> tr
   OracleResult r;
   for (const TriRef& ref : triangles) {
     ++r.checked;
-    const FragmentTriangle& t = source.triangle(ref);
-    const bool ok = !t.killer.valid() || rcf.is_finer(source.op(ref.op), source) ||
-                    (t.killer.valid() && rcf.is_completely_finer(source.op(t.killer), source));
+    const FragmentTriangle t = source.triangle(ref);
+    const bool ok = !t.killer.valid() || rcf.is_finer(*source.op(ref.op), source) ||
+                    (t.killer.valid() && rcf.is_completely_finer(*source.op(t.killer), source));
     if (!ok)
       r.fail(tri_name(ref) +
              " is replaced, but satisfies neither IsFiner(creator) nor IsCompletelyFiner(killer)");
@@ -200,7 +202,7 @@ OracleResult check_x_definition(const OpSource& source, std::span<const OpId> x,
     for (OpId id : x) in.insert(id.value);
     for (std::uint64_t i = 0; i < source.op_count(); ++i) {
       ++r.checked;
-      const bool want = i == 0 || !rcf.is_completely_finer(source.op(OpId{i}), source);
+      const bool want = i == 0 || !rcf.is_completely_finer(*source.op(OpId{i}), source);
       if (want != (in.count(i) != 0))
         r.fail("op " + std::to_string(i) +
                (want ? " is missing from X" : " is in X without a reason"));
@@ -212,7 +214,8 @@ OracleResult check_x_definition(const OpSource& source, std::span<const OpId> x,
   if (!in.count(0)) r.fail("R^0 is not in X");
   for (OpId id : x) {
     ++r.checked;
-    const Op& op = source.op(id);
+    const OpRef op_ref = source.op(id);
+    const Op& op = *op_ref;
     if (ancestors) {
       for (OpId p : op.parents) {
         if (!in.count(p.value))
@@ -221,7 +224,7 @@ OracleResult check_x_definition(const OpSource& source, std::span<const OpId> x,
     }
     if (!rcf.is_finer(op, source)) {
       for (OpId c : op.children) {
-        if (!in.count(c.value) && !rcf.is_completely_finer(source.op(c), source)) {
+        if (!in.count(c.value) && !rcf.is_completely_finer(*source.op(c), source)) {
           r.fail("op " + std::to_string(c.value) + " is a needed child of op " +
                  std::to_string(id.value) + " but not in X");
         }
@@ -233,10 +236,11 @@ OracleResult check_x_definition(const OpSource& source, std::span<const OpId> x,
   // parent of a member.
   for (OpId id : x) {
     if (id == kBaseOp) continue;
-    const Op& op = source.op(id);
+    const OpRef op_ref = source.op(id);
+    const Op& op = *op_ref;
     bool justified = false;
     for (OpId p : op.parents) {
-      justified |= in.count(p.value) && !rcf.is_finer(source.op(p), source) &&
+      justified |= in.count(p.value) && !rcf.is_finer(*source.op(p), source) &&
                    !rcf.is_completely_finer(op, source);
     }
     if (ancestors) {
