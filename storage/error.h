@@ -30,6 +30,9 @@ class Error : public std::runtime_error {
 [[noreturn]] inline void throw_io(const std::string& message) {
   throw Error(ErrorKind::kIo, message);
 }
+[[noreturn]] inline void throw_corrupt(const std::string& message) {
+  throw Error(ErrorKind::kCorrupt, message);
+}
 [[noreturn]] inline void throw_internal(const std::string& message) {
   throw Error(ErrorKind::kInternal, message);
 }

@@ -15,6 +15,7 @@
 
 #include "smr/build/greedy_tin.h"
 #include "smr/core/invariants.h"
+#include "smr/db/database.h"
 #include "smr/extract/extract.h"
 #include "smr/io/dem_reader.h"
 #include "smr/io/mesh_writer.h"
@@ -158,44 +159,66 @@ std::string extension_of(const std::string& path) {
   return ext;
 }
 
-int cmd_build(const std::string& dem_path, double max_error, std::uint64_t max_vertices,
-              std::uint64_t base_vertices, const RcfOptions& rcf_options,
-              const std::string& algorithm, const std::string& out, const std::string& png,
-              bool json, bool quiet, bool verify) {
-  // Check everything the user typed before any long work.
-  if (!(max_error >= 0.0) || !std::isfinite(max_error))
-    throw_input("--max-error must be >= 0 (data units)");
-  if (base_vertices < 4) throw_input("--base-vertices must be at least 4 (the corners)");
-  if (algorithm != "minimal" && algorithm != "reduced") {
-    throw_input("--algorithm must be 'minimal' or 'reduced', got '" + algorithm + "'");
-  }
-  const std::string ext = extension_of(out);
-  if (ext != ".obj" && ext != ".ply")
-    throw_input("-o " + out + ": the output must end in .obj or .ply");
-  if (!png.empty() && extension_of(png) != ".png")
-    throw_input("--png " + png + ": must end in .png");
-  const smr::RcfSpec spec = rcf_options.spec();
+struct IngestArgs {
+  std::string dem;
+  double max_error = 0.0;
+  std::uint64_t max_vertices = 0, base_vertices = 4;
+  std::string codec = "draco";
+  double z_quantum = 0.0;
+  std::uint32_t page_kb = 16;
+  bool force = false;
 
+  void add_to(CLI::App& app) {
+    app.add_option("dem", dem, "DEM: GeoTIFF or any GDAL raster (one band), .npy or .npz")
+        ->required();
+    app.add_option("--max-error", max_error,
+                   "Stop refining at this vertical error (data units; 0 = lossless)")
+        ->capture_default_str();
+    app.add_option("--max-vertices", max_vertices, "Stop at this many vertices (0 = no limit)");
+    app.add_option("--base-vertices", base_vertices, "Vertices of the base mesh (4 = the corners)")
+        ->capture_default_str();
+    app.add_option("--codec", codec, "Geometry codec of the pages: draco, zstd or raw")
+        ->capture_default_str();
+    app.add_option("--z-quantum", z_quantum,
+                   "Height quantization step (data units; 0 = automatic, range / 2^24)");
+    app.add_option("--page-kb", page_kb, "Target size of a data page in KiB")
+        ->capture_default_str();
+    app.add_flag("--force", force, "Replace an existing database");
+  }
+  // Checks everything the user typed before any long work.
+  void validate() const {
+    if (!(max_error >= 0.0) || !std::isfinite(max_error))
+      throw_input("--max-error must be >= 0 (data units)");
+    if (base_vertices < 4) throw_input("--base-vertices must be at least 4 (the corners)");
+    if (!smr::storage::parse_codec(codec))
+      throw_input("--codec must be draco, zstd or raw, got '" + codec + "'");
+    if (!(z_quantum >= 0.0) || !std::isfinite(z_quantum))
+      throw_input("--z-quantum must be >= 0 (0 = automatic)");
+    if (page_kb < 1 || page_kb > 4096) throw_input("--page-kb must be in [1, 4096]");
+  }
+};
+
+// Reads the DEM, builds the CRMR and writes the database. Returns the report.
+nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quiet, bool verify,
+                      const std::string& command_line) {
   nlohmann::json report;
   auto t0 = Clock::now();
-  const smr::Heightfield dem = smr::read_dem(dem_path);
-  report["input"] = {{"path", dem_path},
+  const smr::Heightfield dem = smr::read_dem(a.dem);
+  report["input"] = {{"path", a.dem},
                      {"width", dem.width},
                      {"height", dem.height},
                      {"samples", dem.sample_count()},
                      {"nodata", dem.has_nodata()},
                      {"geographic", dem.georef.geographic},
                      {"read_seconds", seconds_since(t0)}};
-
   smr::tools::GdalProgress progress(quiet ? nullptr : stderr);
   smr::GreedyTinOptions opt;
-  opt.max_error = max_error;
-  opt.max_vertices = max_vertices;
-  opt.base_vertices = base_vertices;
-  opt.progress = [&](double f) { progress.update(f); };
+  opt.max_error = a.max_error;
+  opt.max_vertices = a.max_vertices;
+  opt.base_vertices = a.base_vertices;
+  opt.progress = [&](double f) { progress.update(0.8 * f); };
   t0 = Clock::now();
-  const smr::Crmr crmr = smr::build_greedy_tin(dem, opt);
-  progress.done();
+  smr::Crmr crmr = smr::build_greedy_tin(dem, opt);
   std::uint64_t finest = 0;
   for (const smr::Op& op : crmr.ops) {
     for (const auto& t : op.fragment) finest += !t.killer.valid() && !t.is_void();
@@ -208,42 +231,247 @@ int cmd_build(const std::string& dem_path, double max_error, std::uint64_t max_v
                     {"err0", crmr.header.err0},
                     {"err_final", crmr.header.err_final},
                     {"build_seconds", seconds_since(t0)}};
-
   if (verify) {
     const smr::InvariantReport r = smr::check_crmr(crmr);
     if (!r.ok()) smr::throw_internal("CRMR invariants violated: " + r.summary());
   }
+  smr::WriteOptions wo;
+  wo.codec = *smr::storage::parse_codec(a.codec);
+  wo.force = a.force;
+  wo.z_step = a.z_quantum;
+  wo.page_bytes = a.page_kb * 1024 - 16;
+  wo.parameters = command_line;
+  wo.progress = [&](double f) { progress.update(0.8 + 0.2 * f); };
+  const smr::WriteReport w = smr::write_database(crmr, db_path, wo);
+  progress.done();
+  report["database"] = {
+      {"path", db_path},
+      {"codec", a.codec},
+      {"pages", w.pages},
+      {"rtree_nodes", w.rtree_nodes},
+      {"page_bytes", w.page_bytes},
+      {"locator_bytes", w.node_bytes},
+      {"rtree_bytes", w.rtree_bytes},
+      {"file_bytes", w.file_bytes},
+      {"bytes_per_vertex",
+       double(w.file_bytes) / double(std::max<std::uint64_t>(1, crmr.header.vertex_count))},
+      {"z_quantum", w.grid.step.z},
+      {"z_shift", w.z_shift},
+      {"write_seconds", w.seconds}};
+  return report;
+}
 
-  const smr::Rcf rcf = smr::make_rcf(spec, smr::ModelKind::kTerrain, &dem);
-  const smr::Extraction e = algorithm == "reduced" ? smr::extract_reduced(crmr, rcf)
-                                                   : smr::extract_minimal_surface(crmr, rcf);
+struct ExtractArgs {
+  std::string algorithm = "minimal", out, png, dem;
+  std::uint64_t cache_mb = 64;
+
+  void add_to(CLI::App& app, bool with_cache) {
+    app.add_option("--algorithm", algorithm, "minimal (Brown 5.1) or reduced (Brown 5.2)")
+        ->capture_default_str();
+    app.add_option("-o,--output", out, "Output mesh (.obj or .ply)")->required();
+    app.add_option("--png", png, "Also write a top-down picture of the mesh (.png)");
+    if (with_cache) {
+      app.add_option("--cache-mb", cache_mb, "Page cache budget in MiB")->capture_default_str();
+      app.add_option("--dem", dem, "The source DEM (needed by --critical-lines)");
+    }
+  }
+  void validate() const {
+    if (algorithm != "minimal" && algorithm != "reduced")
+      throw_input("--algorithm must be 'minimal' or 'reduced', got '" + algorithm + "'");
+    const std::string ext = extension_of(out);
+    if (ext != ".obj" && ext != ".ply")
+      throw_input("-o " + out + ": the output must end in .obj or .ply");
+    if (!png.empty() && extension_of(png) != ".png")
+      throw_input("--png " + png + ": must end in .png");
+    if (cache_mb < 1 || cache_mb > (std::uint64_t{1} << 20))
+      throw_input("--cache-mb must be in [1, 1048576]");
+  }
+};
+
+nlohmann::json extract(const smr::Database& db, const smr::Heightfield* dem,
+                       const smr::RcfSpec& spec, const ExtractArgs& a, bool verify) {
+  nlohmann::json report;
+  if (spec.critical_level && dem == nullptr)
+    throw_input("--critical-lines needs the source DEM: pass --dem");
+  const smr::Rcf rcf = smr::make_rcf(spec, db.info().kind, dem);
+  const smr::Extraction e = a.algorithm == "reduced" ? smr::extract_reduced(db, rcf)
+                                                     : smr::extract_minimal_surface(db, rcf);
   report["rcf"] = rcf.describe();
   report["extraction"] = stats_json(e.stats);
-  report["extraction"]["algorithm"] = algorithm;
+  report["extraction"]["algorithm"] = a.algorithm;
   if (verify) {
-    const smr::InvariantReport r = smr::check_tiling(crmr, e.triangles);
+    const smr::InvariantReport r = smr::check_tiling(db, e.triangles);
     if (!r.ok()) smr::throw_internal("output does not tile the domain: " + r.summary());
   }
-
-  const smr::TriangleMesh mesh = smr::to_mesh(crmr, e.triangles);
-  smr::write_mesh(out, mesh);
+  const smr::TriangleMesh mesh = smr::to_mesh(db, e.triangles);
+  const smr::DatabaseStats st = db.stats();
+  report["io"] = {{"pages_read", st.pages_read},
+                  {"page_bytes_read", st.page_bytes_read},
+                  {"rtree_nodes_read", st.rtree_nodes_read},
+                  {"lmdb_bytes_read", st.lmdb_bytes_read},
+                  {"cache_hits", st.cache.hits},
+                  {"cache_misses", st.cache.misses},
+                  {"cache_evictions", st.cache.evictions},
+                  {"cache_peak_bytes", st.cache.peak_held_bytes},
+                  {"bytes_decoded", st.cache.bytes_decoded}};
+  smr::write_mesh(a.out, mesh);
   report["output"] = {
-      {"path", out}, {"vertices", mesh.positions.size()}, {"triangles", mesh.triangles.size()}};
-  if (!png.empty()) {
+      {"path", a.out}, {"vertices", mesh.positions.size()}, {"triangles", mesh.triangles.size()}};
+  if (!a.png.empty()) {
     smr::RenderOptions ro;
-    ro.geographic = dem.georef.geographic;
-    smr::render_png(png, mesh, ro);
-    report["output"]["png"] = png;
+    ro.geographic = db.info().georef.geographic;
+    smr::render_png(a.png, mesh, ro);
+    report["output"]["png"] = a.png;
   }
-  if (json) {
-    std::cout << report.dump(2) << "\n";
-  } else if (!quiet) {
-    std::fprintf(stderr, "%s: %llu ops, %llu output triangles (|X| = %llu) -> %s\n",
-                 dem_path.c_str(), static_cast<unsigned long long>(crmr.ops.size()),
-                 static_cast<unsigned long long>(mesh.triangles.size()),
-                 static_cast<unsigned long long>(e.stats.x), out.c_str());
+  return report;
+}
+
+void print_report(const nlohmann::json& report, bool json) {
+  if (json) std::cout << report.dump(2) << "\n";
+}
+
+int cmd_ingest(const IngestArgs& a, const std::string& db_path, bool json, bool quiet, bool verify,
+               const std::string& command_line) {
+  a.validate();
+  const nlohmann::json r = ingest(a, db_path, quiet, verify, command_line);
+  print_report(r, json);
+  if (!json && !quiet) {
+    std::fprintf(stderr, "%s: %llu ops in %llu pages, %.1f MB (%.1f bytes/vertex) -> %s\n",
+                 a.dem.c_str(),
+                 static_cast<unsigned long long>(r["crmr"]["ops"].get<std::uint64_t>()),
+                 static_cast<unsigned long long>(r["database"]["pages"].get<std::uint64_t>()),
+                 double(r["database"]["file_bytes"].get<std::uint64_t>()) / 1e6,
+                 r["database"]["bytes_per_vertex"].get<double>(), db_path.c_str());
   }
   return 0;
+}
+
+int cmd_extract(const std::string& db_path, const RcfOptions& rcf_options, const ExtractArgs& a,
+                bool json, bool quiet, bool verify) {
+  a.validate();
+  const smr::RcfSpec spec = rcf_options.spec();
+  std::optional<smr::Heightfield> dem;
+  if (!a.dem.empty()) dem = smr::read_dem(a.dem);
+  const auto db = smr::Database::open(db_path, {std::size_t(a.cache_mb) << 20});
+  const nlohmann::json r = extract(*db, dem ? &*dem : nullptr, spec, a, verify);
+  print_report(r, json);
+  if (!json && !quiet) {
+    std::fprintf(
+        stderr, "%s: %llu output triangles (|X| = %llu, %llu pages read) -> %s\n", db_path.c_str(),
+        static_cast<unsigned long long>(r["output"]["triangles"].get<std::uint64_t>()),
+        static_cast<unsigned long long>(r["extraction"]["x"].get<std::uint64_t>()),
+        static_cast<unsigned long long>(r["io"]["pages_read"].get<std::uint64_t>()), a.out.c_str());
+  }
+  return 0;
+}
+
+int cmd_build(IngestArgs a, std::string db_path, const RcfOptions& rcf_options,
+              const ExtractArgs& e, bool json, bool quiet, bool verify,
+              const std::string& command_line) {
+  a.validate();
+  e.validate();
+  const smr::RcfSpec spec = rcf_options.spec();
+  std::optional<std::filesystem::path> scratch;
+  if (db_path.empty()) {
+    // No --db: a scratch database next to the output, removed afterwards.
+    scratch = std::filesystem::path(e.out).concat(".smrdb-scratch");
+    db_path = scratch->string();
+    a.force = true;
+  }
+  struct Remove {
+    std::optional<std::filesystem::path>& p;
+    ~Remove() {
+      std::error_code ec;
+      if (p) std::filesystem::remove(*p, ec);
+    }
+  } remove{scratch};
+  nlohmann::json r = ingest(a, db_path, quiet, verify, command_line);
+  const smr::Heightfield dem = smr::read_dem(a.dem);
+  const auto db = smr::Database::open(db_path, {std::size_t(e.cache_mb) << 20});
+  r.update(extract(*db, &dem, spec, e, verify));
+  print_report(r, json);
+  if (!json && !quiet) {
+    std::fprintf(stderr, "%s: %llu ops, %llu output triangles (|X| = %llu) -> %s\n", a.dem.c_str(),
+                 static_cast<unsigned long long>(r["crmr"]["ops"].get<std::uint64_t>()),
+                 static_cast<unsigned long long>(r["output"]["triangles"].get<std::uint64_t>()),
+                 static_cast<unsigned long long>(r["extraction"]["x"].get<std::uint64_t>()),
+                 e.out.c_str());
+  }
+  return 0;
+}
+
+int cmd_info(const std::string& db_path, bool json) {
+  const auto db = smr::Database::open(db_path, {std::size_t{16} << 20});
+  nlohmann::json meta = nlohmann::json::parse(db->meta_json());
+  // DAG depth: longest parent chain, computed in id order (parents have smaller ids).
+  std::vector<std::uint32_t> depth(db->op_count(), 0);
+  std::uint32_t max_depth = 0;
+  for (std::uint64_t i = 1; i < db->op_count(); ++i) {
+    const smr::OpRef op = db->op(smr::OpId{i});
+    for (smr::OpId p : op->parents) depth[i] = std::max(depth[i], depth[p.value] + 1);
+    max_depth = std::max(max_depth, depth[i]);
+  }
+  const std::uint64_t vertices = meta["model"]["vertex_count"].get<std::uint64_t>();
+  nlohmann::json out = {
+      {"path", db_path},
+      {"file_bytes", db->file_bytes()},
+      {"bytes_per_vertex", double(db->file_bytes()) / double(std::max<std::uint64_t>(1, vertices))},
+      {"dag_depth", max_depth},
+      {"rtree_height", db->rtree().height()},
+      {"meta", meta}};
+  if (json) {
+    std::cout << out.dump(2) << "\n";
+    return 0;
+  }
+  const auto& m = meta["model"];
+  std::printf("database        %s (format %d, %s pages, checksum %s)\n", db_path.c_str(),
+              meta["version"].get<int>(), meta["codec"].get<std::string>().c_str(),
+              meta["checksum"].get<std::string>().c_str());
+  std::printf("source          %s (%dx%d samples)\n", m["source"].get<std::string>().c_str(),
+              m["grid_width"].get<int>(), m["grid_height"].get<int>());
+  std::printf("builder         %s\n", m["builder"].get<std::string>().c_str());
+  std::printf("ops             %llu (DAG depth %u), %llu triangles, %llu vertices\n",
+              static_cast<unsigned long long>(meta["counts"]["ops"].get<std::uint64_t>()),
+              max_depth,
+              static_cast<unsigned long long>(meta["counts"]["triangles"].get<std::uint64_t>()),
+              static_cast<unsigned long long>(vertices));
+  std::printf("pages           %llu data pages, R-tree of %llu nodes (height %d)\n",
+              static_cast<unsigned long long>(meta["counts"]["pages"].get<std::uint64_t>()),
+              static_cast<unsigned long long>(meta["counts"]["rtree_nodes"].get<std::uint64_t>()),
+              db->rtree().height());
+  std::printf(
+      "size            %.3f MB, %.2f bytes/vertex (pages %.3f MB, locators %.3f MB, R-tree %.3f "
+      "MB)\n",
+      double(db->file_bytes()) / 1e6, out["bytes_per_vertex"].get<double>(),
+      double(meta["bytes"]["pages"].get<std::uint64_t>()) / 1e6,
+      double(meta["bytes"]["nodes"].get<std::uint64_t>()) / 1e6,
+      double(meta["bytes"]["rtree"].get<std::uint64_t>()) / 1e6);
+  std::printf("error           err0 %g, err_final %g (includes the z quantization shift %g)\n",
+              m["err0"].get<double>(), m["err_final"].get<double>(), meta["z_shift"].get<double>());
+  std::printf("quantization    origin %s, step %s\n", meta["grid"]["origin"].dump().c_str(),
+              meta["grid"]["step"].dump().c_str());
+  std::printf("parameters      %s\n", meta["parameters"].get<std::string>().c_str());
+  return 0;
+}
+
+int cmd_verify(const std::string& db_path, bool json, bool quiet) {
+  if (!std::filesystem::exists(db_path)) throw_input(db_path + ": no such file");
+  smr::tools::GdalProgress progress(quiet || json ? nullptr : stderr);
+  const smr::VerifyReport r = smr::verify_database(db_path, [&](double f) { progress.update(f); });
+  progress.done();
+  if (json) {
+    std::cout << nlohmann::json{{"path", db_path},  {"ok", r.ok()}, {"faults", r.faults},
+                                {"pages", r.pages}, {"ops", r.ops}, {"triangles", r.triangles}}
+                     .dump(2)
+              << "\n";
+  }
+  for (const std::string& f : r.faults) std::fprintf(stderr, "smrdb: verify: %s\n", f.c_str());
+  if (!json && !quiet)
+    std::fprintf(stderr, "%s: %s (%llu pages, %llu ops, %llu triangles)\n", db_path.c_str(),
+                 r.ok() ? "ok" : "FAULTY", static_cast<unsigned long long>(r.pages),
+                 static_cast<unsigned long long>(r.ops),
+                 static_cast<unsigned long long>(r.triangles));
+  return r.ok() ? 0 : 1;
 }
 
 int cmd_synth(int width, int height, std::uint64_t seed, double range, double spacing,
@@ -277,27 +505,46 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   app.set_version_flag("--version", "smrdb 0.1.0");
 
-  std::string dem, out, png, algorithm = "minimal";
-  double max_error = 0.0;
-  std::uint64_t max_vertices = 0, base_vertices = 4;
+  std::string command_line;
+  for (int i = 0; i < argc; ++i) command_line += (i ? " " : "") + std::string(argv[i]);
   bool json = false, quiet = false, verify = false;
   RcfOptions rcf;
+  IngestArgs ingest_args;
+  ExtractArgs extract_args;
+  std::string db_path;
+
+  CLI::App* ingest_cmd = app.add_subcommand(
+      "ingest", "Build a CRMR from a DEM and store it as an on-disk LOD database");
+  ingest_args.add_to(*ingest_cmd);
+  ingest_cmd->add_option("-o,--output", db_path, "Database file to create")->required();
+  ingest_cmd->add_flag("--json", json, "Print statistics as JSON on stdout");
+  ingest_cmd->add_flag("-q,--quiet", quiet, "No progress or summary on stderr");
+  ingest_cmd->add_flag("--verify", verify, "Check the CRMR invariants before writing (slow)");
+
+  CLI::App* extract_cmd = app.add_subcommand(
+      "extract", "Extract a selectively refined mesh for an RCF from a database");
+  extract_cmd->add_option("db", db_path, "Database file")->required();
+  extract_args.add_to(*extract_cmd, true);
+  extract_cmd->add_flag("--json", json, "Print statistics as JSON on stdout");
+  extract_cmd->add_flag("-q,--quiet", quiet, "No summary on stderr");
+  extract_cmd->add_flag("--verify", verify, "Check that the output tiles the domain (slow)");
+  rcf.add_to(*extract_cmd);
+
+  CLI::App* info_cmd = app.add_subcommand("info", "Describe a database");
+  info_cmd->add_option("db", db_path, "Database file")->required();
+  info_cmd->add_flag("--json", json, "Print as JSON");
+
+  CLI::App* verify_cmd = app.add_subcommand(
+      "verify", "Check every checksum, the DAG and the index of a database (exit 1 on a fault)");
+  verify_cmd->add_option("db", db_path, "Database file")->required();
+  verify_cmd->add_flag("--json", json, "Print the result as JSON");
+  verify_cmd->add_flag("-q,--quiet", quiet, "No progress or summary on stderr");
+
   CLI::App* build = app.add_subcommand(
-      "build",
-      "Build a CRMR from a DEM in memory and extract a selectively refined mesh for an RCF");
-  build->add_option("dem", dem, "DEM: GeoTIFF or any GDAL raster (one band), .npy or .npz")
-      ->required();
-  build
-      ->add_option("--max-error", max_error,
-                   "Stop refining at this vertical error (data units; 0 = lossless)")
-      ->capture_default_str();
-  build->add_option("--max-vertices", max_vertices, "Stop at this many vertices (0 = no limit)");
-  build->add_option("--base-vertices", base_vertices, "Vertices of the base mesh (4 = the corners)")
-      ->capture_default_str();
-  build->add_option("--algorithm", algorithm, "minimal (Brown 5.1) or reduced (Brown 5.2)")
-      ->capture_default_str();
-  build->add_option("-o,--output", out, "Output mesh (.obj or .ply)")->required();
-  build->add_option("--png", png, "Also write a top-down picture of the mesh (.png)");
+      "build", "Ingest a DEM and extract a mesh from the database in one go (ingest + extract)");
+  ingest_args.add_to(*build);
+  extract_args.add_to(*build, false);
+  build->add_option("--db", db_path, "Keep the database at this path (default: a scratch file)");
   build->add_flag("--json", json, "Print statistics as JSON on stdout");
   build->add_flag("-q,--quiet", quiet, "No progress or summary on stderr");
   build->add_flag("--verify", verify, "Check the CRMR invariants and the output tiling (slow)");
@@ -328,10 +575,12 @@ int main(int argc, char** argv) {
     return 1;
   }
   try {
-    if (*build) {
-      return cmd_build(dem, max_error, max_vertices, base_vertices, rcf, algorithm, out, png, json,
-                       quiet, verify);
-    }
+    if (*ingest_cmd) return cmd_ingest(ingest_args, db_path, json, quiet, verify, command_line);
+    if (*extract_cmd) return cmd_extract(db_path, rcf, extract_args, json, quiet, verify);
+    if (*info_cmd) return cmd_info(db_path, json);
+    if (*verify_cmd) return cmd_verify(db_path, json, quiet);
+    if (*build)
+      return cmd_build(ingest_args, db_path, rcf, extract_args, json, quiet, verify, command_line);
     if (*synth)
       return cmd_synth(width, height == 0 ? width : height, seed, range, spacing, synth_out, quiet);
   } catch (const smr::Error& e) {

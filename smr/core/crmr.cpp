@@ -99,11 +99,15 @@ void link_dag(Crmr& crmr) {
     op.parents.erase(std::unique(op.parents.begin(), op.parents.end()), op.parents.end());
     for (OpId p : op.parents) crmr.ops[p.value].children.push_back(op.id);
   }
-  // ROI = own box united with the children's ROIs; children have larger ids, so go backwards.
-  for (std::uint64_t i = m; i-- > 0;) {
+  compute_rois(crmr);
+}
+
+void compute_rois(Crmr& crmr) {
+  // Children have larger ids, so going backwards finishes every child before its parents.
+  for (std::uint64_t i = crmr.ops.size(); i-- > 0;) {
     Op& op = crmr.ops[i];
     op.roi = op.box;
-    for (OpId c : op.children) op.roi.add(crmr.ops[c.value].roi);
+    for (OpId c : op.children) op.roi.add(crmr.ops.at(c.value).roi);
   }
 }
 

@@ -70,6 +70,9 @@ double resolution_of(const CrmrInfo& info, double error);
 /// then of PreF (via pre_tris), in that order. Deterministic, so the store recomputes them.
 void compute_op_bounds(Op& op);
 
+/// ROI of every op = its box united with its children's ROIs (children have larger ids).
+void compute_rois(Crmr& crmr);
+
 /// Derives parents/children from PreF, killer/death_res of every triangle, pre_tris, the bounds
 /// (compute_op_bounds) and ROIs (children before parents). Builders call it once all ops exist.
 /// Throws on dangling references.

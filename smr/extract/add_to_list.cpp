@@ -71,6 +71,14 @@ std::vector<OpId> add_to_list_reduced(const OpSource& source, const Rcf& rcf) {
   // can miss such an op behind a completely-finer-but-not-finer parent, and the output would then
   // break Theorem 5.2.2. This is also exactly what the R-tree's RCF query returns.
   std::vector<OpId> x{kBaseOp};
+  if (const auto* indexed = dynamic_cast<const RcfIndexedSource*>(&source)) {
+    for (OpId id : indexed->not_completely_finer(rcf)) {
+      if (id != kBaseOp) x.push_back(id);
+    }
+    std::sort(x.begin(), x.end(), std::greater<>());
+    x.erase(std::unique(x.begin(), x.end()), x.end());
+    return x;
+  }
   for (std::uint64_t i = 1; i < source.op_count(); ++i) {
     const OpRef op_ref = source.op(OpId{i});
     const Op& op = *op_ref;

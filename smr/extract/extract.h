@@ -41,12 +41,21 @@ struct ExpansionOptions {
   std::uint64_t max_triangles = 0;
 };
 
+/// A source that answers reduced extraction's X from an index instead of a scan of every op
+/// (smr/db: the R-tree over ROI boxes). Must return exactly the ops that are not completely finer
+/// than the RCF (R^0 may be omitted; it is always added).
+class RcfIndexedSource {
+ public:
+  virtual ~RcfIndexedSource() = default;
+  virtual std::vector<OpId> not_completely_finer(const Rcf& rcf) const = 0;
+};
+
 /// Brown 5.1.1 (Fig. 5.2): the smallest X containing R^0, the children of its non-finer members
 /// that are not completely finer, and all ancestors of its members. Sorted descending.
 std::vector<OpId> add_to_list(const OpSource& source, const Rcf& rcf);
 
 /// Reduced extraction's X (Brown Eq. 5.5 in the form of Lemma 5.2.1): R^0 and every op that is
-/// not completely finer than the RCF. Scans every op; the on-disk store answers it from the index.
+/// not completely finer than the RCF. Scans every op, unless the source is an RcfIndexedSource.
 std::vector<OpId> add_to_list_reduced(const OpSource& source, const Rcf& rcf);
 
 /// Minimal surface SMR (Brown 5.1).

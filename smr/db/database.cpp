@@ -1,0 +1,400 @@
+#include "smr/db/database.h"
+
+#include <algorithm>
+#include <chrono>
+#include <limits>
+#include <map>
+#include <set>
+
+#include <nlohmann/json.hpp>
+
+#include "smr/db/page.h"
+#include "storage/checksum.h"
+#include "storage/error.h"
+
+namespace smr {
+
+using nlohmann::json;
+using storage::ByteReader;
+using storage::Bytes;
+using storage::ByteView;
+using storage::ByteWriter;
+using storage::Table;
+
+namespace {
+
+constexpr std::uint64_t kRtreeHeaderKey = std::numeric_limits<std::uint64_t>::max();
+constexpr std::uint64_t kReleaseEveryBytes = std::uint64_t{16} << 20;
+
+index::Box to_index(const Box3& b) {
+  index::Box out;
+  for (int k = 0; k < 3; ++k) {
+    out.lo[k] = b.lo[k];
+    out.hi[k] = b.hi[k];
+  }
+  return out;
+}
+
+Box3 from_index(const index::Box& b) {
+  Box3 out;
+  for (int k = 0; k < 3; ++k) {
+    out.lo[k] = b.lo[k];
+    out.hi[k] = b.hi[k];
+  }
+  return out;
+}
+
+json vec_json(const Vec3& v) {
+  return json::array({v.x, v.y, v.z});
+}
+Vec3 json_vec(const json& j) {
+  return {j.at(0).get<double>(), j.at(1).get<double>(), j.at(2).get<double>()};
+}
+
+json info_json(const CrmrInfo& info) {
+  return {{"kind", info.kind == ModelKind::kTerrain ? "terrain" : "mesh"},
+          {"georef",
+           {{"x0", info.georef.x0},
+            {"y0", info.georef.y0},
+            {"dx", info.georef.dx},
+            {"dy", info.georef.dy},
+            {"crs_wkt", info.georef.crs_wkt},
+            {"geographic", info.georef.geographic}}},
+          {"grid_width", info.grid_width},
+          {"grid_height", info.grid_height},
+          {"err0", info.err0},
+          {"err_final", info.err_final},
+          {"bounds", {{"lo", vec_json(info.bounds.lo)}, {"hi", vec_json(info.bounds.hi)}}},
+          {"source", info.source},
+          {"builder", info.builder},
+          {"vertex_count", info.vertex_count}};
+}
+
+CrmrInfo json_info(const json& j) {
+  CrmrInfo info;
+  info.kind =
+      j.at("kind").get<std::string>() == "terrain" ? ModelKind::kTerrain : ModelKind::kMesh3d;
+  const json& g = j.at("georef");
+  info.georef.x0 = g.at("x0").get<double>();
+  info.georef.y0 = g.at("y0").get<double>();
+  info.georef.dx = g.at("dx").get<double>();
+  info.georef.dy = g.at("dy").get<double>();
+  info.georef.crs_wkt = g.at("crs_wkt").get<std::string>();
+  info.georef.geographic = g.at("geographic").get<bool>();
+  info.grid_width = j.at("grid_width").get<int>();
+  info.grid_height = j.at("grid_height").get<int>();
+  info.err0 = j.at("err0").get<double>();
+  info.err_final = j.at("err_final").get<double>();
+  info.bounds = Box3{json_vec(j.at("bounds").at("lo")), json_vec(j.at("bounds").at("hi"))};
+  info.source = j.at("source").get<std::string>();
+  info.builder = j.at("builder").get<std::string>();
+  info.vertex_count = j.at("vertex_count").get<std::uint64_t>();
+  return info;
+}
+
+// Rough encoded size of an op, for packing leaves into pages of about WriteOptions::page_bytes.
+std::uint32_t estimated_bytes(const Op& op) {
+  return static_cast<std::uint32_t>(24 + 4 * op.fragment.size() + 2 * op.vertices.size() +
+                                    5 * op.pre.size() + 5 * op.coarser.size() +
+                                    10 * op.children.size());
+}
+
+Bytes encode_locators(std::span<const std::pair<std::uint64_t, std::uint32_t>> locs) {
+  Bytes b;
+  ByteWriter w(b);
+  w.varint(locs.size());
+  std::uint64_t prev = 0;
+  for (const auto& [page, slot] : locs) {
+    w.svarint(std::int64_t(page - prev));
+    prev = page;
+    w.varint(slot);
+  }
+  return b;
+}
+
+std::string key_text(std::uint64_t key) {
+  return std::to_string(key);
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------------------------ writing
+
+WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptions& options) {
+  const auto t0 = std::chrono::steady_clock::now();
+  auto progress = [&](double f) {
+    if (options.progress) options.progress(f);
+  };
+  // Opening the writer first checks the path (exists without --force) before any work.
+  storage::DatabaseWriter writer(path, options.force);
+  WriteReport report;
+  report.grid = choose_grid(crmr.header, options.z_step);
+  report.z_shift = quantize(crmr, report.grid);
+  report.ops = crmr.ops.size();
+
+  std::vector<index::Entry> entries;
+  entries.reserve(crmr.ops.size());
+  for (const Op& op : crmr.ops) {
+    entries.push_back(
+        {op.id.value, to_index(op.roi), to_index(op.box), op.birth_res, estimated_bytes(op)});
+  }
+  index::BuildOptions bo;
+  bo.leaf_weight = options.page_bytes;
+  bo.order_dims = crmr.header.kind == ModelKind::kTerrain ? 2 : 3;
+  const index::Plan plan = index::plan(entries, bo);
+  report.pages = plan.leaves.size();
+
+  // Data pages, in leaf order; remember where each op went.
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> where(crmr.ops.size(), {~0ull, 0u});
+  std::vector<const Op*> page_ops;
+  for (std::uint64_t leaf = 0; leaf < plan.leaves.size(); ++leaf) {
+    page_ops.clear();
+    for (std::uint64_t id : plan.leaves[leaf]) {
+      where.at(id) = {leaf, std::uint32_t(page_ops.size())};
+      page_ops.push_back(&crmr.ops[id]);
+    }
+    const Bytes sealed = storage::seal(encode_page(page_ops, report.grid, options.codec));
+    report.page_bytes += sealed.size();
+    writer.append(Table::kPages, leaf, sealed);
+    if (leaf % 256 == 0) progress(0.9 * double(leaf) / double(plan.leaves.size()));
+  }
+  // Locators.
+  for (std::uint64_t block = 0; block * kOpsPerLocatorBlock < where.size(); ++block) {
+    const std::size_t begin = block * kOpsPerLocatorBlock;
+    const std::size_t end = std::min(where.size(), begin + kOpsPerLocatorBlock);
+    const Bytes sealed = storage::seal(encode_locators({where.data() + begin, end - begin}));
+    report.node_bytes += sealed.size();
+    writer.append(Table::kNodes, block, sealed);
+  }
+  // The R-tree, then its header.
+  const Bytes header = index::write(plan, entries, bo, [&](std::uint64_t id, ByteView node) {
+    report.rtree_bytes += node.size();
+    ++report.rtree_nodes;
+    writer.append(Table::kRtree, id, node);
+  });
+  writer.append(Table::kRtree, kRtreeHeaderKey, header);
+  progress(0.95);
+
+  std::uint64_t triangles = 0;
+  for (const Op& op : crmr.ops) triangles += op.fragment.size();
+  json meta = {
+      {"format", "smrdb"},
+      {"version", kDatabaseFormat},
+      {"checksum", "xxh3-64"},
+      {"codec", std::string(storage::codec_name(options.codec))},
+      {"model", info_json(crmr.header)},
+      {"grid", {{"origin", vec_json(report.grid.origin)}, {"step", vec_json(report.grid.step)}}},
+      {"z_shift", report.z_shift},
+      {"counts",
+       {{"ops", crmr.ops.size()},
+        {"triangles", triangles},
+        {"pages", plan.leaves.size()},
+        {"rtree_nodes", report.rtree_nodes}}},
+      {"bytes",
+       {{"pages", report.page_bytes}, {"nodes", report.node_bytes}, {"rtree", report.rtree_bytes}}},
+      {"page_bytes_target", options.page_bytes},
+      {"parameters", options.parameters}};
+  const std::string text = meta.dump();
+  writer.put(Table::kMeta, "meta", storage::seal(storage::as_bytes(text)));  // last
+  writer.finish();
+  report.file_bytes = storage::Env::open_read_only(path).file_bytes();
+  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  progress(1.0);
+  return report;
+}
+
+// ------------------------------------------------------------------------------------ reading
+
+std::unique_ptr<Database> Database::open(const std::string& path, const Options& options) {
+  std::unique_ptr<Database> db(new Database());
+  db->env_ = std::make_unique<storage::Env>(storage::Env::open_read_only(path));
+  db->cache_ = std::make_unique<storage::PageCache<CacheItem>>(options.cache_bytes);
+  const storage::ReadTxn txn = db->env_->read();
+  const auto meta = txn.get(Table::kMeta, "meta");
+  if (!meta) {
+    throw_input(path +
+                ": not a complete smrdb database (no meta record; an ingest was "
+                "interrupted or this is another LMDB file)");
+  }
+  const ByteView text = storage::unseal(*meta, "meta", "meta");
+  try {
+    const json j = json::parse(text.begin(), text.end());
+    if (j.at("format").get<std::string>() != "smrdb") throw_input(path + ": not an smrdb database");
+    if (j.at("version").get<int>() != kDatabaseFormat)
+      throw_input(path + ": database format " + std::to_string(j.at("version").get<int>()) +
+                  " is not supported (this smrdb reads format " + std::to_string(kDatabaseFormat) +
+                  ")");
+    db->info_ = json_info(j.at("model"));
+    db->grid_.origin = json_vec(j.at("grid").at("origin"));
+    db->grid_.step = json_vec(j.at("grid").at("step"));
+    db->op_count_ = j.at("counts").at("ops").get<std::uint64_t>();
+    db->page_count_ = j.at("counts").at("pages").get<std::uint64_t>();
+    db->meta_json_ = j.dump(2);
+  } catch (const json::exception& e) {
+    throw Error(ErrorKind::kCorrupt, path + ": meta record is malformed: " + e.what());
+  }
+  const auto header = txn.get(Table::kRtree, kRtreeHeaderKey);
+  if (!header) throw Error(ErrorKind::kCorrupt, path + ": the R-tree header is missing");
+  const Database* self = db.get();
+  db->rtree_ = std::make_unique<index::RTree>(*header, [self](std::uint64_t node) {
+    return std::get<Bytes>(*self->cached(3, Table::kRtree, node));
+  });
+  if (db->rtree_->entry_count() != db->op_count_ || db->rtree_->leaf_count() != db->page_count_)
+    throw Error(ErrorKind::kCorrupt, path + ": R-tree and meta disagree on the counts");
+  return db;
+}
+
+Database::~Database() = default;
+
+const std::string& Database::path() const {
+  return env_->path();
+}
+std::uint64_t Database::file_bytes() const {
+  return env_->file_bytes();
+}
+
+void Database::maybe_release() const {
+  const std::uint64_t read = env_->bytes_read();
+  std::uint64_t last = released_at_.load();
+  if (read - last >= kReleaseEveryBytes && released_at_.compare_exchange_strong(last, read))
+    env_->release_mapped_pages();
+}
+
+std::shared_ptr<const Database::CacheItem> Database::cached(std::uint64_t kind, Table table,
+                                                            std::uint64_t id) const {
+  const std::uint64_t key = (kind << 60) | id;
+  return cache_->get(key, [&]() {
+    storage::PageCache<CacheItem>::Loaded loaded;
+    const std::string name = std::string(storage::table_name(table)) + "/" + key_text(id);
+    Bytes raw;
+    {
+      const storage::ReadTxn txn = env_->read();
+      const auto value = txn.get(table, id);
+      if (!value) throw Error(ErrorKind::kCorrupt, path() + ": " + name + " is missing");
+      raw.assign(value->begin(), value->end());
+    }
+    loaded.bytes_read = raw.size();
+    if (table == Table::kRtree) {
+      loaded.charged_bytes = raw.size() + 64;
+      loaded.value = std::make_shared<const CacheItem>(std::move(raw));
+      nodes_read_.fetch_add(1);
+    } else if (table == Table::kPages) {
+      const ByteView payload = storage::unseal(raw, storage::table_name(table), key_text(id));
+      std::vector<Op> ops = decode_page(payload, grid_, path() + ": " + name);
+      std::size_t bytes = sizeof(CacheItem) + ops.capacity() * sizeof(Op);
+      for (const Op& op : ops) bytes += op_memory_bytes(op) - sizeof(Op);
+      loaded.charged_bytes = bytes;
+      loaded.value = std::make_shared<const CacheItem>(std::move(ops));
+      pages_read_.fetch_add(1);
+      page_bytes_read_.fetch_add(raw.size());
+    } else {
+      const ByteView payload = storage::unseal(raw, storage::table_name(table), key_text(id));
+      ByteReader r(payload, path() + ": " + name);
+      const std::uint64_t n = r.varint();
+      if (n > kOpsPerLocatorBlock) r.fail("too many locators");
+      std::vector<Locator> locs(n);
+      std::uint64_t prev = 0;
+      for (Locator& l : locs) {
+        l.page = prev + std::uint64_t(r.svarint());
+        prev = l.page;
+        l.slot = std::uint32_t(r.varint());
+      }
+      r.expect_end();
+      loaded.charged_bytes = sizeof(CacheItem) + locs.capacity() * sizeof(Locator);
+      loaded.value = std::make_shared<const CacheItem>(std::move(locs));
+    }
+    maybe_release();
+    return loaded;
+  });
+}
+
+Database::Locator Database::locate(OpId id) const {
+  if (id.value >= op_count_)
+    throw_input(path() + ": op " + std::to_string(id.value) + " does not exist (the database has " +
+                std::to_string(op_count_) + " ops)");
+  const auto item = cached(2, Table::kNodes, id.value / kOpsPerLocatorBlock);
+  const auto& locs = std::get<std::vector<Locator>>(*item);
+  const std::uint64_t i = id.value % kOpsPerLocatorBlock;
+  if (i >= locs.size() || locs[i].page >= page_count_)
+    throw Error(ErrorKind::kCorrupt, path() + ": nodes/" +
+                                         key_text(id.value / kOpsPerLocatorBlock) +
+                                         ": no valid locator for op " + key_text(id.value));
+  return locs[i];
+}
+
+std::shared_ptr<const std::vector<Op>> Database::page(std::uint64_t page) const {
+  if (page >= page_count_) throw_input(path() + ": page " + key_text(page) + " does not exist");
+  auto item = cached(1, Table::kPages, page);
+  return {item, &std::get<std::vector<Op>>(*item)};
+}
+
+OpRef Database::op(OpId id) const {
+  const Locator loc = locate(id);
+  auto ops = page(loc.page);
+  if (loc.slot >= ops->size() || (*ops)[loc.slot].id != id)
+    throw Error(ErrorKind::kCorrupt, path() + ": pages/" + key_text(loc.page) +
+                                         " does not hold op " + key_text(id.value) +
+                                         " where nodes/ says");
+  return OpRef(ops, &(*ops)[loc.slot]);
+}
+
+namespace {
+
+// Brown Lemma 5.2.1 through the R-tree: a subtree is skipped when every op in it is completely
+// finer (Rcf::region_completely_finer on the union of the ops' own boxes, at the subtree's least
+// birth_res: conservative and monotone); an entry passing its box test is then judged exactly.
+class RcfVisitor final : public index::Visitor {
+ public:
+  RcfVisitor(const Rcf& rcf, const CrmrInfo& info) : rcf_(rcf), info_(info) {}
+  bool enter(const index::Summary& s) override {
+    return !rcf_.region_completely_finer(from_index(s.box), s.min_res, info_);
+  }
+  bool accept(const index::Entry& e) override {
+    return !rcf_.region_completely_finer(from_index(e.box), e.res, info_);
+  }
+
+ private:
+  const Rcf& rcf_;
+  const CrmrInfo& info_;
+};
+
+}  // namespace
+
+std::vector<OpId> Database::not_completely_finer(const Rcf& rcf) const {
+  RcfVisitor visitor(rcf, info_);
+  const std::vector<index::Hit> hits = rtree_->query(visitor);
+  std::vector<OpId> x;
+  std::shared_ptr<const std::vector<Op>> ops;
+  std::uint64_t current = ~0ull;
+  for (const index::Hit& h : hits) {
+    if (h.leaf != current) {
+      current = h.leaf;
+      ops = page(h.leaf);
+    }
+    const Op* found = nullptr;
+    for (const Op& o : *ops) {
+      if (o.id.value == h.id) found = &o;
+    }
+    if (found == nullptr)
+      throw Error(ErrorKind::kCorrupt, path() + ": pages/" + key_text(h.leaf) + " lacks op " +
+                                           key_text(h.id) + " of its R-tree leaf");
+    if (found->id == kBaseOp || !rcf.is_completely_finer(*found, *this)) x.push_back(found->id);
+  }
+  return x;
+}
+
+DatabaseStats Database::stats() const {
+  DatabaseStats s;
+  s.cache = cache_->stats();
+  s.pages_read = pages_read_.load();
+  s.page_bytes_read = page_bytes_read_.load();
+  s.rtree_nodes_read = nodes_read_.load();
+  s.lmdb_bytes_read = env_->bytes_read();
+  return s;
+}
+
+void Database::clear_cache() const {
+  cache_->clear();
+}
+
+}  // namespace smr

@@ -1,0 +1,129 @@
+// The on-disk LOD database (DESIGN.md sections 3, 5, 6): a CRMR written into one LMDB file —
+// data pages of ops in R-tree leaf order (one leaf <-> one page), op locators, the packed R-tree
+// over ROI boxes, and a `meta` record committed last — and read back lazily through a page cache
+// with a byte budget. Database is an OpSource, so both extraction algorithms run on it unchanged;
+// reduced extraction takes its X from the R-tree (Brown Lemma 5.2.1 via Maheshwari 4.4).
+//
+// Tables: meta  "meta" -> JSON (format, model info, grid, counts, build parameters), sealed
+//         pages u64 leaf -> page (smr/db/page.h), sealed
+//         nodes u64 block -> locators of ops 256*block .. 256*block+255: varint page, varint slot
+//         rtree u64 node -> R-tree node (index/rtree.h); key 2^64-1 -> the tree's header
+//         aux   unused so far
+// Every value carries an xxhash checksum; a mismatch names the table and key.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "index/rtree.h"
+#include "smr/core/crmr.h"
+#include "smr/db/quantize.h"
+#include "smr/extract/extract.h"
+#include "storage/codec.h"
+#include "storage/lmdb_env.h"
+#include "storage/page_cache.h"
+
+namespace smr {
+
+inline constexpr int kDatabaseFormat = 1;
+inline constexpr std::uint64_t kOpsPerLocatorBlock = 256;
+
+struct WriteOptions {
+  storage::CodecId codec = storage::CodecId::kDraco;
+  bool force = false;   // replace an existing database at the path
+  double z_step = 0.0;  // quantization step of heights; 0 = automatic (quantize.h)
+  std::uint32_t page_bytes = 16 * 1024 - 16;  // target payload of a data page
+  std::string parameters;                     // free text recorded in meta (the command line, say)
+  std::function<void(double)> progress;       // fraction done, from 0 to 1
+};
+
+struct WriteReport {
+  QuantGrid grid;
+  double z_shift = 0.0;  // largest vertex move made by the quantization (added to every error)
+  std::uint64_t ops = 0, pages = 0, rtree_nodes = 0;
+  std::uint64_t page_bytes = 0, node_bytes = 0, rtree_bytes = 0;  // value bytes per table
+  std::uint64_t file_bytes = 0;
+  double seconds = 0.0;
+};
+
+/// Writes `crmr` to a new database file at `path`, atomically: the meta record is written last
+/// and the file appears only when complete. Snaps `crmr` to the quantization grid in place first,
+/// so afterwards it equals what the database holds. Throws smr::Error (kInvalidInput if `path`
+/// exists without options.force).
+WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptions& options);
+
+struct DatabaseStats {
+  storage::CacheStats cache;
+  std::uint64_t pages_read = 0;       // data pages fetched from LMDB
+  std::uint64_t page_bytes_read = 0;  // their bytes
+  std::uint64_t rtree_nodes_read = 0;
+  std::uint64_t lmdb_bytes_read = 0;  // every value fetched from LMDB
+};
+
+class Database final : public OpSource, public RcfIndexedSource {
+ public:
+  struct Options {
+    std::size_t cache_bytes = std::size_t{64} << 20;
+  };
+  /// Opens a database read-only. A missing file, a file that is not a complete smrdb database (no
+  /// meta record: an interrupted ingest), or an unknown format throws smr::Error naming the path.
+  static std::unique_ptr<Database> open(const std::string& path, const Options& options);
+  ~Database() override;
+
+  const CrmrInfo& info() const override { return info_; }
+  std::uint64_t op_count() const override { return op_count_; }
+  OpRef op(OpId id) const override;
+  /// Reduced extraction's X from the R-tree: every op not completely finer than `rcf`.
+  std::vector<OpId> not_completely_finer(const Rcf& rcf) const override;
+
+  const index::RTree& rtree() const { return *rtree_; }
+  const QuantGrid& grid() const { return grid_; }
+  std::uint64_t page_count() const { return page_count_; }
+  const std::string& meta_json() const { return meta_json_; }
+  const std::string& path() const;
+  std::uint64_t file_bytes() const;
+  DatabaseStats stats() const;
+  /// Decoded ops of data page `page` (through the cache).
+  std::shared_ptr<const std::vector<Op>> page(std::uint64_t page) const;
+  /// Forgets every cached page (for cold measurements).
+  void clear_cache() const;
+
+ private:
+  Database() = default;
+  struct Locator {
+    std::uint64_t page;
+    std::uint32_t slot;
+  };
+  using CacheItem = std::variant<std::vector<Op>, std::vector<Locator>, storage::Bytes>;
+  std::shared_ptr<const CacheItem> cached(std::uint64_t key, storage::Table table,
+                                          std::uint64_t id) const;
+  Locator locate(OpId id) const;
+  void maybe_release() const;
+
+  std::unique_ptr<storage::Env> env_;
+  std::unique_ptr<storage::PageCache<CacheItem>> cache_;
+  std::unique_ptr<index::RTree> rtree_;
+  CrmrInfo info_;
+  QuantGrid grid_;
+  std::uint64_t op_count_ = 0, page_count_ = 0;
+  std::string meta_json_;
+  mutable std::atomic<std::uint64_t> pages_read_{0}, page_bytes_read_{0}, nodes_read_{0};
+  mutable std::atomic<std::uint64_t> released_at_{0};
+};
+
+/// `smrdb verify`: reads every value of the database and checks checksums, decoding, the op
+/// locators, the DAG (parents <-> children, PreF <-> killers), Hypermesh links, and that the
+/// R-tree holds every op exactly once with a conservative box, in the page of its leaf.
+struct VerifyReport {
+  std::vector<std::string> faults;  // empty = clean
+  std::uint64_t pages = 0, ops = 0, triangles = 0, rtree_nodes = 0;
+  bool ok() const { return faults.empty(); }
+};
+VerifyReport verify_database(const std::string& path, const std::function<void(double)>& progress);
+
+}  // namespace smr

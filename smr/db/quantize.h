@@ -1,0 +1,38 @@
+// The database's one global quantization grid (DESIGN.md section 3): every vertex position is
+// stored as integers q on the grid origin + q * step, so a vertex shared by fragments in
+// different pages decodes to bit-identical coordinates (no cracks by construction).
+//
+// Terrain: x and y use the DEM's own lattice (origin x0, y0; steps dx, dy), where every vertex
+// already lies, so they are exact. z uses a power-of-two step (auto: the largest with
+// range / step <= 2^24, e.g. 2^-14 m for a 1600 m range); a DEM whose samples are multiples of
+// it (integer DEMs, float32 values above range/2^... ) is stored exactly. Snapping z moves a
+// triangle's plane by at most the largest vertex shift, so every stored error grows by that
+// shift (0 when nothing moved): error bounds against the source stay true.
+#pragma once
+
+#include <array>
+#include <cstdint>
+
+#include "smr/core/crmr.h"
+
+namespace smr {
+
+struct QuantGrid {
+  Vec3 origin{0.0};
+  Vec3 step{1.0};
+
+  std::array<std::int32_t, 3> quantize(const Vec3& p) const;  // throws if out of int32 range
+  Vec3 dequantize(const std::array<std::int32_t, 3>& q) const {
+    return {origin.x + q[0] * step.x, origin.y + q[1] * step.y, origin.z + q[2] * step.z};
+  }
+  friend bool operator==(const QuantGrid&, const QuantGrid&) = default;
+};
+
+/// The grid for a model; z_step 0 = automatic, otherwise a positive step in data units.
+QuantGrid choose_grid(const CrmrInfo& info, double z_step);
+
+/// Snaps every vertex of `crmr` to `grid`, recomputes bounds and ROIs, and raises every stored
+/// error (ops, err0, err_final) by the largest vertex shift, which it returns.
+double quantize(Crmr& crmr, const QuantGrid& grid);
+
+}  // namespace smr

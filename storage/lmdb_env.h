@@ -1,0 +1,143 @@
+// The LMDB environment of one database (DESIGN.md section 3): one file, five tables, read-only
+// access for readers and an atomic, deterministic writer. LMDB types never appear here; every LMDB
+// status becomes an smr::Error carrying mdb_strerror's text and the path/table/key involved.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+
+#include "storage/bytes.h"
+
+namespace smr::storage {
+
+enum class Table : std::uint8_t { kMeta, kNodes, kPages, kRtree, kAux };
+inline constexpr Table kAllTables[] = {Table::kMeta, Table::kNodes, Table::kPages, Table::kRtree,
+                                       Table::kAux};
+
+// "meta", "nodes", "pages", "rtree", "aux" (also the LMDB sub-database names).
+std::string_view table_name(Table table);
+
+class ReadTxn;
+
+namespace detail {
+struct EnvState;
+}
+
+// A database file opened for reading. Move-only; closing unmaps the file.
+class Env {
+ public:
+  // Opens with MDB_RDONLY|MDB_NOSUBDIR|MDB_NOTLS|MDB_NOLOCK|MDB_NORDAHEAD: database files are never
+  // modified after creation, so no lock file is needed and any number of threads and processes
+  // may read. A missing file (kIo), an empty, truncated or non-LMDB file or a missing table
+  // (kCorrupt) throws smr::Error naming the path.
+  static Env open_read_only(const std::string& path);
+
+  Env(Env&&) noexcept;
+  Env& operator=(Env&&) noexcept;
+  ~Env();
+
+  const std::string& path() const;
+  std::uint64_t file_bytes() const;
+
+  // A read-only transaction (a consistent snapshot). It may be created and used on any thread
+  // (MDB_NOTLS), but one transaction must not be used by two threads at the same time.
+  ReadTxn read() const;
+
+  // Drops this process's mapping of the file's pages (madvise MADV_DONTNEED over the whole map)
+  // so that pages read earlier stop counting in RSS. Call only while no ByteView obtained from a
+  // transaction is in use (the data stays valid but is faulted in again from the page cache).
+  void release_mapped_pages() const;
+
+  // Total bytes of values returned by ReadTxn::get() on transactions of this Env.
+  std::uint64_t bytes_read() const;
+
+ private:
+  explicit Env(std::unique_ptr<detail::EnvState> state);
+  std::unique_ptr<detail::EnvState> state_;
+};
+
+// Move-only. ByteViews returned by get()/for_each() stay valid until the transaction is destroyed.
+// The Env must outlive its transactions.
+class ReadTxn {
+ public:
+  ReadTxn(ReadTxn&&) noexcept;
+  ReadTxn& operator=(ReadTxn&&) noexcept;
+  ~ReadTxn();
+
+  std::optional<ByteView> get(Table table, std::uint64_t key) const;  // key_u64(key)
+  std::optional<ByteView> get(Table table, std::string_view key) const;
+  // Every entry of `table` in key order.
+  void for_each(Table table, const std::function<void(ByteView key, ByteView value)>& visit) const;
+  std::uint64_t count(Table table) const;
+
+ private:
+  friend class Env;
+  ReadTxn(const detail::EnvState* env, void* txn) : env_(env), txn_(txn) {}
+  std::optional<ByteView> get_bytes(Table table, ByteView key, const std::string& key_text) const;
+
+  const detail::EnvState* env_ = nullptr;
+  void* txn_ = nullptr;  // MDB_txn*
+};
+
+// Writes a NEW database file atomically and deterministically.
+//
+// Writes go to a temporary LMDB file "<path>.tmp-<pid>" in the same directory. finish() commits,
+// writes a compacted copy (mdb_env_copyfd2 with MDB_CP_COMPACT) to "<path>.tmp-<pid>.compact",
+// fsyncs it, renames it over <path>, fsyncs the directory and removes the temporaries. The
+// caller writes the `meta` table LAST, so a reader never sees a database without its meta.
+// A kill -9 at any moment leaves <path> either as it was or complete (at worst a stale
+// "<path>.tmp-*" file remains). The same sequence of calls produces a byte-identical file.
+// All five tables always exist in the output, possibly empty.
+class DatabaseWriter {
+ public:
+  // Throws kInvalidInput "<path>: exists; pass --force to replace it" if <path> exists and !force,
+  // before touching anything. Writes are committed every `batch_bytes`; the map starts at
+  // `initial_map_bytes` and doubles whenever LMDB reports MDB_MAP_FULL (the batch is redone; the
+  // caller never sees MDB_MAP_FULL).
+  DatabaseWriter(std::string path, bool force, std::uint64_t batch_bytes = 64u << 20,
+                 std::uint64_t initial_map_bytes = 64u << 20);
+  DatabaseWriter(const DatabaseWriter&) = delete;
+  DatabaseWriter& operator=(const DatabaseWriter&) = delete;
+  // Without finish(): removes every temporary and leaves <path> untouched.
+  ~DatabaseWriter();
+
+  // Keys must be strictly increasing per table (bulk load with MDB_APPEND); a key not greater
+  // than the previous one appended to that table throws kInternal.
+  void append(Table table, std::uint64_t key, ByteView value);
+  // Any key, any order (meta/aux); a later put of the same key replaces the value.
+  void put(Table table, std::string_view key, ByteView value);
+  // Commit, compact, rename. The writer is unusable afterwards.
+  void finish();
+
+  const std::string& path() const { return path_; }
+  std::uint64_t bytes_written() const { return bytes_written_; }  // value bytes accepted
+  std::uint64_t commits() const { return commits_; }              // LMDB write txns committed
+  std::uint64_t map_bytes() const { return map_bytes_; }          // current map size
+
+ private:
+  struct Op {
+    Table table;
+    bool append;
+    std::size_t key_offset, key_size, value_offset, value_size;
+  };
+  void add(Table table, ByteView key, ByteView value, bool append);
+  void flush();
+  void cleanup() noexcept;
+
+  std::string path_, tmp_path_, compact_path_;
+  std::uint64_t batch_bytes_;
+  std::uint64_t map_bytes_;
+  void* env_ = nullptr;    // MDB_env*
+  unsigned dbis_[5] = {};  // MDB_dbi per Table
+  std::vector<Op> ops_;    // the pending batch
+  Bytes arena_;            // keys and values of the pending batch
+  std::optional<std::uint64_t> last_key_[5];
+  std::uint64_t bytes_written_ = 0, commits_ = 0;
+  bool finished_ = false;
+};
+
+}  // namespace smr::storage

@@ -1,0 +1,208 @@
+// The on-disk database (DESIGN.md sections 3, 5, 6; invariant 6): ops read back equal the ops
+// built, extraction from disk equals extraction in memory triangle for triangle and meets every
+// invariant, no cracks across pages, byte-identical files, atomic creation, the cache budget.
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <unordered_map>
+
+#include "smr/core/invariants.h"
+#include "smr/db/database.h"
+#include "smr/db/page.h"
+#include "smr/extract/extract.h"
+#include "storage/error.h"
+#include "tests/support/datasets.h"
+#include "tests/support/oracles.h"
+#include "tests/support/rcf_spread.h"
+
+namespace smr {
+namespace {
+
+namespace fs = std::filesystem;
+
+class TempDir {
+ public:
+  TempDir() {
+    path_ = fs::temp_directory_path() /
+            ("smrdb-db-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter_++));
+    fs::create_directories(path_);
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  std::string file(const std::string& name) const { return (path_ / name).string(); }
+
+ private:
+  static inline int counter_ = 0;
+  fs::path path_;
+};
+
+std::string read_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// Ops read from disk equal the (quantized) ops in memory, field for field.
+void expect_same_ops(const Crmr& m, const Database& db) {
+  ASSERT_EQ(db.op_count(), m.ops.size());
+  EXPECT_EQ(db.info(), m.header);
+  for (const Op& op : m.ops) {
+    const OpRef got = db.op(op.id);
+    ASSERT_EQ(*got, op) << "op " << op.id.value << " differs after the round trip";
+  }
+}
+
+class PerDataset : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(PerDataset, ExtractionFromDiskEqualsExtractionInMemory) {
+  const test::Dataset& d = test::dataset(GetParam());
+  Crmr m = d.crmr;
+  TempDir dir;
+  const std::string path = dir.file("model.smrdb");
+  const WriteReport w = write_database(m, path, {});
+  EXPECT_GT(w.pages, 1u);
+  EXPECT_LE(w.z_shift, w.grid.step.z / 2);
+  // Quantization keeps the model valid and its stored errors true bounds.
+  const InvariantReport inv = check_crmr(m);
+  ASSERT_TRUE(inv.ok()) << inv.summary();
+
+  // A cache smaller than the decoded database, so pages are evicted and read again.
+  const std::size_t budget = std::size_t{24} << 20;
+  const auto db = Database::open(path, {budget});
+  expect_same_ops(m, *db);
+  db->clear_cache();
+
+  const std::vector<test::NamedSpec> spread = test::rcf_spread(m.header);
+  for (std::size_t i = 0; i < spread.size(); ++i) {
+    const test::NamedSpec& ns = spread[i];
+    SCOPED_TRACE(GetParam() + "/" + ns.name);
+    // Every spec compares disk with memory; the oracles (which extraction_test already runs on
+    // the same triangles in memory) run on every third, through the disk's OpSource.
+    const bool oracles = i % 3 == 0;
+    const Rcf rcf = make_rcf(ns.spec, ModelKind::kTerrain, &d.dem);
+    const Extraction mem = extract_minimal_surface(m, rcf);
+    const Extraction disk = extract_minimal_surface(*db, rcf);
+    EXPECT_EQ(disk.x, mem.x);
+    EXPECT_EQ(disk.triangles, mem.triangles);
+    EXPECT_EQ(disk.fan_starts, mem.fan_starts);
+
+    // Reduced extraction: X from the R-tree == X from a scan of every op.
+    const Extraction rmem = extract_reduced(m, rcf);
+    const Extraction rdisk = extract_reduced(*db, rcf);
+    EXPECT_EQ(rdisk.x, rmem.x);
+    EXPECT_EQ(rdisk.triangles, rmem.triangles);
+
+    for (const Extraction* e : {&disk, &rdisk}) {
+      if (!oracles) break;
+      const InvariantReport tiling = check_tiling(*db, e->triangles);
+      EXPECT_TRUE(tiling.ok()) << tiling.summary();
+      const test::OracleResult rcf_ok = test::check_rcf_opwise(*db, e->triangles, rcf);
+      EXPECT_TRUE(rcf_ok.ok()) << rcf_ok.first_failure;
+      const test::OracleResult bound = test::check_error_bound(*db, e->triangles, d.dem);
+      EXPECT_TRUE(bound.ok()) << bound.first_failure;
+    }
+    // No cracks: every vertex decodes to one position, whichever op (page) it comes from.
+    std::unordered_map<std::uint64_t, Vec3> at;
+    for (const TriRef& ref : disk.triangles) {
+      const OpRef op = db->op(ref.op);
+      const FragmentTriangle& t = op->fragment[ref.index];
+      for (int k = 0; k < 3; ++k) {
+        const Vertex& v = op->vertices[t.v[k]];
+        auto [it, fresh] = at.emplace(v.id.value, v.p);
+        ASSERT_TRUE(fresh || it->second == v.p) << "vertex " << v.id.value << " cracks";
+      }
+    }
+  }
+  const DatabaseStats st = db->stats();
+  EXPECT_LE(st.cache.peak_held_bytes, budget);
+  EXPECT_GT(st.cache.evictions, 0u);
+  EXPECT_GT(st.pages_read, w.pages);  // pages were evicted and faulted in again
+}
+
+INSTANTIATE_TEST_SUITE_P(Dems, PerDataset, ::testing::ValuesIn(test::dataset_names()),
+                         [](const auto& p) { return p.param; });
+
+TEST(Database, EveryCodecRoundTripsAndFilesAreByteIdentical) {
+  const test::Dataset& d = test::dataset("jacksboro");
+  TempDir dir;
+  std::uint64_t sizes[3] = {};
+  for (storage::CodecId codec :
+       {storage::CodecId::kRaw, storage::CodecId::kZstd, storage::CodecId::kDraco}) {
+    SCOPED_TRACE(std::string(storage::codec_name(codec)));
+    WriteOptions o;
+    o.codec = codec;
+    Crmr a = d.crmr, b = d.crmr;
+    const std::string pa = dir.file("a.smrdb"), pb = dir.file("b.smrdb");
+    o.force = true;
+    write_database(a, pa, o);
+    write_database(b, pb, o);
+    const std::string bytes = read_file(pa);
+    EXPECT_EQ(bytes, read_file(pb)) << "same input, different bytes";
+    sizes[static_cast<int>(codec)] = bytes.size();
+    expect_same_ops(a, *Database::open(pa, {}));
+    const VerifyReport v = verify_database(pa, nullptr);
+    EXPECT_TRUE(v.ok()) << v.faults.front();
+    EXPECT_EQ(v.ops, a.ops.size());
+  }
+  EXPECT_LT(sizes[2], sizes[0]);  // Draco beats raw
+  EXPECT_LT(sizes[1], sizes[0]);  // and so does zstd
+}
+
+TEST(Database, ExistingPathNeedsForceAndStaysUntouched) {
+  const test::Dataset& d = test::dataset("fbm129");
+  TempDir dir;
+  const std::string path = dir.file("x.smrdb");
+  Crmr m = d.crmr;
+  write_database(m, path, {});
+  const std::string before = read_file(path);
+  Crmr again = d.crmr;
+  WriteOptions o;
+  o.codec = storage::CodecId::kZstd;
+  try {
+    write_database(again, path, o);
+    FAIL() << "overwrote an existing database without force";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::kInvalidInput);
+    EXPECT_NE(std::string(e.what()).find("--force"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(read_file(path), before);
+  o.force = true;
+  write_database(again, path, o);
+  EXPECT_NE(read_file(path), before);
+  // Nothing but the database is left in the directory.
+  int files = 0;
+  for (const auto& entry : fs::directory_iterator(fs::path(path).parent_path())) {
+    ++files;
+    EXPECT_EQ(entry.path().string(), path);
+  }
+  EXPECT_EQ(files, 1);
+}
+
+TEST(Database, OpeningSomethingElseFailsClearly) {
+  TempDir dir;
+  EXPECT_THROW(Database::open(dir.file("missing.smrdb"), {}), Error);
+  { std::ofstream(dir.file("text.smrdb")) << "not a database\n"; }
+  EXPECT_THROW(Database::open(dir.file("text.smrdb"), {}), Error);
+  { std::ofstream(dir.file("empty.smrdb")); }
+  EXPECT_THROW(Database::open(dir.file("empty.smrdb"), {}), Error);
+  const VerifyReport v = verify_database(dir.file("text.smrdb"), nullptr);
+  EXPECT_FALSE(v.ok());
+}
+
+TEST(Database, OpsOutOfRangeAreAnErrorNotACrash) {
+  const test::Dataset& d = test::dataset("fbm129");
+  TempDir dir;
+  Crmr m = d.crmr;
+  write_database(m, dir.file("x.smrdb"), {});
+  const auto db = Database::open(dir.file("x.smrdb"), {});
+  EXPECT_THROW(db->op(OpId{m.ops.size()}), Error);
+  EXPECT_THROW(db->page(db->page_count()), Error);
+}
+
+}  // namespace
+}  // namespace smr
