@@ -163,7 +163,7 @@ struct IngestArgs {
   std::string dem;
   double max_error = 0.0;
   std::uint64_t max_vertices = 0, base_vertices = 4;
-  std::string codec = "draco";
+  std::string codec = "zstd";
   double z_quantum = 0.0;
   std::uint32_t page_kb = 16;
   bool force = false;

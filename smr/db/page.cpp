@@ -22,18 +22,36 @@ std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
   return (std::uint64_t(a) << 32) | b;
 }
 
-// In-fragment neighbours: the triangle across each edge that has the reversed edge.
+// In-fragment neighbours: the triangle across each edge that has the reversed edge. Fragments
+// are small (a few triangles), so a quadratic scan beats a hash map; R^0 may be large.
 void derive_neighbours(Op& op) {
-  std::unordered_map<std::uint64_t, std::int32_t> by_edge;
-  by_edge.reserve(op.fragment.size() * 3);
-  for (std::size_t i = 0; i < op.fragment.size(); ++i) {
-    const auto& v = op.fragment[i].v;
-    for (int k = 0; k < 3; ++k) by_edge[edge_key(v[k], v[(k + 1) % 3])] = std::int32_t(i);
+  const std::size_t n = op.fragment.size();
+  if (n > 64) {
+    std::unordered_map<std::uint64_t, std::int32_t> by_edge;
+    by_edge.reserve(n * 3);
+    for (std::size_t i = 0; i < n; ++i) {
+      const auto& v = op.fragment[i].v;
+      for (int k = 0; k < 3; ++k) by_edge[edge_key(v[k], v[(k + 1) % 3])] = std::int32_t(i);
+    }
+    for (FragmentTriangle& t : op.fragment) {
+      for (int k = 0; k < 3; ++k) {
+        auto it = by_edge.find(edge_key(t.v[(k + 1) % 3], t.v[k]));
+        t.nbr[k] = it == by_edge.end() ? FragmentTriangle::kNoNeighbour : it->second;
+      }
+    }
+    return;
   }
   for (FragmentTriangle& t : op.fragment) {
     for (int k = 0; k < 3; ++k) {
-      auto it = by_edge.find(edge_key(t.v[(k + 1) % 3], t.v[k]));
-      t.nbr[k] = it == by_edge.end() ? FragmentTriangle::kNoNeighbour : it->second;
+      const std::uint32_t a = t.v[(k + 1) % 3], b = t.v[k];  // the reversed edge a -> b
+      t.nbr[k] = FragmentTriangle::kNoNeighbour;
+      for (std::size_t j = 0; j < n; ++j) {
+        const auto& u = op.fragment[j].v;
+        if ((u[0] == a && u[1] == b) || (u[1] == a && u[2] == b) || (u[2] == a && u[0] == b)) {
+          t.nbr[k] = std::int32_t(j);
+          break;
+        }
+      }
     }
   }
 }
@@ -202,7 +220,9 @@ std::vector<Op> decode_page(ByteView page, const QuantGrid& grid, const std::str
   std::vector<Op> ops(op_count);
   std::size_t face = 0;
   std::uint64_t prev_op = 0;
-  std::unordered_map<std::uint32_t, std::uint32_t> local_of;
+  constexpr std::uint32_t kNone = ~0u;
+  std::vector<std::uint32_t> local_of(vcount, kNone);  // page vertex -> index in the current op
+  std::vector<std::uint32_t> mine;                     // the current op's page vertices
   for (Op& op : ops) {
     const std::uint64_t id = prev_op + std::uint64_t(r.svarint());
     prev_op = id;
@@ -212,15 +232,17 @@ std::vector<Op> decode_page(ByteView page, const QuantGrid& grid, const std::str
     const std::uint64_t nv = count(vcount, "op vertex");
     op.new_vertex_count = std::uint32_t(count(nv, "new vertex"));
     op.vertices.resize(nv);
-    local_of.clear();
     std::int64_t prev_index = 0;
+    mine.clear();
     for (std::uint32_t i = 0; i < nv; ++i) {
       prev_index += r.svarint();
       if (prev_index < 0 || std::uint64_t(prev_index) >= vcount)
         r.fail("vertex index out of range");
       const auto p = std::uint32_t(prev_index);
       op.vertices[i] = {VertexId(ids[p]), positions[p]};
-      if (!local_of.emplace(p, i).second) r.fail("an op lists a vertex twice");
+      if (local_of[p] != kNone) r.fail("an op lists a vertex twice");
+      local_of[p] = i;
+      mine.push_back(p);
     }
     const std::uint64_t nc = count(r.remaining(), "child");
     op.children.resize(nc);
@@ -232,9 +254,9 @@ std::vector<Op> decode_page(ByteView page, const QuantGrid& grid, const std::str
     for (FragmentTriangle& t : op.fragment) {
       const auto& f = geometry.faces[face++];
       for (int k = 0; k < 3; ++k) {
-        auto it = local_of.find(f[k]);
-        if (it == local_of.end()) r.fail("a triangle uses a vertex its op does not list");
-        t.v[k] = it->second;
+        if (f[k] >= vcount || local_of[f[k]] == kNone)
+          r.fail("a triangle uses a vertex its op does not list");
+        t.v[k] = local_of[f[k]];
       }
       const std::uint64_t killer = r.varint();
       if (killer > nc) r.fail("killer out of range");
@@ -249,6 +271,7 @@ std::vector<Op> decode_page(ByteView page, const QuantGrid& grid, const std::str
       if (v >= nf) r.fail("void triangle out of range");
       op.fragment[v].flags |= FragmentTriangle::kVoid;
     }
+    for (std::uint32_t p : mine) local_of[p] = kNone;
     derive_neighbours(op);
     const std::uint64_t np = count(r.remaining(), "parent");
     op.parents.resize(np);
