@@ -8,6 +8,19 @@
 // Triangles are rasterised exactly in integer grid coordinates: a sample belongs to a triangle iff
 // it lies in the closed triangle, so each triangle's maximum error is computed from every sample
 // it covers, and the error bound of Brown's resolution attributes is exact, not estimated.
+//
+// Speed and memory (benchmarks/README.md, "Profile"):
+// - The sample scan is bound by DEM cache misses: the rows under a whole new star are prefetched
+//   right after star_hole, before any of it is scanned, and every scan prefetches a few rows
+//   ahead. Row spans come from exact integer edge steppers (no division per row); a row's maximum
+//   is taken with SSE2 using the scalar code's exact operations, so errors are bit-identical.
+// - The queue is an indexed max-heap over live triangles, keyed by (error, creation number), so
+//   dead triangles leave it at once and ties break exactly as before (the newest first).
+// - A triangle's build record is recycled as soon as the op that killed it is closed, so build
+//   memory follows the live mesh, not every triangle ever made.
+// - Ops are kept in fixed-size chunks and moved into an exactly sized vector at the end; each op's
+//   vectors are allocated once at their final size. The builder's own state is freed before
+//   link_dag, which computes the DAG, pre_tris and the bounds of every op.
 #include "smr/build/greedy_tin.h"
 
 #include <CGAL/Delaunay_triangulation_2.h>
@@ -16,22 +29,34 @@
 #include <CGAL/Triangulation_vertex_base_with_info_2.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
-#include <queue>
+#include <memory>
+#include <new>
 #include <string>
+#include <utility>
 #include <vector>
 
-#include <glm/geometric.hpp>
-
 #include "storage/error.h"
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 namespace smr {
 namespace {
 
 using K = CGAL::Exact_predicates_inexact_constructions_kernel;
 using Vb = CGAL::Triangulation_vertex_base_with_info_2<std::uint32_t, K>;
-using Fb = CGAL::Triangulation_face_base_with_info_2<std::uint32_t, K>;
+/// What a face tells its neighbours: its build record and, once its op is closed, its TriRef
+/// (close_op reads these across fragment boundaries without touching the record).
+struct FaceInfo {
+  std::uint32_t id;  // index in Builder::tris_; kNone on infinite faces
+  std::uint32_t op;
+  std::uint32_t local;
+};
+using Fb = CGAL::Triangulation_face_base_with_info_2<FaceInfo, K>;
 using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
 using Dt = CGAL::Delaunay_triangulation_2<K, Tds>;
 using FaceHandle = Dt::Face_handle;
@@ -42,15 +67,18 @@ constexpr double kMixed = std::numeric_limits<double>::infinity();
 
 struct BuildVertex {
   std::uint32_t col, row;
-  Vec3 world;
+  float z;  // the sample's elevation, or the fill value at a no-data sample
 };
 
+/// The build record of a live triangle (or of one that died in the op being built).
 struct BuildTri {
   FaceHandle face;
   std::array<std::uint32_t, 3> v{};  // build vertex ids, counter-clockwise
   std::uint32_t op = 0;              // creating op
   std::uint32_t local = kNone;       // index in the op's fragment, once the op is closed
   std::uint32_t cand = kNone;        // sample to insert next (max error, or a no-data fix)
+  std::uint32_t seq = 0;             // creation number: breaks ties between equal errors
+  std::uint32_t heap_pos = kNone;    // index in the queue, or kNone
   double err = 0.0;                  // max vertical error; kMixed when it must be split
   bool alive = true;
   bool is_void = false;
@@ -61,9 +89,119 @@ std::int64_t floor_div(std::int64_t n, std::int64_t d) {  // d > 0
   if ((n % d != 0) && (n < 0)) --q;
   return q;
 }
-std::int64_t ceil_div(std::int64_t n, std::int64_t d) {
-  return -floor_div(-n, d);
+
+/// x(row) = q + r / den (0 <= r < den) along an edge, exactly, stepped one row at a time.
+struct EdgeStepper {
+  std::int64_t q = 0, r = 0, den = 1, dq = 0, dr = 0;
+  // The edge from (xa, ya) to (xb, yb), yb > ya, at row `row`.
+  EdgeStepper(std::int64_t xa, std::int64_t ya, std::int64_t xb, std::int64_t yb, std::int64_t row)
+      : den(yb - ya) {
+    const std::int64_t dx = xb - xa;
+    const std::int64_t num = xa * den + (row - ya) * dx;
+    q = floor_div(num, den);
+    r = num - q * den;
+    dq = floor_div(dx, den);
+    dr = dx - dq * den;
+  }
+  EdgeStepper() = default;
+  std::int64_t floor() const { return q; }
+  std::int64_t ceil() const { return q + (r != 0); }
+  void step() {
+    q += dq;
+    r += dr;
+    if (r >= den) {
+      r -= den;
+      ++q;
+    }
+  }
+};
+
+/// |z - plane| at column `col` of a row whose plane is a * col + zrow.
+inline double sample_error(float z, double a, std::int64_t col, double zrow) {
+  return std::abs(double(z) - (a * double(col) + zrow));
 }
+
+/// max(m, the errors of samples xl..xr of one row): the same arithmetic as sample_error, two
+/// samples per SSE2 instruction (exact: every step is one IEEE operation, as in the scalar code).
+/// NaN samples are ignored, as by `e > best`.
+inline double row_max_error(const float* z, std::int64_t xl, std::int64_t xr, double a, double zrow,
+                            double m) {
+  std::int64_t col = xl;
+#if defined(__SSE2__)
+  if (xr - xl >= 3) {
+    const __m128d va = _mm_set1_pd(a), vz = _mm_set1_pd(zrow), four = _mm_set1_pd(4.0);
+    const __m128d sign = _mm_set1_pd(-0.0);
+    __m128d c0 = _mm_set_pd(double(xl + 1), double(xl)), c1 = _mm_add_pd(c0, _mm_set1_pd(2.0));
+    __m128d m0 = _mm_set1_pd(m), m1 = m0;
+    for (; col + 3 <= xr; col += 4) {
+      const __m128 f = _mm_loadu_ps(z + col);
+      const __m128d z0 = _mm_cvtps_pd(f), z1 = _mm_cvtps_pd(_mm_movehl_ps(f, f));
+      const __m128d e0 = _mm_andnot_pd(sign, _mm_sub_pd(z0, _mm_add_pd(_mm_mul_pd(va, c0), vz)));
+      const __m128d e1 = _mm_andnot_pd(sign, _mm_sub_pd(z1, _mm_add_pd(_mm_mul_pd(va, c1), vz)));
+      m0 = _mm_max_pd(e0, m0);  // the second operand when either is NaN
+      m1 = _mm_max_pd(e1, m1);
+      c0 = _mm_add_pd(c0, four);
+      c1 = _mm_add_pd(c1, four);
+    }
+    m0 = _mm_max_pd(m0, m1);
+    m = std::max(_mm_cvtsd_f64(m0), _mm_cvtsd_f64(_mm_unpackhi_pd(m0, m0)));
+  }
+#endif
+  for (; col <= xr; ++col) {
+    const double e = sample_error(z[col], a, col, zrow);
+    if (e > m) m = e;
+  }
+  return m;
+}
+
+/// Ops in fixed-size chunks, so that growing never copies them or doubles their footprint. A chunk
+/// is larger than glibc's largest dynamic mmap threshold (32 MiB), so it is mapped on its own: its
+/// pages are touched only as ops fill it and go back to the system as soon as it is freed.
+class OpStore {
+ public:
+  static constexpr std::size_t kChunk = (std::size_t(40) << 20) / sizeof(Op);
+  OpStore() = default;
+  OpStore(const OpStore&) = delete;
+  OpStore& operator=(const OpStore&) = delete;
+  ~OpStore() { clear(); }
+
+  std::size_t size() const { return size_; }
+  Op& operator[](std::size_t i) { return chunks_[i / kChunk][i % kChunk]; }
+  void push_back(Op&& op) {
+    if (size_ % kChunk == 0) chunks_.push_back(std::allocator<Op>().allocate(kChunk));
+    new (&chunks_.back()[size_ % kChunk]) Op(std::move(op));
+    ++size_;
+  }
+  /// Moves every op into `out` (sized exactly), freeing each chunk once it is moved.
+  void move_to(std::vector<Op>& out) {
+    out.clear();
+    out.reserve(size_);
+    for (std::size_t c = 0; c < chunks_.size(); ++c) {
+      const std::size_t n = std::min(kChunk, size_ - c * kChunk);
+      for (std::size_t i = 0; i < n; ++i) out.push_back(std::move(chunks_[c][i]));
+      free_chunk(c, n);
+    }
+    chunks_.clear();
+    size_ = 0;
+  }
+
+ private:
+  void free_chunk(std::size_t c, std::size_t n) {
+    std::destroy_n(chunks_[c], n);
+    std::allocator<Op>().deallocate(chunks_[c], kChunk);
+    chunks_[c] = nullptr;
+  }
+  void clear() {
+    for (std::size_t c = 0; c < chunks_.size(); ++c) {
+      if (chunks_[c] != nullptr) free_chunk(c, std::min(kChunk, size_ - c * kChunk));
+    }
+    chunks_.clear();
+    size_ = 0;
+  }
+
+  std::vector<Op*> chunks_;
+  std::size_t size_ = 0;
+};
 
 class Builder {
  public:
@@ -76,6 +214,10 @@ class Builder {
     if (static_cast<std::size_t>(dem.width) * dem.height != dem.z.size() ||
         (!dem.valid.empty() && dem.valid.size() != dem.z.size())) {
       throw_internal(dem.source + ": heightfield arrays do not match its size");
+    }
+    if (dem.z.size() >= kNone) {
+      throw_input(dem.source + ": too many samples for the in-core builder (" +
+                  std::to_string(dem.z.size()) + ")");
     }
     fill_z_ = std::numeric_limits<float>::infinity();
     std::size_t valid = 0;
@@ -101,26 +243,26 @@ class Builder {
     }
     for (auto f = dt_.all_faces_begin(); f != dt_.all_faces_end(); ++f) {
       if (dt_.is_infinite(f)) {
-        f->info() = kNone;
+        f->info().id = kNone;
       } else {
         new_tri(f);
       }
     }
-    while (!heap_empty() && (top_err() == kMixed || verts_.size() < opt_.base_vertices)) {
+    while (!heap_.empty() && (top_err() == kMixed || verts_.size() < opt_.base_vertices)) {
       insert_top();
     }
-    const double err0 = heap_empty() ? 0.0 : top_err();
+    const double err0 = heap_.empty() ? 0.0 : top_err();
     close_op();
     err0_ = err0;
 
     // R^1..R^m: one op per insertion, coalesced while the mesh error exceeds its start.
     std::size_t steps = 0;
-    while (!heap_empty() && top_err() > stop_error_) {
+    while (!heap_.empty() && top_err() > stop_error_) {
       if (opt_.max_vertices != 0 && verts_.size() >= opt_.max_vertices) break;
       const double e_start = top_err();
       begin_op(e_start);
       insert_top();
-      while (!heap_empty() && top_err() > e_start) insert_top();
+      while (!heap_.empty() && top_err() > e_start) insert_top();
       close_op();
       if (opt_.progress && (++steps & 0xfff) == 0) report_progress();
     }
@@ -136,54 +278,123 @@ class Builder {
  private:
   // ---- vertices and samples ----
   std::uint32_t add_vertex(std::uint32_t col, std::uint32_t row) {
-    Vec3 p{dem_.georef.x0 + col * dem_.georef.dx, dem_.georef.y0 + row * dem_.georef.dy,
-           has_data(col, row) ? double(dem_.at(col, row)) : double(fill_z_)};
-    verts_.push_back({col, row, p});
+    verts_.push_back({col, row, has_data(col, row) ? dem_.at(col, row) : fill_z_});
     op_new_vertices_.push_back(static_cast<std::uint32_t>(verts_.size() - 1));
     return static_cast<std::uint32_t>(verts_.size() - 1);
+  }
+  Vec3 world(const BuildVertex& v) const {
+    return {dem_.georef.x0 + v.col * dem_.georef.dx, dem_.georef.y0 + v.row * dem_.georef.dy,
+            double(v.z)};
+  }
+  Vec3 world(const Point& q) const {  // the same as world(verts_[id]) for the vertex at q
+    const auto col = static_cast<std::uint32_t>(q.x()), row = static_cast<std::uint32_t>(q.y());
+    return world(BuildVertex{col, row, has_data(col, row) ? dem_.at(col, row) : fill_z_});
   }
   bool has_data(std::uint32_t col, std::uint32_t row) const {
     return dem_.valid.empty() || dem_.valid[dem_.index(col, row)] != 0;
   }
 
-  // ---- the priority queue of triangles by error (lazy deletion) ----
+  // ---- the priority queue: an indexed max-heap of live triangles by (err, seq) ----
+  struct HeapEntry {
+    double err;
+    std::uint32_t seq;
+    std::uint32_t tri;
+  };
+  static bool above(const HeapEntry& a, const HeapEntry& b) {
+    return a.err > b.err || (a.err == b.err && a.seq > b.seq);
+  }
+  void heap_place(std::size_t i, const HeapEntry& e) {
+    heap_[i] = e;
+    tris_[e.tri].heap_pos = static_cast<std::uint32_t>(i);
+  }
+  // Binary: a 4-ary heap measured no faster at 0.5 m (within noise).
+  static constexpr std::size_t kArity = 2;
+  void sift_up(std::size_t i, HeapEntry e) {
+    while (i > 0) {
+      const std::size_t parent = (i - 1) / kArity;
+      if (!above(e, heap_[parent])) break;
+      heap_place(i, heap_[parent]);
+      i = parent;
+    }
+    heap_place(i, e);
+  }
+  void sift_down(std::size_t i, HeapEntry e) {
+    const std::size_t n = heap_.size();
+    for (;;) {
+      const std::size_t first = kArity * i + 1;
+      if (first >= n) break;
+      std::size_t best = first;
+      const std::size_t end = std::min(first + kArity, n);
+      for (std::size_t c = first + 1; c < end; ++c) {
+        if (above(heap_[c], heap_[best])) best = c;
+      }
+      if (!above(heap_[best], e)) break;
+      heap_place(i, heap_[best]);
+      i = best;
+    }
+    heap_place(i, e);
+  }
   void push(std::uint32_t t) {
-    if (tris_[t].err > stop_error_ || (tris_[t].err == kMixed)) heap_.push({tris_[t].err, t});
+    const BuildTri& b = tris_[t];
+    if (!(b.err > stop_error_ || b.err == kMixed)) return;
+    heap_.push_back({});
+    sift_up(heap_.size() - 1, {b.err, b.seq, t});
   }
-  void pop_dead() {
-    while (!heap_.empty() && !tris_[heap_.top().second].alive) heap_.pop();
+  void heap_remove(std::uint32_t t) {
+    const std::uint32_t pos = tris_[t].heap_pos;
+    if (pos == kNone) return;
+    tris_[t].heap_pos = kNone;
+    const HeapEntry last = heap_.back();
+    heap_.pop_back();
+    if (pos == heap_.size()) return;
+    if (pos > 0 && above(last, heap_[(pos - 1) / kArity])) {
+      sift_up(pos, last);
+    } else {
+      sift_down(pos, last);
+    }
   }
-  bool heap_empty() {
-    pop_dead();
-    return heap_.empty();
-  }
-  double top_err() {
-    pop_dead();
-    return heap_.top().first;
-  }
+  double top_err() const { return heap_.front().err; }
 
   // ---- triangles ----
-  void new_tri(FaceHandle f) {
-    BuildTri t;
+  std::uint32_t new_tri(FaceHandle f) {
+    std::uint32_t id;
+    if (!free_tris_.empty()) {
+      id = free_tris_.back();
+      free_tris_.pop_back();
+    } else {
+      id = static_cast<std::uint32_t>(tris_.size());
+      tris_.emplace_back();
+    }
+    if (next_seq_ == kNone) throw_input(dem_.source + ": too many triangles for the builder");
+    BuildTri& t = tris_[id];
+    t = BuildTri{};
     t.face = f;
     for (int i = 0; i < 3; ++i) t.v[i] = f->vertex(i)->info();
     t.op = current_op_;
-    const auto id = static_cast<std::uint32_t>(tris_.size());
-    f->info() = id;
-    tris_.push_back(t);
+    t.seq = next_seq_++;
+    f->info() = {id, current_op_, kNone};
     op_created_.push_back(id);
-    scan(tris_.back());
+    scan(t);
     push(id);
+    return id;
   }
 
   // Computes err and cand of t from every grid sample in the closed triangle.
   void scan(BuildTri& t) {
-    const BuildVertex* p[3] = {&verts_[t.v[0]], &verts_[t.v[1]], &verts_[t.v[2]]};
-    t.is_void = !(has_data(p[0]->col, p[0]->row) && has_data(p[1]->col, p[1]->row) &&
-                  has_data(p[2]->col, p[2]->row));
-    const std::int64_t x[3] = {p[0]->col, p[1]->col, p[2]->col};
-    const std::int64_t y[3] = {p[0]->row, p[1]->row, p[2]->row};
-    const double z[3] = {p[0]->world.z, p[1]->world.z, p[2]->world.z};
+    // The corners from the face's points (in cache after star_hole; verts_ is not), z from the
+    // DEM as add_vertex takes it.
+    std::int64_t x[3], y[3];
+    double z[3];
+    t.is_void = false;
+    for (int k = 0; k < 3; ++k) {
+      const Point& q = t.face->vertex(k)->point();
+      x[k] = static_cast<std::int64_t>(q.x());
+      y[k] = static_cast<std::int64_t>(q.y());
+      const auto col = static_cast<std::uint32_t>(x[k]), row = static_cast<std::uint32_t>(y[k]);
+      const bool data = has_data(col, row);
+      t.is_void |= !data;
+      z[k] = data ? double(dem_.at(col, row)) : double(fill_z_);
+    }
     // Plane z = a*x + b*y + c through the three vertices (in grid units).
     const double det = double((x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]));
     const double a =
@@ -193,48 +404,59 @@ class Builder {
     const double c = z[0] - a * double(x[0]) - b * double(y[0]);
     const double cx = double(x[0] + x[1] + x[2]) / 3.0, cy = double(y[0] + y[1] + y[2]) / 3.0;
 
-    const std::int64_t ymin = std::min({y[0], y[1], y[2]}), ymax = std::max({y[0], y[1], y[2]});
+    // Row spans of the closed triangle: vertices sorted by row (s0 <= s1 <= s2); the long edge
+    // s0-s2 bounds every row, the edge s0-s1 the rows above s1 and s1-s2 the rows below.
+    int s0 = 0, s1 = 1, s2 = 2;
+    if (y[s0] > y[s1]) std::swap(s0, s1);
+    if (y[s1] > y[s2]) std::swap(s1, s2);
+    if (y[s0] > y[s1]) std::swap(s0, s1);
+    const std::int64_t ymin = y[s0], ymid = y[s1], ymax = y[s2];
+    if (ymin == ymax) throw_internal("greedy TIN: degenerate triangle");
+    EdgeStepper lng(x[s0], ymin, x[s2], ymax, ymin), up, down;
+    if (ymid > ymin) up = EdgeStepper(x[s0], ymin, x[s1], ymid, ymin);
+    if (ymax > ymid) down = EdgeStepper(x[s1], ymid, x[s2], ymax, ymid);
+
     double best = 0.0;
     std::uint32_t cand = kNone;
+    std::int64_t best_row = -1, best_xl = 0;
     bool mixed = false;
     double mixed_d2 = std::numeric_limits<double>::infinity();
     const bool nodata = dem_.has_nodata();
     const float* zs = dem_.z.data();
     const std::uint8_t* valid = nodata ? dem_.valid.data() : nullptr;
+    const std::size_t width = static_cast<std::size_t>(dem_.width);
+
     for (std::int64_t row = ymin; row <= ymax; ++row) {
-      std::int64_t xl = std::numeric_limits<std::int64_t>::max();
-      std::int64_t xr = std::numeric_limits<std::int64_t>::min();
-      for (int e = 0; e < 3; ++e) {
-        const int f = (e + 1) % 3;
-        const std::int64_t ya = y[e], yb = y[f];
-        if (ya == yb) {
-          if (ya == row) {
-            xl = std::min({xl, x[e], x[f]});
-            xr = std::max({xr, x[e], x[f]});
-          }
-          continue;
-        }
-        if (row < std::min(ya, yb) || row > std::max(ya, yb)) continue;
-        // x(row) = x[e] + (row - ya) * (x[f] - x[e]) / (yb - ya), exactly as a rational.
-        std::int64_t num = x[e] * (yb - ya) + (row - ya) * (x[f] - x[e]);
-        std::int64_t den = yb - ya;
-        if (den < 0) {
-          num = -num;
-          den = -den;
-        }
-        xl = std::min(xl, ceil_div(num, den));
-        xr = std::max(xr, floor_div(num, den));
+      std::int64_t xl, xr;
+      if (row < ymid) {
+        xl = std::min(lng.ceil(), up.ceil());
+        xr = std::max(lng.floor(), up.floor());
+        up.step();
+      } else if (row > ymid) {
+        xl = std::min(lng.ceil(), down.ceil());
+        xr = std::max(lng.floor(), down.floor());
+        down.step();
+      } else {
+        xl = std::min(lng.ceil(), x[s1]);
+        xr = std::max(lng.floor(), x[s1]);
+        if (ymax > ymid) down.step();
       }
+      lng.step();
       if (xl > xr) continue;
-      const std::size_t base = static_cast<std::size_t>(row) * dem_.width;
+      const std::size_t base = static_cast<std::size_t>(row) * width;
+      if (row + kLookaheadRows <= ymax) {  // the span a few rows ahead, roughly
+        const float* ahead = zs + base + kLookaheadRows * width;
+        for (std::int64_t col = xl; col <= xr; col += 16) __builtin_prefetch(ahead + col);
+        __builtin_prefetch(ahead + xr);
+      }
       const double zrow = b * double(row) + c;
       if (!nodata) {
-        for (std::int64_t col = xl; col <= xr; ++col) {
-          const double e = std::abs(double(zs[base + col]) - (a * double(col) + zrow));
-          if (e > best) {
-            best = e;
-            cand = static_cast<std::uint32_t>(base + col);
-          }
+        // The first row reaching the largest error; its column is found once, at the end.
+        const double m = row_max_error(zs + base, xl, xr, a, zrow, best);
+        if (m > best) {
+          best = m;
+          best_row = row;
+          best_xl = xl;
         }
         continue;
       }
@@ -247,7 +469,7 @@ class Builder {
           for (int k = 0; k < 3; ++k) is_vertex |= (x[k] == col && y[k] == row);
           if (is_vertex) continue;
         } else if (v) {
-          const double e = std::abs(double(zs[base + col]) - (a * double(col) + zrow));
+          const double e = sample_error(zs[base + col], a, col, zrow);
           if (e > best && !mixed) {
             best = e;
             cand = static_cast<std::uint32_t>(base + col);
@@ -264,6 +486,14 @@ class Builder {
         }
       }
     }
+    if (best_row >= 0) {
+      // The first sample of that row with the error: the one a row-major scan keeps.
+      const std::size_t base = static_cast<std::size_t>(best_row) * width;
+      const double zrow = b * double(best_row) + c;
+      std::int64_t col = best_xl;
+      while (sample_error(zs[base + col], a, col, zrow) != best) ++col;
+      cand = static_cast<std::uint32_t>(base + col);
+    }
     if (mixed) {
       t.err = kMixed;
     } else if (t.is_void || best <= tol_) {
@@ -275,16 +505,38 @@ class Builder {
     t.cand = cand;
   }
 
+  // Prefetches the DEM rows under a triangle's bounding box when it is small (every triangle also
+  // prefetches a few rows ahead while it is scanned).
+  void prefetch(FaceHandle f) const {
+    std::int64_t x0 = std::numeric_limits<std::int64_t>::max(), x1 = -1;
+    std::int64_t y0 = std::numeric_limits<std::int64_t>::max(), y1 = -1;
+    for (int i = 0; i < 3; ++i) {
+      const Point& q = f->vertex(i)->point();
+      x0 = std::min(x0, static_cast<std::int64_t>(q.x()));
+      x1 = std::max(x1, static_cast<std::int64_t>(q.x()));
+      y0 = std::min(y0, static_cast<std::int64_t>(q.y()));
+      y1 = std::max(y1, static_cast<std::int64_t>(q.y()));
+    }
+    if (y1 - y0 > kPrefetchRows || x1 - x0 > kPrefetchCols) return;
+    const float* zs = dem_.z.data();
+    const std::size_t width = static_cast<std::size_t>(dem_.width);
+    for (std::int64_t row = y0; row <= y1; ++row) {
+      const float* r = zs + static_cast<std::size_t>(row) * width;
+      for (std::int64_t col = x0; col <= x1; col += 16) __builtin_prefetch(r + col);
+      __builtin_prefetch(r + x1);
+    }
+  }
+
   void kill(std::uint32_t id) {
     BuildTri& t = tris_[id];
     t.alive = false;
+    heap_remove(id);
     if (t.op != current_op_) op_killed_.push_back(id);
   }
 
   void insert_top() {
-    pop_dead();
-    const std::uint32_t tid = heap_.top().second;
-    heap_.pop();
+    const std::uint32_t tid = heap_.front().tri;
+    heap_remove(tid);
     const std::uint32_t sample = tris_[tid].cand;
     const auto col = static_cast<std::uint32_t>(sample % dem_.width);
     const auto row = static_cast<std::uint32_t>(sample / dem_.width);
@@ -296,25 +548,29 @@ class Builder {
                                    tris_[tid].face);
     if (conflicts_.empty()) throw_internal("greedy TIN: empty conflict zone");
     for (FaceHandle f : conflicts_) {
-      if (f->info() != kNone) kill(f->info());
+      if (f->info().id != kNone) kill(f->info().id);
     }
     const std::uint32_t vid = add_vertex(col, row);
     Dt::Vertex_handle vh =
         dt_.star_hole(p, boundary_.begin(), boundary_.end(), conflicts_.begin(), conflicts_.end());
     vh->info() = vid;
+    // The DEM under the whole new star is fetched before any of it is scanned.
+    star_.clear();
     Dt::Face_circulator fc = dt_.incident_faces(vh), done = fc;
     do {
       if (dt_.is_infinite(fc)) {
-        fc->info() = kNone;
+        fc->info().id = kNone;
       } else {
-        new_tri(fc);
+        star_.push_back(fc);
+        prefetch(fc);
       }
     } while (++fc != done);
+    for (FaceHandle f : star_) new_tri(f);
   }
 
   // ---- ops ----
   void begin_op(double e_start) {
-    current_op_ = static_cast<std::uint32_t>(crmr_.ops.size());
+    current_op_ = static_cast<std::uint32_t>(ops_.size());
     op_err_start_ = e_start;
     op_created_.clear();
     op_killed_.clear();
@@ -326,29 +582,35 @@ class Builder {
     op.id = OpId(current_op_);
     op.error = op_err_start_;
 
-    std::vector<std::uint32_t> frag;
+    frag_.clear();
     for (std::uint32_t id : op_created_) {
-      if (tris_[id].alive) frag.push_back(id);
+      if (tris_[id].alive) frag_.push_back(id);
     }
-    for (std::uint32_t i = 0; i < frag.size(); ++i) tris_[frag[i]].local = i;
+    for (std::uint32_t i = 0; i < frag_.size(); ++i) tris_[frag_[i]].local = i;
 
-    // Vertices: V(R) first, in insertion order, then the others by id.
-    std::vector<std::uint32_t> others;
-    for (std::uint32_t id : frag) {
-      for (std::uint32_t v : tris_[id].v) others.push_back(v);
+    // Vertices: V(R) first, in insertion order, then the others by id (their positions from the
+    // CGAL vertices and the DEM, both in cache, rather than from verts_).
+    others_.clear();
+    for (std::uint32_t id : frag_) {
+      const BuildTri& t = tris_[id];
+      for (int k = 0; k < 3; ++k) others_.push_back({t.v[k], t.face->vertex(k)});
     }
-    std::sort(others.begin(), others.end());
-    others.erase(std::unique(others.begin(), others.end()), others.end());
-    std::vector<std::uint32_t> order = op_new_vertices_;
-    std::sort(op_new_vertices_.begin(), op_new_vertices_.end());
-    for (std::uint32_t v : others) {
-      if (!std::binary_search(op_new_vertices_.begin(), op_new_vertices_.end(), v))
-        order.push_back(v);
-    }
+    std::sort(others_.begin(), others_.end(),
+              [](const VertexRef& a, const VertexRef& b) { return a.id < b.id; });
+    others_.erase(std::unique(others_.begin(), others_.end(),
+                              [](const VertexRef& a, const VertexRef& b) { return a.id == b.id; }),
+                  others_.end());
     op.new_vertex_count = static_cast<std::uint32_t>(op_new_vertices_.size());
-    for (std::uint32_t v : order) {
+    op.vertices.reserve(others_.size());
+    for (std::uint32_t v : op_new_vertices_) {
       local_of_[v] = static_cast<std::uint32_t>(op.vertices.size());
-      op.vertices.push_back({VertexId(v), verts_[v].world});
+      op.vertices.push_back({VertexId(v), world(verts_[v])});
+    }
+    std::sort(op_new_vertices_.begin(), op_new_vertices_.end());
+    for (const VertexRef& r : others_) {
+      if (std::binary_search(op_new_vertices_.begin(), op_new_vertices_.end(), r.id)) continue;
+      local_of_[r.id] = static_cast<std::uint32_t>(op.vertices.size());
+      op.vertices.push_back({VertexId(r.id), world(r.vh->point())});
     }
 
     // PreF, and the edges of PreF triangles for the coarser links.
@@ -356,29 +618,38 @@ class Builder {
       return std::pair(tris_[a].op, tris_[a].local) < std::pair(tris_[b].op, tris_[b].local);
     });
     pre_edges_.clear();
+    op.pre.reserve(op_killed_.size());
+    std::uint32_t last_parent = kNone;
     for (std::uint32_t id : op_killed_) {
       const BuildTri& t = tris_[id];
       op.pre.push_back({OpId(t.op), t.local});
+      // link_dag gives each parent one child entry per op: size those vectors once.
+      if (t.op != last_parent) ++child_count_[t.op];
+      last_parent = t.op;
       for (std::uint8_t k = 0; k < 3; ++k) {
         pre_edges_.push_back({edge_key(t.v[k], t.v[(k + 1) % 3]), id, k});
       }
     }
+    op.parents.reserve(op.pre.size());  // link_dag lists a parent per PreF triangle, then dedups
+    child_count_.push_back(0);
     std::sort(pre_edges_.begin(), pre_edges_.end(),
               [](const PreEdge& a, const PreEdge& b) { return a.key < b.key; });
 
-    std::vector<Vec3> points, normals;
-    for (std::uint32_t i = 0; i < frag.size(); ++i) {
-      const BuildTri& t = tris_[frag[i]];
-      FragmentTriangle ft;
+    coarser_.clear();
+    op.fragment.resize(frag_.size());
+    for (std::uint32_t i = 0; i < frag_.size(); ++i) {
+      const BuildTri& t = tris_[frag_[i]];
+      FragmentTriangle& ft = op.fragment[i];
+      t.face->info().local = i;
       for (int k = 0; k < 3; ++k) ft.v[k] = local_of_[t.v[k]];
       if (t.is_void) ft.flags |= FragmentTriangle::kVoid;
       for (std::uint8_t k = 0; k < 3; ++k) {
         // Our edge k joins v[k], v[k+1]: CGAL's edge opposite vertex k+2.
-        FaceHandle nf = t.face->neighbor((k + 2) % 3);
-        if (dt_.is_infinite(nf)) continue;  // model boundary: no coarser version
-        const BuildTri& n = tris_[nf->info()];
+        const FaceHandle nf = t.face->neighbor((k + 2) % 3);
+        const FaceInfo& n = nf->info();
+        if (n.id == kNone) continue;  // infinite face: model boundary, no coarser version
         if (n.op == current_op_) {
-          ft.nbr[k] = static_cast<std::int32_t>(n.local);
+          ft.nbr[k] = static_cast<std::int32_t>(tris_[n.id].local);
           continue;
         }
         // Fragment boundary edge. Its versions are the fragments of the triangles that have had
@@ -391,41 +662,29 @@ class Builder {
           throw_internal("greedy TIN: fragment boundary edge without a replaced triangle");
         }
         const BuildTri& inside = tris_[it->tri];
-        const bool use_outside = n.op > inside.op;
-        const BuildTri& target = use_outside ? n : inside;
-        const std::uint8_t target_edge =
-            use_outside ? edge_index(n, t.v[k], t.v[(k + 1) % 3]) : it->edge;
-        op.coarser.push_back({i, k, EdgeRef{TriRef{OpId(target.op), target.local}, target_edge}});
+        if (n.op > inside.op) {
+          // The neighbour's edge is the one opposite its vertex facing t: CGAL's edge j is our
+          // edge j + 1 (vertex order is fixed at creation; faces are never flipped here).
+          const auto edge = static_cast<std::uint8_t>((nf->index(t.face) + 1) % 3);
+          coarser_.push_back({i, k, EdgeRef{TriRef{OpId(n.op), n.local}, edge}});
+        } else {
+          coarser_.push_back({i, k, EdgeRef{TriRef{OpId(inside.op), inside.local}, it->edge}});
+        }
       }
-      op.fragment.push_back(ft);
-      add_geometry(t, points, normals);
     }
-    for (std::uint32_t id : op_killed_) add_geometry(tris_[id], points, normals);
-    op.sphere = bounding_sphere(points);
-    op.box = Box3{};
-    for (const Vec3& p : points) op.box.add(p);
-    op.cone = normal_cone(normals);
-    crmr_.ops.push_back(std::move(op));
-  }
+    op.coarser.assign(coarser_.begin(), coarser_.end());
+    // op.box, op.sphere, op.cone and op.pre_tris are link_dag's (compute_op_bounds).
+    ops_.push_back(std::move(op));
 
-  void add_geometry(const BuildTri& t, std::vector<Vec3>& points,
-                    std::vector<Vec3>& normals) const {
-    const Vec3& a = verts_[t.v[0]].world;
-    const Vec3& b = verts_[t.v[1]].world;
-    const Vec3& c = verts_[t.v[2]].world;
-    points.insert(points.end(), {a, b, c});
-    normals.push_back(triangle_normal(a, b, c));
+    // The dead are no longer referenced: recycle their records.
+    for (std::uint32_t id : op_killed_) free_tris_.push_back(id);
+    for (std::uint32_t id : op_created_) {
+      if (!tris_[id].alive) free_tris_.push_back(id);
+    }
   }
 
   static std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
     return (std::uint64_t(std::min(a, b)) << 32) | std::max(a, b);
-  }
-  static std::uint8_t edge_index(const BuildTri& t, std::uint32_t a, std::uint32_t b) {
-    for (std::uint8_t k = 0; k < 3; ++k) {
-      const std::uint32_t p = t.v[k], q = t.v[(k + 1) % 3];
-      if ((p == a && q == b) || (p == b && q == a)) return k;
-    }
-    throw_internal("greedy TIN: neighbour does not share the edge");
   }
 
   void report_progress() {
@@ -440,7 +699,8 @@ class Builder {
   }
 
   Crmr finish(double err0, double err_final) {
-    CrmrInfo& info = crmr_.header;
+    Crmr crmr;
+    CrmrInfo& info = crmr.header;
     info.kind = ModelKind::kTerrain;
     info.georef = dem_.georef;
     info.grid_width = dem_.width;
@@ -452,12 +712,31 @@ class Builder {
                    " max_vertices=" + std::to_string(opt_.max_vertices) +
                    " base_vertices=" + std::to_string(opt_.base_vertices);
     info.vertex_count = verts_.size();
-    for (const BuildVertex& v : verts_) info.bounds.add(v.world);
-    for (Op& op : crmr_.ops) op.birth_res = op.id == kBaseOp ? 0.0 : resolution_of(info, op.error);
-    crmr_.ops[0].error = err0;
-    link_dag(crmr_);
+    for (const BuildVertex& v : verts_) info.bounds.add(world(v));
+    // Free the builder's state before link_dag allocates.
+    dt_.clear();
+    release(tris_);
+    release(heap_);
+    release(verts_);
+    release(free_tris_);
+    release(local_of_.map);
+    release(pre_edges_);
+    ops_.move_to(crmr.ops);
+    for (std::size_t i = 0; i < crmr.ops.size(); ++i) {
+      Op& op = crmr.ops[i];
+      op.children.reserve(child_count_[i]);
+      op.birth_res = op.id == kBaseOp ? 0.0 : resolution_of(info, op.error);
+    }
+    release(child_count_);
+    crmr.ops[0].error = err0;
+    link_dag(crmr);
     if (opt_.progress) opt_.progress(1.0);
-    return std::move(crmr_);
+    return crmr;
+  }
+
+  template <class T>
+  static void release(std::vector<T>& v) {
+    std::vector<T>().swap(v);
   }
 
   struct PreEdge {
@@ -465,6 +744,10 @@ class Builder {
     std::uint32_t tri;
     std::uint8_t edge;
   };
+
+  // Prefetch limits (samples): a star's triangles whose box exceeds them are not prefetched as a
+  // whole; a scan prefetches kLookaheadRows ahead (4 beat 8 and none, benchmarks/README.md).
+  static constexpr std::int64_t kPrefetchRows = 128, kPrefetchCols = 128, kLookaheadRows = 4;
 
   const Heightfield& dem_;
   const GreedyTinOptions& opt_;
@@ -476,13 +759,24 @@ class Builder {
   Dt dt_;
   std::vector<BuildVertex> verts_;
   std::vector<BuildTri> tris_;
-  std::priority_queue<std::pair<double, std::uint32_t>> heap_;
-  Crmr crmr_;
+  std::vector<std::uint32_t> free_tris_;  // recycled slots of tris_
+  std::uint32_t next_seq_ = 0;
+  std::vector<HeapEntry> heap_;
+  OpStore ops_;
+  std::vector<std::uint32_t> child_count_;  // per op: how many later ops replace its triangles
   std::uint32_t current_op_ = 0;
   double op_err_start_ = 0.0;
   std::vector<std::uint32_t> op_created_, op_killed_, op_new_vertices_;
+  // Scratch, reused by every op.
+  struct VertexRef {
+    std::uint32_t id;
+    Dt::Vertex_handle vh;
+  };
+  std::vector<std::uint32_t> frag_;
+  std::vector<VertexRef> others_;
   std::vector<PreEdge> pre_edges_;
-  std::vector<FaceHandle> conflicts_;
+  std::vector<CoarserLink> coarser_;
+  std::vector<FaceHandle> conflicts_, star_;
   std::vector<Dt::Edge> boundary_;
   struct LocalMap {
     std::vector<std::uint32_t> map;
