@@ -37,7 +37,7 @@ std::size_t index_of(Table table) {
     case MDB_BAD_VALSIZE:
       throw_corrupt(message);
     default:
-      if (rc > 0 && rc < MDB_KEYEXIST) throw_io(message);  // an errno value
+      if (rc > 0) throw_io(message);  // an errno value (LMDB's own codes are negative)
       throw_internal(message);
   }
 }

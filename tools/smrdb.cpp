@@ -330,9 +330,21 @@ void print_report(const nlohmann::json& report, bool json) {
   if (json) std::cout << report.dump(2) << "\n";
 }
 
+// Checks where a database will be written before the long build (DatabaseWriter checks again).
+void check_database_path(const std::string& path, bool force) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw_input(path + ": is a directory");
+  if (std::filesystem::exists(path, ec) && !force)
+    throw_input(path + ": exists; pass --force to replace it");
+  const std::filesystem::path parent = std::filesystem::path(path).parent_path();
+  if (!parent.empty() && !std::filesystem::is_directory(parent, ec))
+    throw_input(path + ": no such directory " + parent.string());
+}
+
 int cmd_ingest(const IngestArgs& a, const std::string& db_path, bool json, bool quiet, bool verify,
                const std::string& command_line) {
   a.validate();
+  check_database_path(db_path, a.force);
   const nlohmann::json r = ingest(a, db_path, quiet, verify, command_line);
   print_report(r, json);
   if (!json && !quiet) {
@@ -378,6 +390,7 @@ int cmd_build(IngestArgs a, std::string db_path, const RcfOptions& rcf_options,
     db_path = scratch->string();
     a.force = true;
   }
+  check_database_path(db_path, a.force);
   struct Remove {
     std::optional<std::filesystem::path>& p;
     ~Remove() {
@@ -571,6 +584,13 @@ int main(int argc, char** argv) {
   } catch (const CLI::CallForVersion& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
+    if (app.get_subcommands().empty() && argc > 1 && argv[1][0] != '-') {
+      std::fprintf(stderr,
+                   "smrdb: error: unknown subcommand '%s' (ingest, extract, info, verify, build, "
+                   "synth; --help lists them)\n",
+                   argv[1]);
+      return 1;
+    }
     app.exit(e);
     return 1;
   }

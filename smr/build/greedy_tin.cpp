@@ -19,8 +19,11 @@
 // - A triangle's build record is recycled as soon as the op that killed it is closed, so build
 //   memory follows the live mesh, not every triangle ever made.
 // - Ops are kept in fixed-size chunks and moved into an exactly sized vector at the end; each op's
-//   vectors are allocated once at their final size. The builder's own state is freed before
-//   link_dag, which computes the DAG, pre_tris and the bounds of every op.
+//   vectors are allocated once at their final size. A triangle's build record is 48 bytes.
+// - link_dag is not called: close_op fills pre_tris (from the killed triangles' records), parents
+//   (their distinct creators) and the bounds (compute_op_bounds, while the op is in cache), and
+//   finish sets birth_res, killer/death_res and children in one pass, then compute_rois. The
+//   result is field for field what link_dag computes (bench_build --fingerprint).
 #include "smr/build/greedy_tin.h"
 
 #include <CGAL/Delaunay_triangulation_2.h>
@@ -70,19 +73,21 @@ struct BuildVertex {
   float z;  // the sample's elevation, or the fill value at a no-data sample
 };
 
-/// The build record of a live triangle (or of one that died in the op being built).
+/// The build record of a live triangle (or of one that died in the op being built): 48 bytes.
 struct BuildTri {
+  static constexpr std::uint32_t kOpBits = 30;
   FaceHandle face;
-  std::array<std::uint32_t, 3> v{};  // build vertex ids, counter-clockwise
-  std::uint32_t op = 0;              // creating op
-  std::uint32_t local = kNone;       // index in the op's fragment, once the op is closed
-  std::uint32_t cand = kNone;        // sample to insert next (max error, or a no-data fix)
-  std::uint32_t seq = 0;             // creation number: breaks ties between equal errors
-  std::uint32_t heap_pos = kNone;    // index in the queue, or kNone
   double err = 0.0;                  // max vertical error; kMixed when it must be split
-  bool alive = true;
-  bool is_void = false;
+  std::array<std::uint32_t, 3> v{};  // build vertex ids, counter-clockwise
+  std::uint32_t op : kOpBits = 0;    // creating op
+  std::uint32_t alive : 1 = 1;
+  std::uint32_t is_void : 1 = 0;
+  std::uint32_t local = kNone;     // index in the op's fragment, once the op is closed
+  std::uint32_t cand = kNone;      // sample to insert next (max error, or a no-data fix)
+  std::uint32_t seq = 0;           // creation number: breaks ties between equal errors
+  std::uint32_t heap_pos = kNone;  // index in the queue, or kNone
 };
+static_assert(sizeof(BuildTri) <= 48);
 
 std::int64_t floor_div(std::int64_t n, std::int64_t d) {  // d > 0
   std::int64_t q = n / d;
@@ -370,7 +375,7 @@ class Builder {
     t = BuildTri{};
     t.face = f;
     for (int i = 0; i < 3; ++i) t.v[i] = f->vertex(i)->info();
-    t.op = current_op_;
+    t.op = current_op_ & ((1u << BuildTri::kOpBits) - 1);  // begin_op checks the range
     t.seq = next_seq_++;
     f->info() = {id, current_op_, kNone};
     op_created_.push_back(id);
@@ -385,14 +390,14 @@ class Builder {
     // DEM as add_vertex takes it.
     std::int64_t x[3], y[3];
     double z[3];
-    t.is_void = false;
+    t.is_void = 0;
     for (int k = 0; k < 3; ++k) {
       const Point& q = t.face->vertex(k)->point();
       x[k] = static_cast<std::int64_t>(q.x());
       y[k] = static_cast<std::int64_t>(q.y());
       const auto col = static_cast<std::uint32_t>(x[k]), row = static_cast<std::uint32_t>(y[k]);
       const bool data = has_data(col, row);
-      t.is_void |= !data;
+      if (!data) t.is_void = 1;
       z[k] = data ? double(dem_.at(col, row)) : double(fill_z_);
     }
     // Plane z = a*x + b*y + c through the three vertices (in grid units).
@@ -529,7 +534,7 @@ class Builder {
 
   void kill(std::uint32_t id) {
     BuildTri& t = tris_[id];
-    t.alive = false;
+    t.alive = 0;
     heap_remove(id);
     if (t.op != current_op_) op_killed_.push_back(id);
   }
@@ -570,6 +575,9 @@ class Builder {
 
   // ---- ops ----
   void begin_op(double e_start) {
+    if (ops_.size() >= (std::size_t(1) << BuildTri::kOpBits)) {
+      throw_input(dem_.source + ": too many refinement operations for the builder");
+    }
     current_op_ = static_cast<std::uint32_t>(ops_.size());
     op_err_start_ = e_start;
     op_created_.clear();
@@ -613,24 +621,43 @@ class Builder {
       op.vertices.push_back({VertexId(r.id), world(r.vh->point())});
     }
 
-    // PreF, and the edges of PreF triangles for the coarser links.
-    std::sort(op_killed_.begin(), op_killed_.end(), [&](std::uint32_t a, std::uint32_t b) {
-      return std::pair(tris_[a].op, tris_[a].local) < std::pair(tris_[b].op, tris_[b].local);
-    });
-    pre_edges_.clear();
-    op.pre.reserve(op_killed_.size());
-    std::uint32_t last_parent = kNone;
+    // PreF in (creator, index) order, with pre_tris (the creator's corners, same rotation, as
+    // indices into this op's vertices: every PreF corner is a vertex of F), parents (the distinct
+    // creators, so sorted and unique) and the edges of PreF triangles for the coarser links.
+    // link_dag would derive the same from the parents' records; the builder has them at hand.
+    killed_.clear();
     for (std::uint32_t id : op_killed_) {
       const BuildTri& t = tris_[id];
+      killed_.push_back({(std::uint64_t(t.op) << 32) | t.local, id});
+    }
+    std::sort(killed_.begin(), killed_.end(),
+              [](const Killed& a, const Killed& b) { return a.key < b.key; });
+    pre_edges_.clear();
+    parents_.clear();
+    op.pre.reserve(killed_.size());
+    op.pre_tris.reserve(killed_.size());
+    for (const Killed& kd : killed_) {
+      const BuildTri& t = tris_[kd.id];
       op.pre.push_back({OpId(t.op), t.local});
-      // link_dag gives each parent one child entry per op: size those vectors once.
-      if (t.op != last_parent) ++child_count_[t.op];
-      last_parent = t.op;
+      PreTriangle pt;
+      for (int k = 0; k < 3; ++k) {
+        pt.v[k] = local_of_[t.v[k]];
+        if (pt.v[k] >= op.vertices.size() || op.vertices[pt.v[k]].id.value != t.v[k]) {
+          throw_internal("greedy TIN: a PreF corner is not a vertex of F");
+        }
+      }
+      if (t.is_void) pt.flags |= FragmentTriangle::kVoid;
+      op.pre_tris.push_back(pt);
+      if (parents_.empty() || parents_.back() != t.op) {
+        parents_.push_back(t.op);
+        ++child_count_[t.op];  // each parent gets one child entry per op: sized once at the end
+      }
       for (std::uint8_t k = 0; k < 3; ++k) {
-        pre_edges_.push_back({edge_key(t.v[k], t.v[(k + 1) % 3]), id, k});
+        pre_edges_.push_back({edge_key(t.v[k], t.v[(k + 1) % 3]), kd.id, k});
       }
     }
-    op.parents.reserve(op.pre.size());  // link_dag lists a parent per PreF triangle, then dedups
+    op.parents.reserve(parents_.size());
+    for (std::uint32_t p : parents_) op.parents.push_back(OpId(p));
     child_count_.push_back(0);
     std::sort(pre_edges_.begin(), pre_edges_.end(),
               [](const PreEdge& a, const PreEdge& b) { return a.key < b.key; });
@@ -673,7 +700,9 @@ class Builder {
       }
     }
     op.coarser.assign(coarser_.begin(), coarser_.end());
-    // op.box, op.sphere, op.cone and op.pre_tris are link_dag's (compute_op_bounds).
+    // The bounds from the op's own record, as link_dag computes them (and smr/db recomputes
+    // them), while that record is in cache.
+    compute_op_bounds(op);
     ops_.push_back(std::move(op));
 
     // The dead are no longer referenced: recycle their records.
@@ -721,15 +750,24 @@ class Builder {
     release(free_tris_);
     release(local_of_.map);
     release(pre_edges_);
+    release(killed_);
     ops_.move_to(crmr.ops);
-    for (std::size_t i = 0; i < crmr.ops.size(); ++i) {
-      Op& op = crmr.ops[i];
-      op.children.reserve(child_count_[i]);
-      op.birth_res = op.id == kBaseOp ? 0.0 : resolution_of(info, op.error);
-    }
-    release(child_count_);
     crmr.ops[0].error = err0;
-    link_dag(crmr);
+    for (std::size_t i = 0; i < crmr.ops.size(); ++i) crmr.ops[i].children.reserve(child_count_[i]);
+    release(child_count_);
+    // What link_dag would add to the ops closed above (pre_tris, parents, bounds are set): the
+    // birth resolutions, each replaced triangle's killer and death_res, children (in op order,
+    // so sorted) and the ROIs.
+    for (Op& op : crmr.ops) {
+      op.birth_res = op.id == kBaseOp ? 0.0 : resolution_of(info, op.error);
+      for (const TriRef& t : op.pre) {
+        FragmentTriangle& tri = crmr.ops[t.op.value].fragment[t.index];
+        tri.killer = op.id;
+        tri.death_res = op.birth_res;
+      }
+      for (OpId p : op.parents) crmr.ops[p.value].children.push_back(op.id);
+    }
+    compute_rois(crmr);
     if (opt_.progress) opt_.progress(1.0);
     return crmr;
   }
@@ -772,7 +810,12 @@ class Builder {
     std::uint32_t id;
     Dt::Vertex_handle vh;
   };
-  std::vector<std::uint32_t> frag_;
+  struct Killed {
+    std::uint64_t key;  // (creating op, index in its fragment)
+    std::uint32_t id;
+  };
+  std::vector<std::uint32_t> frag_, parents_;
+  std::vector<Killed> killed_;
   std::vector<VertexRef> others_;
   std::vector<PreEdge> pre_edges_;
   std::vector<CoarserLink> coarser_;

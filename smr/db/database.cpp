@@ -116,6 +116,19 @@ std::string key_text(std::uint64_t key) {
   return std::to_string(key);
 }
 
+// Runs `f`; an smr::Error it throws that does not name the database file yet (checksum and R-tree
+// errors name only the table and key) is rethrown with the path in front.
+template <class F>
+auto naming_file(const std::string& path, F&& f) -> decltype(f()) {
+  try {
+    return f();
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    if (what.rfind(path, 0) == 0) throw;
+    throw Error(e.kind(), path + ": " + what);
+  }
+}
+
 }  // namespace
 
 // ------------------------------------------------------------------------------------ writing
@@ -216,7 +229,7 @@ std::unique_ptr<Database> Database::open(const std::string& path, const Options&
                 ": not a complete smrdb database (no meta record; an ingest was "
                 "interrupted or this is another LMDB file)");
   }
-  const ByteView text = storage::unseal(*meta, "meta", "meta");
+  const ByteView text = naming_file(path, [&] { return storage::unseal(*meta, "meta", "meta"); });
   try {
     const json j = json::parse(text.begin(), text.end());
     if (j.at("format").get<std::string>() != "smrdb") throw_input(path + ": not an smrdb database");
@@ -236,8 +249,10 @@ std::unique_ptr<Database> Database::open(const std::string& path, const Options&
   const auto header = txn.get(Table::kRtree, kRtreeHeaderKey);
   if (!header) throw Error(ErrorKind::kCorrupt, path + ": the R-tree header is missing");
   const Database* self = db.get();
-  db->rtree_ = std::make_unique<index::RTree>(*header, [self](std::uint64_t node) {
-    return std::get<Bytes>(*self->cached(3, Table::kRtree, node));
+  db->rtree_ = naming_file(path, [&] {
+    return std::make_unique<index::RTree>(*header, [self](std::uint64_t node) {
+      return std::get<Bytes>(*self->cached(3, Table::kRtree, node));
+    });
   });
   if (db->rtree_->entry_count() != db->op_count_ || db->rtree_->leaf_count() != db->page_count_)
     throw Error(ErrorKind::kCorrupt, path + ": R-tree and meta disagree on the counts");
@@ -263,49 +278,52 @@ void Database::maybe_release() const {
 std::shared_ptr<const Database::CacheItem> Database::cached(std::uint64_t kind, Table table,
                                                             std::uint64_t id) const {
   const std::uint64_t key = (kind << 60) | id;
-  return cache_->get(key, [&]() {
-    storage::PageCache<CacheItem>::Loaded loaded;
-    const std::string name = std::string(storage::table_name(table)) + "/" + key_text(id);
-    Bytes raw;
-    {
-      const storage::ReadTxn txn = env_->read();
-      const auto value = txn.get(table, id);
-      if (!value) throw Error(ErrorKind::kCorrupt, path() + ": " + name + " is missing");
-      raw.assign(value->begin(), value->end());
+  return cache_->get(key, [&]() { return naming_file(path(), [&] { return load(table, id); }); });
+}
+
+storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table,
+                                                               std::uint64_t id) const {
+  storage::PageCache<CacheItem>::Loaded loaded;
+  const std::string name = std::string(storage::table_name(table)) + "/" + key_text(id);
+  Bytes raw;
+  {
+    const storage::ReadTxn txn = env_->read();
+    const auto value = txn.get(table, id);
+    if (!value) throw Error(ErrorKind::kCorrupt, path() + ": " + name + " is missing");
+    raw.assign(value->begin(), value->end());
+  }
+  loaded.bytes_read = raw.size();
+  if (table == Table::kRtree) {
+    loaded.charged_bytes = raw.size() + 64;
+    loaded.value = std::make_shared<const CacheItem>(std::move(raw));
+    nodes_read_.fetch_add(1);
+  } else if (table == Table::kPages) {
+    const ByteView payload = storage::unseal(raw, storage::table_name(table), key_text(id));
+    std::vector<Op> ops = decode_page(payload, grid_, path() + ": " + name);
+    std::size_t bytes = sizeof(CacheItem) + ops.capacity() * sizeof(Op);
+    for (const Op& op : ops) bytes += op_memory_bytes(op) - sizeof(Op);
+    loaded.charged_bytes = bytes;
+    loaded.value = std::make_shared<const CacheItem>(std::move(ops));
+    pages_read_.fetch_add(1);
+    page_bytes_read_.fetch_add(raw.size());
+  } else {
+    const ByteView payload = storage::unseal(raw, storage::table_name(table), key_text(id));
+    ByteReader r(payload, path() + ": " + name);
+    const std::uint64_t n = r.varint();
+    if (n > kOpsPerLocatorBlock) r.fail("too many locators");
+    std::vector<Locator> locs(n);
+    std::uint64_t prev = 0;
+    for (Locator& l : locs) {
+      l.page = prev + std::uint64_t(r.svarint());
+      prev = l.page;
+      l.slot = std::uint32_t(r.varint());
     }
-    loaded.bytes_read = raw.size();
-    if (table == Table::kRtree) {
-      loaded.charged_bytes = raw.size() + 64;
-      loaded.value = std::make_shared<const CacheItem>(std::move(raw));
-      nodes_read_.fetch_add(1);
-    } else if (table == Table::kPages) {
-      const ByteView payload = storage::unseal(raw, storage::table_name(table), key_text(id));
-      std::vector<Op> ops = decode_page(payload, grid_, path() + ": " + name);
-      std::size_t bytes = sizeof(CacheItem) + ops.capacity() * sizeof(Op);
-      for (const Op& op : ops) bytes += op_memory_bytes(op) - sizeof(Op);
-      loaded.charged_bytes = bytes;
-      loaded.value = std::make_shared<const CacheItem>(std::move(ops));
-      pages_read_.fetch_add(1);
-      page_bytes_read_.fetch_add(raw.size());
-    } else {
-      const ByteView payload = storage::unseal(raw, storage::table_name(table), key_text(id));
-      ByteReader r(payload, path() + ": " + name);
-      const std::uint64_t n = r.varint();
-      if (n > kOpsPerLocatorBlock) r.fail("too many locators");
-      std::vector<Locator> locs(n);
-      std::uint64_t prev = 0;
-      for (Locator& l : locs) {
-        l.page = prev + std::uint64_t(r.svarint());
-        prev = l.page;
-        l.slot = std::uint32_t(r.varint());
-      }
-      r.expect_end();
-      loaded.charged_bytes = sizeof(CacheItem) + locs.capacity() * sizeof(Locator);
-      loaded.value = std::make_shared<const CacheItem>(std::move(locs));
-    }
-    maybe_release();
-    return loaded;
-  });
+    r.expect_end();
+    loaded.charged_bytes = sizeof(CacheItem) + locs.capacity() * sizeof(Locator);
+    loaded.value = std::make_shared<const CacheItem>(std::move(locs));
+  }
+  maybe_release();
+  return loaded;
 }
 
 Database::Locator Database::locate(OpId id) const {
@@ -362,7 +380,7 @@ class RcfVisitor final : public index::Visitor {
 
 std::vector<OpId> Database::not_completely_finer(const Rcf& rcf) const {
   RcfVisitor visitor(rcf, info_);
-  const std::vector<index::Hit> hits = rtree_->query(visitor);
+  const std::vector<index::Hit> hits = naming_file(path(), [&] { return rtree_->query(visitor); });
   std::vector<OpId> x;
   std::shared_ptr<const std::vector<Op>> ops;
   std::uint64_t current = ~0ull;

@@ -104,6 +104,8 @@ class Database final : public OpSource, public RcfIndexedSource {
   using CacheItem = std::variant<std::vector<Op>, std::vector<Locator>, storage::Bytes>;
   std::shared_ptr<const CacheItem> cached(std::uint64_t key, storage::Table table,
                                           std::uint64_t id) const;
+  // Reads and decodes one value (the cache's loader).
+  storage::PageCache<CacheItem>::Loaded load(storage::Table table, std::uint64_t id) const;
   Locator locate(OpId id) const;
   void maybe_release() const;
 

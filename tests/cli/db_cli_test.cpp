@@ -1,0 +1,434 @@
+// The database subcommands from the outside: kill -9 during ingest leaves the previous database or
+// the complete new one (DESIGN.md section 3), damaged files are exit code 1 with a message naming
+// the table, parallel extract processes agree while an ingest runs next to them, every bad input
+// is exit code 1 naming the file or option, and extraction stays inside --cache-mb.
+#include <gtest/gtest.h>
+
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <future>
+#include <iterator>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "smr/db/database.h"
+#include "smr/io/npy.h"
+#include "smr/io/synthetic.h"
+#include "storage/lmdb_env.h"
+
+extern char** environ;
+
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+struct CliRun {
+  int code;
+  std::string out;  // stdout and stderr together
+};
+
+CliRun smrdb(const std::string& args) {
+  const std::string cmd = std::string(SMRDB_BIN) + " " + args + " 2>&1";
+  CliRun r{0, {}};
+  FILE* p = popen(cmd.c_str(), "r");
+  std::array<char, 4096> buf{};
+  while (std::size_t n = std::fread(buf.data(), 1, buf.size(), p)) r.out.append(buf.data(), n);
+  const int status = pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+// Starts smrdb with `args` (stdout and stderr to /dev/null) and returns its pid.
+pid_t spawn_smrdb(const std::vector<std::string>& args) {
+  std::vector<std::string> all = {SMRDB_BIN};
+  all.insert(all.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (std::string& a : all) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
+  posix_spawn_file_actions_addopen(&actions, 2, "/dev/null", O_WRONLY, 0);
+  pid_t pid = -1;
+  const int rc = posix_spawn(&pid, SMRDB_BIN, &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (rc != 0) throw std::runtime_error("posix_spawn " SMRDB_BIN " failed");
+  return pid;
+}
+
+int wait_for(pid_t pid) {
+  int status = 0;
+  while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+  }
+  return status;
+}
+
+std::string read_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+void write_file(const std::string& path, const std::string& bytes) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+}
+
+class DbCli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::temp_directory_path() /
+           ("smrdb_db_cli_" + std::to_string(::getpid()) + "_" + info->name());
+    fs::create_directories(dir_);
+    dem_ = path("dem.npy");
+    smr::write_npy(dem_, smr::make_fbm(65, 65, 3, 100.0));
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  // A small database of dem_ at db().
+  std::string db() {
+    const std::string p = path("db.smrdb");
+    if (!fs::exists(p)) {
+      const CliRun r = smrdb("ingest " + dem_ + " --max-error 0.05 --page-kb 2 -q -o " + p);
+      EXPECT_EQ(r.code, 0) << r.out;
+    }
+    return p;
+  }
+  void expect_user_error(const std::string& args, const std::string& mention) {
+    const CliRun r = smrdb(args);
+    EXPECT_EQ(r.code, 1) << args << "\n" << r.out;
+    EXPECT_NE(r.out.find(mention), std::string::npos) << args << "\n" << r.out;
+    EXPECT_EQ(r.out.find("internal error"), std::string::npos) << r.out;
+  }
+  std::vector<std::string> stale_temps(const std::string& db) const {
+    std::vector<std::string> out;
+    const std::string prefix = fs::path(db).filename().string() + ".tmp-";
+    for (const auto& e : fs::directory_iterator(dir_)) {
+      if (e.path().filename().string().rfind(prefix, 0) == 0) out.push_back(e.path().string());
+    }
+    return out;
+  }
+  fs::path dir_;
+  std::string dem_;
+};
+
+// (a) kill -9 at deterministic moments spread over a whole ingest (0 to 110 % of its measured
+// duration), alternately over an existing database (--force) and to a fresh path. Afterwards the
+// path is absent or byte-identical to the previous database, or byte-identical to the complete
+// new one (ingest is deterministic), and it opens; stale temporaries never get in the way.
+// scripts/kill-test.sh does the same any number of times.
+TEST_F(DbCli, KillNineDuringIngestLeavesThePreviousOrTheCompleteDatabase) {
+  const std::string dem = path("big.npy");
+  smr::write_npy(dem, smr::make_fbm(129, 129, 5, 1600.0));
+  const std::string old_dem = path("old.npy");
+  smr::write_npy(old_dem, smr::make_fbm(33, 33, 6, 100.0));
+  const std::string target = path("x.smrdb");
+  // The same command line every run (the database records it).
+  const std::vector<std::string> ingest = {"ingest", dem,    "--max-error", "0",
+                                           "-o",     target, "--force",     "-q"};
+  ASSERT_EQ(smrdb("ingest " + old_dem + " -q -o " + target).code, 0);
+  const std::string old_bytes = read_file(target);
+  // A full ingest, twice (the first warms the caches); the second one's duration is the scale.
+  double full = 0.0;
+  for (int k = 0; k < 2; ++k) {
+    const auto t0 = Clock::now();
+    const int status = wait_for(spawn_smrdb(ingest));
+    full = std::chrono::duration<double>(Clock::now() - t0).count();
+    ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+  }
+  const std::string new_bytes = read_file(target);
+  ASSERT_NE(new_bytes, old_bytes);
+  ASSERT_TRUE(smr::verify_database(target, nullptr).ok());
+
+  constexpr int kRuns = 24;
+  std::mt19937_64 rng(20261122);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  int absent = 0, old = 0, complete = 0, killed = 0, stale = 0;
+  for (int i = 0; i < kRuns; ++i) {
+    const bool over_old = i % 2 == 1;
+    fs::remove(target);
+    if (over_old) write_file(target, old_bytes);
+    const double at = full * 1.1 * (i + u(rng)) / kRuns;
+    SCOPED_TRACE("run " + std::to_string(i) + (over_old ? " over the old database" : "") +
+                 ", killed after " + std::to_string(at) + " s of " + std::to_string(full));
+    const pid_t pid = spawn_smrdb(ingest);
+    std::this_thread::sleep_for(std::chrono::duration<double>(at));
+    ::kill(pid, SIGKILL);  // a no-op on a process that already exited (not yet reaped)
+    const int status = wait_for(pid);
+    killed += WIFSIGNALED(status);
+    if (!WIFSIGNALED(status)) {
+      EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+    }
+    if (!fs::exists(target)) {
+      EXPECT_FALSE(over_old) << "the previous database vanished";
+      ++absent;
+    } else {
+      const std::string now = read_file(target);
+      if (over_old && now == old_bytes) {
+        ++old;
+      } else if (now == new_bytes) {
+        ++complete;
+      } else {
+        ADD_FAILURE() << target << " is neither the previous nor the complete database";
+      }
+      EXPECT_NO_THROW(smr::Database::open(target, {}));
+    }
+    const std::vector<std::string> temps = stale_temps(target);
+    if (!temps.empty()) {
+      ++stale;
+      if (fs::exists(target)) {
+        EXPECT_EQ(smrdb("info " + target).code, 0);
+      }
+      for (const std::string& t : temps) fs::remove(t);
+    }
+  }
+  // Then kills at the very moment the path changes (polled with stat): a writer that exposed a
+  // partly written file at the path, even briefly, would be caught here.
+  for (int i = 0; i < 8; ++i) {
+    const bool over_old = i % 2 == 1;
+    fs::remove(target);
+    if (over_old) write_file(target, old_bytes);
+    struct stat before {};
+    const bool had = ::stat(target.c_str(), &before) == 0;
+    SCOPED_TRACE("watched run " + std::to_string(i) + (over_old ? " over the old database" : ""));
+    const pid_t pid = spawn_smrdb(ingest);
+    for (;;) {
+      struct stat now {};
+      const bool has = ::stat(target.c_str(), &now) == 0;
+      if (has != had || (has && (now.st_ino != before.st_ino || now.st_size != before.st_size ||
+                                 now.st_mtim.tv_nsec != before.st_mtim.tv_nsec))) {
+        break;
+      }
+      int status = 0;
+      if (::waitpid(pid, &status, WNOHANG) == pid) break;  // ended before a change was seen
+      std::this_thread::sleep_for(std::chrono::microseconds(50));
+    }
+    ::kill(pid, SIGKILL);
+    wait_for(pid);
+    if (!fs::exists(target)) {
+      EXPECT_FALSE(over_old) << "the previous database vanished";
+    } else {
+      const std::string now = read_file(target);
+      EXPECT_TRUE((over_old && now == old_bytes) || now == new_bytes)
+          << target << " is neither the previous nor the complete database";
+    }
+    for (const std::string& t : stale_temps(target)) fs::remove(t);
+  }
+  std::printf(
+      "%d kills over a %.3f s ingest: %d left nothing, %d the previous database, %d the "
+      "complete one; %d killed mid-run, %d left stale temporaries\n",
+      kRuns, full, absent, old, complete, killed, stale);
+  // The kill moments span the ingest: some runs died early, some finished.
+  EXPECT_GT(absent + old, 0);
+  EXPECT_GT(complete, 0);
+  EXPECT_GT(killed, kRuns / 2);
+}
+
+// (b) Damage through the CLI: a flipped bit in a page and in meta, and a truncated file.
+TEST_F(DbCli, DamagedDatabaseIsExitCodeOneNamingTheTable) {
+  const std::string good = db();
+  const std::string clean_obj = path("clean.obj");
+  const std::string rcf = " --floor 0.2 --aoi 10,10,12,1 -q ";
+  ASSERT_EQ(smrdb("extract " + good + rcf + "-o " + clean_obj).code, 0);
+  const std::string bytes = read_file(good);
+  // Values located through LMDB, then found in the file (contiguous in their LMDB page).
+  struct Target {
+    smr::storage::Table table;
+    std::string key;
+    std::size_t offset;
+  };
+  std::vector<Target> targets;
+  {
+    const smr::storage::Env env = smr::storage::Env::open_read_only(good);
+    const smr::storage::ReadTxn txn = env.read();
+    for (smr::storage::Table t : {smr::storage::Table::kMeta, smr::storage::Table::kPages,
+                                  smr::storage::Table::kNodes, smr::storage::Table::kRtree}) {
+      // The first, a middle and the last page; the first value of the other tables.
+      const std::uint64_t n = txn.count(t);
+      std::uint64_t i = 0;
+      txn.for_each(t, [&](smr::storage::ByteView key, smr::storage::ByteView value) {
+        const std::uint64_t index = i++;
+        if (index != 0 && (t != smr::storage::Table::kPages || (index != n / 2 && index != n - 1)))
+          return;
+        const std::string v(reinterpret_cast<const char*>(value.data()), value.size());
+        const std::size_t at = bytes.find(v);
+        if (at == std::string::npos || bytes.find(v, at + 1) != std::string::npos) return;
+        const std::string k =
+            t == smr::storage::Table::kMeta
+                ? std::string(reinterpret_cast<const char*>(key.data()), key.size())
+                : std::to_string(smr::storage::parse_key_u64(key, "test"));
+        targets.push_back({t, k, at + value.size() / 2});
+      });
+    }
+  }
+  ASSERT_EQ(targets.size(), 6u);
+  int failed = 0, identical = 0;
+  const std::string bad = path("bad.smrdb");
+  for (const Target& t : targets) {
+    const std::string where =
+        "table '" + std::string(smr::storage::table_name(t.table)) + "', key " + t.key;
+    SCOPED_TRACE(where);
+    std::string damaged = bytes;
+    damaged[t.offset] = static_cast<char>(damaged[t.offset] ^ 0x04);
+    write_file(bad, damaged);
+    CliRun r = smrdb("verify -q " + bad);
+    EXPECT_EQ(r.code, 1) << r.out;
+    EXPECT_NE(r.out.find(where), std::string::npos) << r.out;
+    r = smrdb("verify --json " + bad);
+    EXPECT_EQ(r.code, 1);
+    fs::remove(path("out.obj"));
+    r = smrdb("extract " + bad + rcf + "-o " + path("out.obj"));
+    if (r.code == 0) {
+      EXPECT_EQ(read_file(path("out.obj")), read_file(clean_obj)) << "different mesh, exit 0";
+      ++identical;
+    } else {
+      EXPECT_EQ(r.code, 1) << r.out;
+      EXPECT_NE(r.out.find(where), std::string::npos) << r.out;
+      ++failed;
+    }
+    if (t.table == smr::storage::Table::kMeta) expect_user_error("info " + bad, where);
+  }
+  EXPECT_GT(failed, 0);
+  EXPECT_GT(identical, 0);  // pages the RCF never needs do not matter
+  for (std::size_t length : {std::size_t{0}, std::size_t{4000}, bytes.size() / 2}) {
+    SCOPED_TRACE("truncated to " + std::to_string(length));
+    write_file(bad, bytes.substr(0, length));
+    expect_user_error("verify -q " + bad, bad);
+    expect_user_error("info " + bad, bad);
+    expect_user_error("extract " + bad + rcf + "-o " + path("out.obj"), bad);
+  }
+}
+
+// (c) Extract processes in parallel with an ingest of a second database in the same directory.
+TEST_F(DbCli, ParallelExtractProcessesWhileIngesting) {
+  const std::string good = db();
+  const std::string rcf = " --eye 0,0,120 --target 32,32,0 --pixel-error 0.5 -q --cache-mb 1 ";
+  ASSERT_EQ(smrdb("extract " + good + rcf + "-o " + path("ref.ply")).code, 0);
+  const std::string dem2 = path("dem2.npy");
+  smr::write_npy(dem2, smr::make_fbm(129, 129, 9, 500.0));
+  std::vector<std::future<CliRun>> runs;
+  runs.push_back(std::async(std::launch::async, [&] {
+    return smrdb("ingest " + dem2 + " --max-error 0 -q -o " + path("second.smrdb"));
+  }));
+  for (int k = 0; k < 3; ++k) {
+    const std::string args =
+        "extract " + good + rcf + "-o " + path("p" + std::to_string(k)) + ".ply";
+    runs.push_back(std::async(std::launch::async, [args] {
+      CliRun r{0, {}};
+      for (int round = 0; round < 3 && r.code == 0; ++round) r = smrdb(args);
+      return r;
+    }));
+  }
+  for (auto& f : runs) {
+    const CliRun r = f.get();
+    EXPECT_EQ(r.code, 0) << r.out;
+  }
+  for (int k = 0; k < 3; ++k)
+    EXPECT_EQ(read_file(path("p" + std::to_string(k)) + ".ply"), read_file(path("ref.ply")));
+  EXPECT_EQ(smrdb("verify -q " + path("second.smrdb")).code, 0);
+}
+
+// (d) Bad inputs: exit code 1, a message naming the file or option, no internal error.
+TEST_F(DbCli, BadInputsNameTheFileOrOption) {
+  const std::string good = db();
+  const std::string out = " -o " + path("o.obj");
+  const std::string missing = path("missing.smrdb");
+  const std::string text = path("notes.smrdb");
+  std::ofstream(text) << "this is not a database\n";
+  const std::string directory = path("a-directory");
+  fs::create_directories(directory);
+  for (const std::string& bad : {missing, text, dem_, directory}) {
+    SCOPED_TRACE(bad);
+    expect_user_error("extract " + bad + " --floor 0.5" + out, bad);
+    expect_user_error("info " + bad, bad);
+    expect_user_error("verify " + bad, bad);
+  }
+  // Ingest over an existing file without --force: refused, the file untouched.
+  const std::string before = read_file(good);
+  const auto mtime = fs::last_write_time(good);
+  expect_user_error("ingest " + dem_ + " -o " + good, "--force");
+  expect_user_error("ingest " + dem_ + " -o " + good, good);
+  EXPECT_EQ(read_file(good), before);
+  EXPECT_EQ(fs::last_write_time(good), mtime);
+  expect_user_error("ingest " + dem_ + " -o " + text, "--force");
+  expect_user_error("ingest " + dem_ + " -o " + directory + " --force", directory);
+  expect_user_error("ingest " + dem_ + " -o /nonexistent-dir/x.smrdb", "/nonexistent-dir/x.smrdb");
+  expect_user_error("ingest " + path("missing.npy") + " -o " + path("n.smrdb"), "missing.npy");
+  expect_user_error("ingest " + text + " -o " + path("n.smrdb"), text);
+  const std::string n = " -o " + path("n.smrdb");
+  expect_user_error("ingest " + dem_ + n + " --codec lz4", "--codec");
+  expect_user_error("ingest " + dem_ + n + " --codec ''", "--codec");
+  expect_user_error("ingest " + dem_ + n + " --max-error=-1", "--max-error");
+  expect_user_error("ingest " + dem_ + n + " --max-error nan", "--max-error");
+  expect_user_error("ingest " + dem_ + n + " --page-kb 0", "--page-kb");
+  expect_user_error("ingest " + dem_ + n + " --base-vertices 3", "--base-vertices");
+  expect_user_error("ingest " + dem_ + n + " --z-quantum=-1", "--z-quantum");
+  expect_user_error("ingest " + dem_, "--output");
+  EXPECT_FALSE(fs::exists(path("n.smrdb")));
+  // extract's own options.
+  const std::string e = "extract " + good + " ";
+  expect_user_error(e + "--floor 0.5 --cache-mb 0" + out, "--cache-mb");
+  expect_user_error(e + "--floor 0.5 --cache-mb=-5" + out, "--cache-mb");
+  expect_user_error(e + "--floor 0.5 -o " + path("o.stl"), "o.stl");
+  expect_user_error(e + "--floor 0.5 -o " + path("o"), path("o"));
+  expect_user_error(e + "--floor 0.5 --png " + path("p.jpg") + out, "p.jpg");
+  expect_user_error(e + "--floor 0.5 --algorithm fastest" + out, "--algorithm");
+  expect_user_error(e + "--critical-lines 0.8" + out, "--dem");
+  expect_user_error(e + "--critical-lines 0.8 --dem " + path("missing.npy") + out, "missing.npy");
+  expect_user_error(e + "--floor 2" + out, "--floor");
+  expect_user_error(e + "--eye 1,2,3" + out, "--target");
+  expect_user_error(e + "--floor 0.5 -o /nonexistent-dir/o.obj", "/nonexistent-dir/o.obj");
+  expect_user_error(e + "--floor 0.5", "--output");
+  EXPECT_FALSE(fs::exists(path("o.obj")));
+  // Unknown options and arguments, per subcommand.
+  expect_user_error("ingest " + dem_ + n + " --bogus", "--bogus");
+  expect_user_error(e + "--floor 0.5 --bogus" + out, "--bogus");
+  expect_user_error("info " + good + " --bogus", "--bogus");
+  expect_user_error("verify " + good + " --bogus", "--bogus");
+  expect_user_error("synth --size 9 --bogus -o " + path("s.npy"), "--bogus");
+  expect_user_error("info " + good + " " + good, good);
+  expect_user_error("info", "db");
+  expect_user_error("verify", "db");
+  expect_user_error("frobnicate", "frobnicate");
+  // A good run for contrast.
+  EXPECT_EQ(smrdb(e + "--floor 0.5 -q" + out).code, 0);
+}
+
+// (e) Extraction inside a 1 MiB page cache from a database more than 20 times that size: the same
+// mesh as with a large cache, and the cache never held more than the budget.
+TEST_F(DbCli, ExtractionStaysWithinCacheMb) {
+  const std::string dem = path("big.npy");
+  ASSERT_EQ(smrdb("synth --size 353 -q -o " + dem).code, 0);
+  const std::string big = path("big.smrdb");
+  ASSERT_EQ(smrdb("ingest " + dem + " --max-error 0 --codec raw -q -o " + big).code, 0);
+  ASSERT_GE(fs::file_size(big), 20u << 20) << "the database must be at least 20x the budget";
+  const std::string rcf = " --aoi 176,176,40,1 --json -q ";
+  const CliRun small = smrdb("extract " + big + rcf + "--cache-mb 1 -o " + path("small.obj"));
+  ASSERT_EQ(small.code, 0) << small.out;
+  const CliRun large = smrdb("extract " + big + rcf + "--cache-mb 512 -o " + path("large.obj"));
+  ASSERT_EQ(large.code, 0) << large.out;
+  EXPECT_EQ(read_file(path("small.obj")), read_file(path("large.obj")));
+  const auto s = nlohmann::json::parse(small.out), l = nlohmann::json::parse(large.out);
+  EXPECT_LE(s["io"]["cache_peak_bytes"].get<std::uint64_t>(), 1u << 20);
+  EXPECT_GT(s["io"]["cache_evictions"].get<std::uint64_t>(), 0u);
+  EXPECT_GT(l["io"]["cache_peak_bytes"].get<std::uint64_t>(), 1u << 20);  // the budget mattered
+  EXPECT_GT(s["io"]["pages_read"].get<std::uint64_t>(), l["io"]["pages_read"].get<std::uint64_t>());
+  EXPECT_EQ(s["output"]["triangles"], l["output"]["triangles"]);
+}
+
+}  // namespace
