@@ -137,31 +137,6 @@ smr::Camera named_camera(const std::string& name, const smr::Box3& b) {
 
 // ---- recording which ops and pages an extraction fetches -----------------------------------
 
-smr::Box3 from_index(const smr::index::Box& b) {
-  smr::Box3 out;
-  for (int k = 0; k < 3; ++k) {
-    out.lo[k] = b.lo[k];
-    out.hi[k] = b.hi[k];
-  }
-  return out;
-}
-
-// The visitor of Database::not_completely_finer (smr/db/database.cpp), to know its leaves.
-class RcfVisitor final : public smr::index::Visitor {
- public:
-  RcfVisitor(const smr::Rcf& rcf, const smr::CrmrInfo& info) : rcf_(rcf), info_(info) {}
-  bool enter(const smr::index::Summary& s) override {
-    return !rcf_.region_completely_finer(from_index(s.box), s.min_res, info_);
-  }
-  bool accept(const smr::index::Entry& e) override {
-    return !rcf_.region_completely_finer(from_index(e.box), e.res, info_);
-  }
-
- private:
-  const smr::Rcf& rcf_;
-  const smr::CrmrInfo& info_;
-};
-
 class AllVisitor final : public smr::index::Visitor {
  public:
   bool enter(const smr::index::Summary&) override { return true; }
@@ -180,11 +155,13 @@ class RecordingSource final : public smr::OpSource, public smr::RcfIndexedSource
     return db_.op(id);
   }
   std::vector<smr::OpId> not_completely_finer(const smr::Rcf& rcf) const override {
-    RcfVisitor v(rcf, db_.info());
-    for (const smr::index::Hit& h : db_.rtree().query(v)) {
+    for (const smr::index::Hit& h : db_.rcf_hits(rcf)) {
       if (leaves.empty() || leaves.back() != h.leaf) leaves.push_back(h.leaf);
     }
     return db_.not_completely_finer(rcf);
+  }
+  std::vector<smr::OpId> maybe_not_completely_finer(const smr::Rcf& rcf) const override {
+    return db_.maybe_not_completely_finer(rcf);  // reads no page
   }
   mutable std::vector<std::uint64_t> ops;
   mutable std::vector<std::uint64_t> leaves;
@@ -240,6 +217,8 @@ json stats_json(const smr::DatabaseStats& s) {
   return {{"pages_read", s.pages_read},
           {"page_bytes_read", s.page_bytes_read},
           {"rtree_nodes_read", s.rtree_nodes_read},
+          {"rtree_bytes_read", s.rtree_bytes_read},
+          {"locator_bytes_read", s.locator_bytes_read},
           {"lmdb_bytes_read", s.lmdb_bytes_read},
           {"cache_hits", s.cache.hits},
           {"cache_misses", s.cache.misses},

@@ -36,10 +36,13 @@
 // Node format (all nodes sealed with storage::seal; checksum errors name "rtree/<node id>"):
 //   varint level (0 = leaf), varint count, frame (3 x f64 origin, 3 x f64 step);
 //   internal: varint first_child (children are first_child .. first_child + count - 1);
-//   per item: roi and box as 12 x u16 on the node's frame (coordinate = origin + q * step),
-//     then leaf: varint id, f32 res   |   internal: f32 min_res, varint entry count.
+//   per item: roi and box as 12 x u8 on the node's frame (coordinate = origin + q * step),
+//     u16 res (bfloat16 of 1 - res, node_codec.h), then
+//     leaf: svarint id - previous id   |   internal: varint entry count.
 // Quantisation is conservative: stored lo <= true lo, stored hi >= true hi, stored res <= true
-// res (rounded down to float). A leaf entry thus costs ~30 bytes (a 500-entry leaf ~15 KiB).
+// res (1 - res rounded up, by < 2^-7 of itself). A leaf entry costs ~17 bytes (a 500-entry leaf
+// ~8.5 KiB): every query reads the nodes it enters, so small nodes are low read amplification,
+// and 8 bits (1/255 of the node's extent) lose little pruning.
 // Readers see the stored values: Visitor::accept gets the conservative boxes and res (and
 // weight 0). Every summary is computed from the stored values below it, so a stored summary
 // contains the stored boxes of its subtree exactly (no float slack between levels): a visitor

@@ -153,6 +153,7 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
   }
   index::BuildOptions bo;
   bo.leaf_weight = options.page_bytes;
+  bo.fanout = options.rtree_fanout;
   bo.order_dims = crmr.header.kind == ModelKind::kTerrain ? 2 : 3;
   const index::Plan plan = index::plan(entries, bo);
   report.pages = plan.leaves.size();
@@ -295,6 +296,7 @@ storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table,
   loaded.bytes_read = raw.size();
   if (table == Table::kRtree) {
     loaded.charged_bytes = raw.size() + 64;
+    rtree_bytes_read_.fetch_add(raw.size());
     loaded.value = std::make_shared<const CacheItem>(std::move(raw));
     nodes_read_.fetch_add(1);
   } else if (table == Table::kPages) {
@@ -307,6 +309,7 @@ storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table,
     pages_read_.fetch_add(1);
     page_bytes_read_.fetch_add(raw.size());
   } else {
+    locator_bytes_read_.fetch_add(raw.size());
     const ByteView payload = storage::unseal(raw, storage::table_name(table), key_text(id));
     ByteReader r(payload, path() + ": " + name);
     const std::uint64_t n = r.varint();
@@ -378,13 +381,22 @@ class RcfVisitor final : public index::Visitor {
 
 }  // namespace
 
-std::vector<OpId> Database::not_completely_finer(const Rcf& rcf) const {
+std::vector<index::Hit> Database::rcf_hits(const Rcf& rcf) const {
   RcfVisitor visitor(rcf, info_);
-  const std::vector<index::Hit> hits = naming_file(path(), [&] { return rtree_->query(visitor); });
+  return naming_file(path(), [&] { return rtree_->query(visitor); });
+}
+
+std::vector<OpId> Database::maybe_not_completely_finer(const Rcf& rcf) const {
+  std::vector<OpId> ids;
+  for (const index::Hit& h : rcf_hits(rcf)) ids.push_back(OpId{h.id});
+  return ids;
+}
+
+std::vector<OpId> Database::not_completely_finer(const Rcf& rcf) const {
   std::vector<OpId> x;
   std::shared_ptr<const std::vector<Op>> ops;
   std::uint64_t current = ~0ull;
-  for (const index::Hit& h : hits) {
+  for (const index::Hit& h : rcf_hits(rcf)) {
     if (h.leaf != current) {
       current = h.leaf;
       ops = page(h.leaf);
@@ -407,6 +419,8 @@ DatabaseStats Database::stats() const {
   s.pages_read = pages_read_.load();
   s.page_bytes_read = page_bytes_read_.load();
   s.rtree_nodes_read = nodes_read_.load();
+  s.rtree_bytes_read = rtree_bytes_read_.load();
+  s.locator_bytes_read = locator_bytes_read_.load();
   s.lmdb_bytes_read = env_->bytes_read();
   return s;
 }

@@ -30,7 +30,7 @@
 
 namespace smr {
 
-inline constexpr int kDatabaseFormat = 1;
+inline constexpr int kDatabaseFormat = 2;  // 2: 8-bit R-tree boxes, bfloat16 res
 inline constexpr std::uint64_t kOpsPerLocatorBlock = 256;
 
 struct WriteOptions {
@@ -40,8 +40,12 @@ struct WriteOptions {
   bool force = false;   // replace an existing database at the path
   double z_step = 0.0;  // quantization step of heights; 0 = automatic (quantize.h)
   std::uint32_t page_bytes = 16 * 1024 - 16;  // target payload of a data page
-  std::string parameters;                     // free text recorded in meta (the command line, say)
-  std::function<void(double)> progress;       // fraction done, from 0 to 1
+  // Children per internal R-tree node. A view enters internal nodes that each contribute one or
+  // two leaves, so small nodes read fewer unused bytes: 16 read 8 % fewer index bytes than 64 on
+  // a 4097^2 fBm view (benchmarks/README.md), with little more than 8 gives.
+  std::uint32_t rtree_fanout = 16;
+  std::string parameters;                // free text recorded in meta (the command line, say)
+  std::function<void(double)> progress;  // fraction done, from 0 to 1
 };
 
 struct WriteReport {
@@ -64,7 +68,9 @@ struct DatabaseStats {
   std::uint64_t pages_read = 0;       // data pages fetched from LMDB
   std::uint64_t page_bytes_read = 0;  // their bytes
   std::uint64_t rtree_nodes_read = 0;
-  std::uint64_t lmdb_bytes_read = 0;  // every value fetched from LMDB
+  std::uint64_t rtree_bytes_read = 0;    // bytes of R-tree nodes fetched
+  std::uint64_t locator_bytes_read = 0;  // bytes of op-locator blocks (table nodes) fetched
+  std::uint64_t lmdb_bytes_read = 0;     // every value fetched from LMDB
 };
 
 class Database final : public OpSource, public RcfIndexedSource {
@@ -81,8 +87,13 @@ class Database final : public OpSource, public RcfIndexedSource {
   std::uint64_t op_count() const override { return op_count_; }
   OpRef op(OpId id) const override;
   /// Reduced extraction's X from the R-tree: every op not completely finer than `rcf`.
+  /// Reduced extraction's X from the R-tree: every op not completely finer than `rcf`. Reads
+  /// the R-tree nodes the query enters and the data pages of the entries it accepts.
   std::vector<OpId> not_completely_finer(const Rcf& rcf) const override;
-
+  /// The entries the R-tree query accepts (a superset of not_completely_finer), reading no page.
+  std::vector<OpId> maybe_not_completely_finer(const Rcf& rcf) const override;
+  /// The R-tree query behind both: accepted entries, grouped by leaf (= data page).
+  std::vector<index::Hit> rcf_hits(const Rcf& rcf) const;
   const index::RTree& rtree() const { return *rtree_; }
   const QuantGrid& grid() const { return grid_; }
   std::uint64_t page_count() const { return page_count_; }
@@ -117,6 +128,7 @@ class Database final : public OpSource, public RcfIndexedSource {
   std::uint64_t op_count_ = 0, page_count_ = 0;
   std::string meta_json_;
   mutable std::atomic<std::uint64_t> pages_read_{0}, page_bytes_read_{0}, nodes_read_{0};
+  mutable std::atomic<std::uint64_t> rtree_bytes_read_{0}, locator_bytes_read_{0};
   mutable std::atomic<std::uint64_t> released_at_{0};
 };
 

@@ -2,6 +2,7 @@
 // AddToList is run with an explicit stack; the set it reaches is the same fixed point.
 #include <algorithm>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "smr/extract/extract.h"
@@ -36,6 +37,19 @@ class RcfCache {
 
 std::vector<OpId> traverse(const OpSource& source, const Rcf& rcf, bool with_ancestors) {
   RcfCache cache(source, rcf);
+  // With an index, a child outside its conservative candidates (Maheshwari 4.4's query over
+  // the ops' boxes) is completely finer and is not fetched; only candidates are read and tested
+  // exactly. Without it, the test reads every child of every non-finer op of X: finer ops, in
+  // pages the output does not use (4x the needed pages on a 268 M-sample terrain).
+  std::unordered_set<std::uint64_t> candidates;
+  const auto* indexed = dynamic_cast<const RcfIndexedSource*>(&source);
+  if (indexed != nullptr) {
+    for (OpId id : indexed->maybe_not_completely_finer(rcf)) candidates.insert(id.value);
+  }
+  const auto completely_finer = [&](OpId c) {
+    if (indexed != nullptr && candidates.count(c.value) == 0) return true;
+    return cache.completely_finer(*source.op(c));
+  };
   std::unordered_map<std::uint64_t, bool> in_x;
   std::vector<OpId> x, stack{kBaseOp};
   while (!stack.empty()) {
@@ -47,7 +61,7 @@ std::vector<OpId> traverse(const OpSource& source, const Rcf& rcf, bool with_anc
     const Op& op = *op_ref;
     if (!cache.finer(op)) {
       for (OpId c : op.children) {
-        if (!in_x.count(c.value) && !cache.completely_finer(*source.op(c))) stack.push_back(c);
+        if (!in_x.count(c.value) && !completely_finer(c)) stack.push_back(c);
       }
     }
     if (with_ancestors) {

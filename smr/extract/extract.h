@@ -41,13 +41,17 @@ struct ExpansionOptions {
   std::uint64_t max_triangles = 0;
 };
 
-/// A source that answers reduced extraction's X from an index instead of a scan of every op
-/// (smr/db: the R-tree over ROI boxes). Must return exactly the ops that are not completely finer
-/// than the RCF (R^0 may be omitted; it is always added).
+/// A source that answers "which ops are not completely finer than the RCF" from an index instead
+/// of a scan of every op (smr/db: the R-tree over ROI boxes, Maheshwari 4.4).
 class RcfIndexedSource {
  public:
   virtual ~RcfIndexedSource() = default;
+  /// Exactly the ops that are not completely finer than `rcf` (R^0 may be omitted; it is always
+  /// added): reduced extraction's X.
   virtual std::vector<OpId> not_completely_finer(const Rcf& rcf) const = 0;
+  /// A superset of not_completely_finer() found without reading ops (a conservative test on
+  /// index entries), so that AddToList can rule out children without fetching them.
+  virtual std::vector<OpId> maybe_not_completely_finer(const Rcf& rcf) const = 0;
 };
 
 /// Brown 5.1.1 (Fig. 5.2): the smallest X containing R^0, the children of its non-finer members
