@@ -24,7 +24,7 @@ db="$work/x.smrdb"
 "$bin" synth --size "$size" --seed 3 -o "$work/dem.npy" -q
 "$bin" synth --size 65 --seed 4 -o "$work/old.npy" -q
 "$bin" ingest "$work/old.npy" -o "$work/old.smrdb" -q
-# The same command line every time: the database records it, and the output is deterministic.
+# The same parameters every time: the database records them, and the output is deterministic.
 ingest=("$bin" ingest "$work/dem.npy" --max-error 0 -o "$db" --force -q)
 
 now_ns() { date +%s%N; }

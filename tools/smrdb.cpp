@@ -1,5 +1,6 @@
 // smrdb: the command line. Parses options, reports progress on stderr, prints JSON on request.
 // Nothing below tools/ prints or exits; errors arrive here as smr::Error (exit 1, or 2 for bugs).
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -196,11 +197,23 @@ struct IngestArgs {
       throw_input("--z-quantum must be >= 0 (0 = automatic)");
     if (page_kb < 1 || page_kb > 4096) throw_input("--page-kb must be in [1, 4096]");
   }
+  // What the database records of how it was built: the input's file name and every build
+  // parameter, in a fixed order. Not the command line: output path, flag order, -q or --json
+  // must not change the file (same input and parameters -> byte-identical database).
+  std::string describe() const {
+    const auto number = [](double v) {  // shortest text that reads back as v
+      char buf[32];
+      return std::string(buf, std::to_chars(buf, buf + sizeof buf, v).ptr);
+    };
+    return "input=" + std::filesystem::path(dem).filename().string() +
+           " max-error=" + number(max_error) + " max-vertices=" + std::to_string(max_vertices) +
+           " base-vertices=" + std::to_string(base_vertices) + " codec=" + codec +
+           " z-quantum=" + number(z_quantum) + " page-kb=" + std::to_string(page_kb);
+  }
 };
 
 // Reads the DEM, builds the CRMR and writes the database. Returns the report.
-nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quiet, bool verify,
-                      const std::string& command_line) {
+nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quiet, bool verify) {
   nlohmann::json report;
   auto t0 = Clock::now();
   const smr::Heightfield dem = smr::read_dem(a.dem);
@@ -219,6 +232,9 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
   opt.progress = [&](double f) { progress.update(0.8 * f); };
   t0 = Clock::now();
   smr::Crmr crmr = smr::build_greedy_tin(dem, opt);
+  // The database names its source by file name only, like describe(): where the input sits
+  // must not change the bytes.
+  crmr.header.source = std::filesystem::path(a.dem).filename().string();
   std::uint64_t finest = 0;
   for (const smr::Op& op : crmr.ops) {
     for (const auto& t : op.fragment) finest += !t.killer.valid() && !t.is_void();
@@ -240,7 +256,7 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
   wo.force = a.force;
   wo.z_step = a.z_quantum;
   wo.page_bytes = a.page_kb * 1024 - 16;
-  wo.parameters = command_line;
+  wo.parameters = a.describe();
   wo.progress = [&](double f) { progress.update(0.8 + 0.2 * f); };
   const smr::WriteReport w = smr::write_database(crmr, db_path, wo);
   progress.done();
@@ -341,11 +357,11 @@ void check_database_path(const std::string& path, bool force) {
     throw_input(path + ": no such directory " + parent.string());
 }
 
-int cmd_ingest(const IngestArgs& a, const std::string& db_path, bool json, bool quiet, bool verify,
-               const std::string& command_line) {
+int cmd_ingest(const IngestArgs& a, const std::string& db_path, bool json, bool quiet,
+               bool verify) {
   a.validate();
   check_database_path(db_path, a.force);
-  const nlohmann::json r = ingest(a, db_path, quiet, verify, command_line);
+  const nlohmann::json r = ingest(a, db_path, quiet, verify);
   print_report(r, json);
   if (!json && !quiet) {
     std::fprintf(stderr, "%s: %llu ops in %llu pages, %.1f MB (%.1f bytes/vertex) -> %s\n",
@@ -378,8 +394,7 @@ int cmd_extract(const std::string& db_path, const RcfOptions& rcf_options, const
 }
 
 int cmd_build(IngestArgs a, std::string db_path, const RcfOptions& rcf_options,
-              const ExtractArgs& e, bool json, bool quiet, bool verify,
-              const std::string& command_line) {
+              const ExtractArgs& e, bool json, bool quiet, bool verify) {
   a.validate();
   e.validate();
   const smr::RcfSpec spec = rcf_options.spec();
@@ -398,7 +413,7 @@ int cmd_build(IngestArgs a, std::string db_path, const RcfOptions& rcf_options,
       if (p) std::filesystem::remove(*p, ec);
     }
   } remove{scratch};
-  nlohmann::json r = ingest(a, db_path, quiet, verify, command_line);
+  nlohmann::json r = ingest(a, db_path, quiet, verify);
   const smr::Heightfield dem = smr::read_dem(a.dem);
   const auto db = smr::Database::open(db_path, {std::size_t(e.cache_mb) << 20});
   r.update(extract(*db, &dem, spec, e, verify));
@@ -518,8 +533,6 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   app.set_version_flag("--version", "smrdb 0.1.0");
 
-  std::string command_line;
-  for (int i = 0; i < argc; ++i) command_line += (i ? " " : "") + std::string(argv[i]);
   bool json = false, quiet = false, verify = false;
   RcfOptions rcf;
   IngestArgs ingest_args;
@@ -595,12 +608,11 @@ int main(int argc, char** argv) {
     return 1;
   }
   try {
-    if (*ingest_cmd) return cmd_ingest(ingest_args, db_path, json, quiet, verify, command_line);
+    if (*ingest_cmd) return cmd_ingest(ingest_args, db_path, json, quiet, verify);
     if (*extract_cmd) return cmd_extract(db_path, rcf, extract_args, json, quiet, verify);
     if (*info_cmd) return cmd_info(db_path, json);
     if (*verify_cmd) return cmd_verify(db_path, json, quiet);
-    if (*build)
-      return cmd_build(ingest_args, db_path, rcf, extract_args, json, quiet, verify, command_line);
+    if (*build) return cmd_build(ingest_args, db_path, rcf, extract_args, json, quiet, verify);
     if (*synth)
       return cmd_synth(width, height == 0 ? width : height, seed, range, spacing, synth_out, quiet);
   } catch (const smr::Error& e) {
