@@ -431,14 +431,7 @@ int cmd_build(IngestArgs a, std::string db_path, const RcfOptions& rcf_options,
 int cmd_info(const std::string& db_path, bool json) {
   const auto db = smr::Database::open(db_path, {std::size_t{16} << 20});
   nlohmann::json meta = nlohmann::json::parse(db->meta_json());
-  // DAG depth: longest parent chain, computed in id order (parents have smaller ids).
-  std::vector<std::uint32_t> depth(db->op_count(), 0);
-  std::uint32_t max_depth = 0;
-  for (std::uint64_t i = 1; i < db->op_count(); ++i) {
-    const smr::OpRef op = db->op(smr::OpId{i});
-    for (smr::OpId p : op->parents) depth[i] = std::max(depth[i], depth[p.value] + 1);
-    max_depth = std::max(max_depth, depth[i]);
-  }
+  const std::uint64_t max_depth = meta["counts"]["dag_depth"].get<std::uint64_t>();
   const std::uint64_t vertices = meta["model"]["vertex_count"].get<std::uint64_t>();
   nlohmann::json out = {
       {"path", db_path},
@@ -458,9 +451,9 @@ int cmd_info(const std::string& db_path, bool json) {
   std::printf("source          %s (%dx%d samples)\n", m["source"].get<std::string>().c_str(),
               m["grid_width"].get<int>(), m["grid_height"].get<int>());
   std::printf("builder         %s\n", m["builder"].get<std::string>().c_str());
-  std::printf("ops             %llu (DAG depth %u), %llu triangles, %llu vertices\n",
+  std::printf("ops             %llu (DAG depth %llu), %llu triangles, %llu vertices\n",
               static_cast<unsigned long long>(meta["counts"]["ops"].get<std::uint64_t>()),
-              max_depth,
+              static_cast<unsigned long long>(max_depth),
               static_cast<unsigned long long>(meta["counts"]["triangles"].get<std::uint64_t>()),
               static_cast<unsigned long long>(vertices));
   std::printf("pages           %llu data pages, R-tree of %llu nodes (height %d)\n",

@@ -191,6 +191,17 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
 
   std::uint64_t triangles = 0;
   for (const Op& op : crmr.ops) triangles += op.fragment.size();
+  // DAG depth: the longest parent chain (parents have smaller ids), so `info` need not read
+  // every op.
+  std::vector<std::uint32_t> depth(crmr.ops.size(), 0);
+  std::uint32_t dag_depth = 0;
+  for (const Op& op : crmr.ops) {
+    for (OpId p : op.parents) {
+      if (p.value < op.id.value)  // always, in a valid CRMR (checked on read by verify)
+        depth[op.id.value] = std::max(depth[op.id.value], depth[p.value] + 1);
+    }
+    dag_depth = std::max(dag_depth, depth[op.id.value]);
+  }
   json meta = {
       {"format", "smrdb"},
       {"version", kDatabaseFormat},
@@ -203,7 +214,8 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
        {{"ops", crmr.ops.size()},
         {"triangles", triangles},
         {"pages", plan.leaves.size()},
-        {"rtree_nodes", report.rtree_nodes}}},
+        {"rtree_nodes", report.rtree_nodes},
+        {"dag_depth", dag_depth}}},
       {"bytes",
        {{"pages", report.page_bytes}, {"nodes", report.node_bytes}, {"rtree", report.rtree_bytes}}},
       {"page_bytes_target", options.page_bytes},

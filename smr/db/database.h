@@ -17,6 +17,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
 #include <variant>
 #include <vector>
 
@@ -103,6 +104,11 @@ class Database final : public OpSource, public RcfIndexedSource {
   DatabaseStats stats() const;
   /// Decoded ops of data page `page` (through the cache).
   std::shared_ptr<const std::vector<Op>> page(std::uint64_t page) const;
+  /// Where the op locators (table `nodes`) say op `id` is: its data page and slot. Reads no page.
+  std::pair<std::uint64_t, std::uint32_t> locator(OpId id) const {
+    const Locator l = locate(id);
+    return {l.page, l.slot};
+  }
   /// Forgets every cached page (for cold measurements).
   void clear_cache() const;
 

@@ -3,6 +3,8 @@
 #include <map>
 #include <optional>
 
+#include <nlohmann/json.hpp>
+
 #include "smr/db/database.h"
 #include "smr/db/page.h"
 #include "storage/checksum.h"
@@ -103,17 +105,22 @@ VerifyReport verify_database(const std::string& path, const std::function<void(d
     fault(std::to_string(unseen) + " ops (the first: op " + std::to_string(first_unseen) +
           ") are " + (every_page ? "in no page" : "in no readable page"));
   }
-  // Locators.
+  // Locators: each must give the page and slot the op was found in (no page is decoded again).
   for (std::uint64_t i = 0; i < n; ++i) {
     if (facts[i].seen == 0) continue;
     try {
-      const OpRef op = db->op(OpId{i});
-      if (op->id.value != i) fault("nodes: op " + std::to_string(i) + " resolves to another op");
+      const auto [page, slot] = db->locator(OpId{i});
+      if (page != facts[i].page || slot != facts[i].slot) {
+        fault("nodes/" + std::to_string(i / kOpsPerLocatorBlock) + ": op " + std::to_string(i) +
+              " is located at page " + std::to_string(page) + " slot " + std::to_string(slot) +
+              ", it is in page " + std::to_string(facts[i].page) + " slot " +
+              std::to_string(facts[i].slot));
+      }
     } catch (const Error& e) {
       fault(e.what());
       i = (i / kOpsPerLocatorBlock + 1) * kOpsPerLocatorBlock - 1;  // one fault per block
     }
-    if (i % 4096 == 0) db->clear_cache();
+    if (i % 65536 == 0) db->clear_cache();
   }
   if (progress) progress(0.85);
   // The DAG both ways, and PreF against the killers (only when every op was read).
@@ -126,11 +133,30 @@ VerifyReport verify_database(const std::string& path, const std::function<void(d
   std::sort(down.begin(), down.end());
   std::sort(up.begin(), up.end());
   if (down != up) fault("DAG: parents and children lists disagree");
+  bool ordered = true;
   for (const auto& [parent, child] : down) {
     if (parent >= child || child >= n) {
       fault("DAG: op " + std::to_string(parent) + " has child " + std::to_string(child));
+      ordered = false;
       break;
     }
+  }
+  // The DAG depth meta records (the longest parent chain), from the edges just checked.
+  if (every_page && ordered) {
+    std::sort(down.begin(), down.end(),
+              [](const auto& a, const auto& b) { return a.second < b.second; });
+    std::vector<std::uint32_t> depth(n, 0);
+    std::uint32_t dag_depth = 0;
+    for (const auto& [parent, child] : down) {
+      depth[child] = std::max(depth[child], depth[parent] + 1);
+      dag_depth = std::max(dag_depth, depth[child]);
+    }
+    const auto meta = nlohmann::json::parse(db->meta_json());
+    const auto recorded = meta["counts"].find("dag_depth");
+    if (recorded == meta["counts"].end() || *recorded != dag_depth)
+      fault("meta: DAG depth " +
+            (recorded == meta["counts"].end() ? std::string("missing") : recorded->dump()) +
+            ", the DAG's is " + std::to_string(dag_depth));
   }
   std::uint64_t killed = 0;
   for (const OpFacts& f : facts) {
