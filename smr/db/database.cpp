@@ -24,6 +24,9 @@ using storage::Table;
 namespace {
 
 constexpr std::uint64_t kRtreeHeaderKey = std::numeric_limits<std::uint64_t>::max();
+// A cached value's own cost beyond its payload: the shared_ptr's block holding the variant and the
+// cache's list and map nodes.
+constexpr std::size_t kCacheItemOverhead = 160;
 constexpr std::uint64_t kReleaseEveryBytes = std::uint64_t{16} << 20;
 
 index::Box to_index(const Box3& b) {
@@ -307,14 +310,14 @@ storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table,
   }
   loaded.bytes_read = raw.size();
   if (table == Table::kRtree) {
-    loaded.charged_bytes = raw.size() + 64;
+    loaded.charged_bytes = kCacheItemOverhead + heap_block_bytes(raw.capacity());
     rtree_bytes_read_.fetch_add(raw.size());
     loaded.value = std::make_shared<const CacheItem>(std::move(raw));
     nodes_read_.fetch_add(1);
   } else if (table == Table::kPages) {
     const ByteView payload = storage::unseal(raw, storage::table_name(table), key_text(id));
     std::vector<Op> ops = decode_page(payload, grid_, path() + ": " + name);
-    std::size_t bytes = sizeof(CacheItem) + ops.capacity() * sizeof(Op);
+    std::size_t bytes = kCacheItemOverhead + heap_block_bytes(ops.capacity() * sizeof(Op));
     for (const Op& op : ops) bytes += op_memory_bytes(op) - sizeof(Op);
     loaded.charged_bytes = bytes;
     loaded.value = std::make_shared<const CacheItem>(std::move(ops));
@@ -334,7 +337,7 @@ storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table,
       l.slot = std::uint32_t(r.varint());
     }
     r.expect_end();
-    loaded.charged_bytes = sizeof(CacheItem) + locs.capacity() * sizeof(Locator);
+    loaded.charged_bytes = kCacheItemOverhead + heap_block_bytes(locs.capacity() * sizeof(Locator));
     loaded.value = std::make_shared<const CacheItem>(std::move(locs));
   }
   maybe_release();

@@ -324,12 +324,20 @@ std::vector<Op> decode_page(ByteView page, const QuantGrid& grid, const std::str
   return ops;
 }
 
+std::size_t heap_block_bytes(std::size_t bytes) {
+  return bytes == 0 ? 0 : std::max<std::size_t>(32, (bytes + 8 + 15) & ~std::size_t{15});
+}
+
+namespace {
+template <class T>
+std::size_t heap_of(const std::vector<T>& v) {
+  return heap_block_bytes(v.capacity() * sizeof(T));
+}
+}  // namespace
+
 std::size_t op_memory_bytes(const Op& op) {
-  return sizeof(Op) + op.vertices.capacity() * sizeof(Vertex) +
-         op.fragment.capacity() * sizeof(FragmentTriangle) + op.pre.capacity() * sizeof(TriRef) +
-         op.pre_tris.capacity() * sizeof(PreTriangle) +
-         op.coarser.capacity() * sizeof(CoarserLink) +
-         (op.parents.capacity() + op.children.capacity()) * sizeof(OpId);
+  return sizeof(Op) + heap_of(op.vertices) + heap_of(op.fragment) + heap_of(op.pre) +
+         heap_of(op.pre_tris) + heap_of(op.coarser) + heap_of(op.parents) + heap_of(op.children);
 }
 
 }  // namespace smr

@@ -35,5 +35,8 @@ std::vector<Op> decode_page(storage::ByteView page, const QuantGrid& grid,
 
 /// Heap bytes held by an op (what the page cache charges for it).
 std::size_t op_memory_bytes(const Op& op);
+/// What a heap block of `bytes` really takes (glibc malloc: an 8-byte header, 16-byte granules,
+/// 32 bytes at least). Charging a cache only the requested bytes let it hold ~1.7x its budget.
+std::size_t heap_block_bytes(std::size_t bytes);
 
 }  // namespace smr

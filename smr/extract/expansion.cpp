@@ -332,8 +332,14 @@ class Expander {
 
 Extraction run_expansion(const OpSource& source, std::span<const OpId> x, bool reduced,
                          const ExpansionOptions& options) {
-  Expander e(source, reduced, options);
-  Extraction out = e.run(x);
+  Extraction out;
+  {
+    Expander e(source, reduced, options);  // its front and maps are freed before the shrink
+    out = e.run(x);
+  }
+  // The result outlives the extraction: drop the vectors' doubling slack (up to half of them).
+  out.triangles.shrink_to_fit();
+  out.fan_starts.shrink_to_fit();
   out.stats.triangles = out.triangles.size();
   return out;
 }

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -65,7 +66,15 @@ std::vector<TriRef> set_formula(const OpSource& source, std::span<const OpId> x)
 
 TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles, bool keep_void) {
   TriangleMesh mesh;
+  // Sized once: a triangulated surface has about half as many vertices as triangles (Euler),
+  // plus its boundary; growing by doubling would hold up to twice the output for a moment.
+  const std::size_t n = triangles.size();
+  const std::size_t vertices = n / 2 + 4 * static_cast<std::size_t>(std::sqrt(double(n))) + 16;
+  mesh.triangles.reserve(n);
+  mesh.triangle_values.reserve(n);
+  mesh.positions.reserve(vertices);
   std::unordered_map<std::uint64_t, std::uint32_t> index;
+  index.reserve(vertices);
   for (const TriRef& ref : triangles) {
     const OpRef op_ref = source.op(ref.op);
     const Op& op = *op_ref;
