@@ -411,15 +411,15 @@ std::vector<OpId> Database::not_completely_finer(const Rcf& rcf) const {
   std::vector<OpId> x;
   std::shared_ptr<const std::vector<Op>> ops;
   std::uint64_t current = ~0ull;
+  std::size_t slot = 0;  // hits come in slot order within a leaf: one pass over each page
   for (const index::Hit& h : rcf_hits(rcf)) {
     if (h.leaf != current) {
       current = h.leaf;
       ops = page(h.leaf);
+      slot = 0;
     }
-    const Op* found = nullptr;
-    for (const Op& o : *ops) {
-      if (o.id.value == h.id) found = &o;
-    }
+    while (slot < ops->size() && (*ops)[slot].id.value != h.id) ++slot;
+    const Op* found = slot < ops->size() ? &(*ops)[slot] : nullptr;
     if (found == nullptr)
       throw Error(ErrorKind::kCorrupt, path() + ": pages/" + key_text(h.leaf) + " lacks op " +
                                            key_text(h.id) + " of its R-tree leaf");
