@@ -1,5 +1,7 @@
 // smrdb: the command line. Parses options, reports progress on stderr, prints JSON on request.
 // Nothing below tools/ prints or exits; errors arrive here as smr::Error (exit 1, or 2 for bugs).
+#include <malloc.h>
+
 #include <charconv>
 #include <chrono>
 #include <cmath>
@@ -522,6 +524,13 @@ int cmd_synth(int width, int height, std::uint64_t seed, double range, double sp
 }  // namespace
 
 int main(int argc, char** argv) {
+#if defined(__GLIBC__)
+  // Blocks of 128 KiB and more come straight from mmap and go back to the system when freed.
+  // glibc otherwise raises this threshold after the first such free, and the large buffers an
+  // extraction grows and frees (output, hash tables) then stay in the heap: a whole-database
+  // extraction of 1.2 M triangles peaked at 264 MiB, 232 MiB with the threshold fixed.
+  mallopt(M_MMAP_THRESHOLD, 128 * 1024);
+#endif
   CLI::App app{"smrdb: selective mesh refinement database for terrains"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "smrdb 0.1.0");

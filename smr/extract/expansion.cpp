@@ -13,8 +13,8 @@
 #include <algorithm>
 #include <cmath>
 #include <unordered_map>
-#include <unordered_set>
 
+#include "smr/core/id_map.h"
 #include "smr/core/invariants.h"
 #include "storage/error.h"
 
@@ -87,6 +87,35 @@ class DomainIndex {
   std::unordered_map<std::size_t, std::vector<std::size_t>> cells_;
 };
 
+// A vector grown in fixed chunks, then moved into one exactly sized vector chunk by chunk: a
+// doubling vector holds 1.5x its final size while it reallocates (50 MiB for a 1.2 M-triangle
+// output), this at most the final size plus one chunk.
+template <class T>
+class ChunkedVector {
+ public:
+  std::size_t size() const { return size_; }
+  void push_back(const T& v) {
+    if (chunks_.empty() || chunks_.back().size() == kChunk) chunks_.emplace_back().reserve(kChunk);
+    chunks_.back().push_back(v);
+    ++size_;
+  }
+  void move_to(std::vector<T>& out) {
+    out.clear();
+    out.reserve(size_);
+    for (std::vector<T>& c : chunks_) {
+      out.insert(out.end(), c.begin(), c.end());
+      std::vector<T>().swap(c);
+    }
+    chunks_.clear();
+    size_ = 0;
+  }
+
+ private:
+  static constexpr std::size_t kChunk = 1 << 14;
+  std::vector<std::vector<T>> chunks_;
+  std::size_t size_ = 0;
+};
+
 class Expander {
  public:
   Expander(const OpSource& source, bool reduced, const ExpansionOptions& options)
@@ -96,7 +125,7 @@ class Expander {
 
   Extraction run(std::span<const OpId> x) {
     for (OpId id : x) {
-      if (in_x_.insert(id.value).second) queue_.push_back(id.value);
+      if (in_x_.insert(id.value)) queue_.push_back(id.value);
     }
     std::make_heap(queue_.begin(), queue_.end());
     out_.stats.x = in_x_.size();
@@ -107,10 +136,13 @@ class Expander {
       infill(id);
       ++out_.stats.ops_visited;
     }
+    const bool stopped = budget_reached();
+    triangles_.move_to(out_.triangles);
     out_.stats.x_plus = in_x_.size();
-    for (std::uint64_t v : in_x_) out_.x.push_back(OpId{v});
+    out_.x.reserve(in_x_.size());
+    in_x_.for_each([&](std::uint64_t v, std::uint8_t) { out_.x.push_back(OpId{v}); });
     std::sort(out_.x.begin(), out_.x.end(), std::greater<>());
-    if (!budget_reached() && !front_.empty()) {
+    if (!stopped && !front_.empty()) {
       throw_internal("surface expansion ended with " + std::to_string(front_.size()) +
                      " edges left on the active front");
     }
@@ -123,7 +155,7 @@ class Expander {
 
  private:
   bool budget_reached() const {
-    return options_.max_triangles != 0 && out_.triangles.size() >= options_.max_triangles;
+    return options_.max_triangles != 0 && triangles_.size() >= options_.max_triangles;
   }
 
   // Infill (Fig. 5.6).
@@ -141,7 +173,7 @@ class Expander {
     bool starting = !on_front;
     if (starting) {
       for (OpId c : op.children) {
-        if (in_x_.count(c.value)) {
+        if (in_x_.contains(c.value)) {
           starting = false;
           break;
         }
@@ -212,7 +244,7 @@ class Expander {
     if (link == nullptr) return;  // model boundary
     EdgeRef target = link->coarser;
     if (!reduced_) {
-      while (!in_x_.count(target.tri.op.value)) {
+      while (!in_x_.contains(target.tri.op.value)) {
         const OpRef q_ref = source_.op(target.tri.op);
         const Op& q = *q_ref;
         const CoarserLink* next = q.coarser_link(target.tri.index, target.edge);
@@ -222,7 +254,7 @@ class Expander {
         }
         target = next->coarser;
       }
-    } else if (in_x_.insert(target.tri.op.value).second) {
+    } else if (in_x_.insert(target.tri.op.value)) {
       queue_.push_back(target.tri.op.value);
       std::push_heap(queue_.begin(), queue_.end());
     }
@@ -247,7 +279,7 @@ class Expander {
   void emit(const Op& op, std::uint32_t i, int entry_edge, std::vector<FrontKey>& stack) {
     const FragmentTriangle& t = op.fragment[i];
     expanded_[i] = 1;
-    out_.triangles.push_back({op.id, i});
+    triangles_.push_back({op.id, i});
     if (t.is_void()) ++out_.stats.void_triangles;
     track_fan(op, i, entry_edge);
     if (reduced_) domain_->add(grid_triangle(op, t));
@@ -296,7 +328,7 @@ class Expander {
     if (continues) {
       ++fan_len_;
     } else {
-      out_.fan_starts.push_back(static_cast<std::uint32_t>(out_.triangles.size() - 1));
+      out_.fan_starts.push_back(static_cast<std::uint32_t>(triangles_.size() - 1));
       ++out_.stats.fans;
       fan_len_ = 1;
       fan_apex_n_ = 0;
@@ -314,7 +346,8 @@ class Expander {
   const bool reduced_;
   const ExpansionOptions options_;
   Extraction out_;
-  std::unordered_set<std::uint64_t> in_x_;
+  ChunkedVector<TriRef> triangles_;   // out_.triangles while expanding
+  IdMap<std::uint8_t> in_x_;          // X, then X+ (a set: the values are unused)
   std::vector<std::uint64_t> queue_;  // max-heap of op ids: finest first
   std::unordered_map<FrontKey, FrontEntry, FrontKeyHash> front_;
   std::unordered_map<std::uint64_t, std::vector<FrontKey>> stacks_;
@@ -337,8 +370,7 @@ Extraction run_expansion(const OpSource& source, std::span<const OpId> x, bool r
     Expander e(source, reduced, options);  // its front and maps are freed before the shrink
     out = e.run(x);
   }
-  // The result outlives the extraction: drop the vectors' doubling slack (up to half of them).
-  out.triangles.shrink_to_fit();
+  // The result outlives the extraction: drop the fan list's doubling slack.
   out.fan_starts.shrink_to_fit();
   out.stats.triangles = out.triangles.size();
   return out;

@@ -1,0 +1,82 @@
+// A flat hash map from 64-bit ids (OpId values, vertex ids) to small values: open addressing with
+// linear probing, a power-of-two capacity and a load of at most 1/2. Extraction keeps one entry
+// per op of X, which on a whole-database output is every op: std::unordered_map spends ~40-50
+// bytes per entry on nodes and buckets, this map 2 x (8 + sizeof(V)) at worst, in two arrays.
+// No erase (extraction only adds). The id ~0 is reserved as the empty marker.
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "smr/core/ids.h"  // mix64
+
+namespace smr {
+
+template <class V>
+class IdMap {
+ public:
+  static constexpr std::uint64_t kEmpty = ~std::uint64_t{0};
+
+  std::size_t size() const { return size_; }
+  bool empty() const { return size_ == 0; }
+
+  /// The value of `id`, inserted as V{} when absent. `id` must not be kEmpty.
+  V& operator[](std::uint64_t id) {
+    if (2 * (size_ + 1) > keys_.size()) grow();
+    std::size_t i = slot(id);
+    while (keys_[i] != kEmpty && keys_[i] != id) i = (i + 1) & mask_;
+    if (keys_[i] == kEmpty) {
+      keys_[i] = id;
+      values_[i] = V{};
+      ++size_;
+    }
+    return values_[i];
+  }
+  /// Inserts `id` (with V{}); false if it was there already.
+  bool insert(std::uint64_t id) {
+    const std::size_t before = size_;
+    (*this)[id];
+    return size_ != before;
+  }
+  const V* find(std::uint64_t id) const {
+    if (size_ == 0) return nullptr;
+    for (std::size_t i = slot(id);; i = (i + 1) & mask_) {
+      if (keys_[i] == id) return &values_[i];
+      if (keys_[i] == kEmpty) return nullptr;
+    }
+  }
+  bool contains(std::uint64_t id) const { return find(id) != nullptr; }
+  /// Calls f(id, value) for every entry, in no particular order.
+  template <class F>
+  void for_each(F&& f) const {
+    for (std::size_t i = 0; i < keys_.size(); ++i) {
+      if (keys_[i] != kEmpty) f(keys_[i], values_[i]);
+    }
+  }
+
+ private:
+  std::size_t slot(std::uint64_t id) const { return std::size_t(mix64(id)) & mask_; }
+  void grow() {
+    std::vector<std::uint64_t> keys(std::max<std::size_t>(16, 2 * keys_.size()), kEmpty);
+    std::vector<V> values(keys.size());
+    keys.swap(keys_);
+    values.swap(values_);
+    mask_ = keys_.size() - 1;
+    for (std::size_t i = 0; i < keys.size(); ++i) {
+      if (keys[i] == kEmpty) continue;
+      std::size_t j = slot(keys[i]);
+      while (keys_[j] != kEmpty) j = (j + 1) & mask_;
+      keys_[j] = keys[i];
+      values_[j] = values[i];
+    }
+  }
+
+  std::vector<std::uint64_t> keys_;
+  std::vector<V> values_;
+  std::size_t mask_ = 0;
+  std::size_t size_ = 0;
+};
+
+}  // namespace smr
