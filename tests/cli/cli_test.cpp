@@ -2,6 +2,8 @@
 // wrong; good runs write the mesh, the picture and JSON statistics.
 #include <gtest/gtest.h>
 
+#include "tests/support/process.h"
+
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -22,20 +24,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct CliRun {
-  int code;
-  std::string out;  // stdout and stderr together
-};
+using CliRun = smr::test::CommandResult;
 
 CliRun smrdb(const std::string& args) {
-  const std::string cmd = std::string(SMRDB_BIN) + " " + args + " 2>&1";
-  CliRun r{0, {}};
-  FILE* p = popen(cmd.c_str(), "r");
-  std::array<char, 4096> buf{};
-  while (std::size_t n = std::fread(buf.data(), 1, buf.size(), p)) r.out.append(buf.data(), n);
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
+  return smr::test::run_command(std::string(SMRDB_BIN) + " " + args);
 }
 
 class Cli : public ::testing::Test {

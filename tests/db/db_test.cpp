@@ -16,6 +16,7 @@
 #include "smr/extract/extract.h"
 #include "storage/error.h"
 #include "tests/support/datasets.h"
+#include "tests/support/files.h"
 #include "tests/support/oracles.h"
 #include "tests/support/rcf_spread.h"
 
@@ -23,29 +24,12 @@ namespace smr {
 namespace {
 
 namespace fs = std::filesystem;
+using test::read_file;
 
-class TempDir {
- public:
-  TempDir() {
-    path_ = fs::temp_directory_path() /
-            ("smrdb-db-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter_++));
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  std::string file(const std::string& name) const { return (path_ / name).string(); }
-
- private:
-  static inline int counter_ = 0;
-  fs::path path_;
+// A scratch directory for this suite.
+struct TempDir : test::TempDir {
+  TempDir() : test::TempDir("smrdb-db-test") {}
 };
-
-std::string read_file(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
 
 // Ops read from disk equal the (quantized) ops in memory, field for field.
 void expect_same_ops(const Crmr& m, const Database& db) {

@@ -21,40 +21,19 @@
 #include "storage/error.h"
 #include "storage/lmdb_env.h"
 #include "tests/support/datasets.h"
+#include "tests/support/files.h"
 
 namespace smr {
 namespace {
 
 namespace fs = std::filesystem;
 using storage::Table;
+using test::read_file;
+using test::write_file;
 
-class TempDir {
- public:
-  TempDir() {
-    path_ = fs::temp_directory_path() /
-            ("smrdb-reliability-" + std::to_string(::getpid()) + "-" + std::to_string(counter_++));
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  std::string file(const std::string& name) const { return (path_ / name).string(); }
-
- private:
-  static inline int counter_ = 0;
-  fs::path path_;
+struct TempDir : test::TempDir {
+  TempDir() : test::TempDir("smrdb-reliability") {}
 };
-
-std::string read_file(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-void write_file(const std::string& path, const std::string& bytes) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-}
 
 // The small database every test here reads: fbm129 in pages of about 4 KiB, so that each table
 // holds several values (pages, locator blocks, R-tree levels).
