@@ -2,11 +2,13 @@
 // every status code goes through one mapping to smr::Error.
 #include "storage/lmdb_env.h"
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <utility>
+#include <vector>
 
 #include <fcntl.h>
 #include <lmdb.h>
@@ -35,6 +37,7 @@ std::size_t index_of(Table table) {
     case MDB_VERSION_MISMATCH:
     case MDB_INCOMPATIBLE:
     case MDB_BAD_VALSIZE:
+    case MDB_CURSOR_FULL:  // a tree deeper than LMDB's cursor stack: a damaged branch page
       throw_corrupt(message);
     default:
       if (rc > 0) throw_io(message);  // an errno value (LMDB's own codes are negative)
@@ -68,6 +71,292 @@ std::string quoted(std::string_view text) {
   return out;
 }
 
+// ---------------------------------------------------------------------------------------------
+// LMDB's file format, checked before LMDB trusts it
+//
+// LMDB 0.9 trusts the file it maps: a damaged meta page or B-tree page makes it divide by zero,
+// read past the end of the mapping, or follow a null pointer (a leaf node flagged F_DUPDATA in a
+// table without MDB_DUPSORT) — a crash, not an error. Database files never change, so every page
+// LMDB is about to read is checked here once, the first time: the meta pages and the table of
+// tables (LMDB's main table, which names the five) when the file is opened, the pages on the way
+// to a key before each get, every page of a table before a cursor walks it. LMDB then reads only
+// checked pages, and what it returns is compared with what the check found. Layout: mdb.c's
+// MDB_meta, MDB_page, MDB_node and MDB_db of 64-bit builds, little-endian.
+
+static_assert(sizeof(void*) == 8 && sizeof(std::size_t) == 8, "LMDB layout of 64-bit builds");
+static_assert(MDB_VERSION_MAJOR == 0 && MDB_VERSION_MINOR == 9, "LMDB 0.9 file format");
+
+constexpr std::uint16_t kBranchPage = 0x01, kLeafPage = 0x02, kOverflowPage = 0x04;  // P_*
+constexpr std::uint16_t kMetaPage = 0x08;
+constexpr std::uint16_t kBigData = 0x01, kSubData = 0x02;  // F_BIGDATA, F_SUBDATA
+constexpr std::size_t kPageHeader = 16, kNodeHeader = 8;   // PAGEHDRSZ, NODESIZE
+constexpr std::size_t kDbRecord = 48;                      // sizeof(MDB_db)
+constexpr std::size_t kDbFlags = 4, kDbDepth = 6, kDbRoot = 40;
+constexpr std::uint64_t kNoPage = ~std::uint64_t{0};  // P_INVALID: an empty tree
+constexpr std::uint64_t kMaxDepth = 32;               // CURSOR_STACK
+constexpr std::uint64_t kMinPageSize = 512, kMaxPageSize = 65536;
+constexpr std::uint32_t kMagic = 0xBEEFC0DE, kDataVersion = 1;
+// In a meta page: MDB_meta after the page header; the free table's md_pad is the page size.
+constexpr std::size_t kMetaMagic = 16, kMetaVersion = 20, kMetaPageSize = 40;
+constexpr std::size_t kMetaMainDb = 88, kMetaLastPgno = 136, kMetaTxnId = 144, kMetaBytes = 152;
+
+std::uint64_t read_le(const std::uint8_t* p, int bytes) {
+  std::uint64_t v = 0;
+  for (int i = bytes - 1; i >= 0; --i) v = (v << 8) | p[i];
+  return v;
+}
+std::uint16_t u16(const std::uint8_t* p) {
+  return static_cast<std::uint16_t>(read_le(p, 2));
+}
+
+// LMDB's default key order (mdb_cmp_memn): bytewise, a prefix first.
+int compare_keys(ByteView a, ByteView b) {
+  const std::size_t common = std::min(a.size(), b.size());
+  const int c = common == 0 ? 0 : std::memcmp(a.data(), b.data(), common);
+  if (c != 0 || a.size() == b.size()) return c;
+  return a.size() < b.size() ? -1 : 1;
+}
+
+// One node of a checked page.
+struct Node {
+  ByteView key;
+  std::uint16_t flags = 0;
+  std::uint64_t size = 0;   // leaf: the value's size
+  std::uint64_t child = 0;  // branch: the child page
+  const std::uint8_t* data = nullptr;
+};
+
+std::size_t node_count(const std::uint8_t* page) {
+  return (u16(page + 12) - kPageHeader) / 2;
+}
+
+Node node_at(const std::uint8_t* page, std::size_t i) {
+  const std::uint8_t* n = page + u16(page + kPageHeader + 2 * i);
+  Node node;
+  node.key = ByteView(n + kNodeHeader, u16(n + 6));
+  node.flags = u16(n + 4);
+  node.size = read_le(n, 4);   // mn_lo | mn_hi << 16
+  node.child = read_le(n, 6);  // mn_lo | mn_hi << 16 | mn_flags << 32
+  node.data = n + kNodeHeader + node.key.size();
+  return node;
+}
+
+bool is_branch(const std::uint8_t* page) {
+  return u16(page + 10) == kBranchPage;
+}
+
+// LMDB's way down a branch page (mdb_page_search_root): the last child whose key, from the
+// second on, is not greater than `key`.
+std::size_t child_index(const std::uint8_t* page, ByteView key) {
+  std::size_t lo = 1, hi = node_count(page);  // the answer is in [lo - 1, hi - 1]
+  while (lo < hi) {
+    const std::size_t mid = (lo + hi) / 2;
+    if (compare_keys(node_at(page, mid).key, key) <= 0) {
+      lo = mid + 1;
+    } else {
+      hi = mid;
+    }
+  }
+  return lo - 1;
+}
+
+// Page `pgno` of a file of `pages` pages of `page_size` bytes as a B-tree page LMDB may read:
+// flags, bounds, every node inside the page, values inside the file, child pages that exist,
+// keys in order and inside the range [lo, hi) its parent gives it (nullptr: open). `tables`:
+// the table of tables, whose records must be MDB_db records. Returns what is wrong, or "".
+std::string check_tree_page(const std::uint8_t* page, std::uint64_t pgno, std::uint64_t page_size,
+                            std::uint64_t pages, bool tables, const ByteView* lo,
+                            const ByteView* hi) {
+  if (read_le(page, 8) != pgno) return "it says it is page " + std::to_string(read_le(page, 8));
+  const std::uint16_t flags = u16(page + 10);
+  if (flags != kBranchPage && flags != kLeafPage) {
+    return "flags " + std::to_string(flags) + ", not a branch or leaf page";
+  }
+  const bool branch = flags == kBranchPage;
+  const std::size_t lower = u16(page + 12), upper = u16(page + 14);
+  if (lower < kPageHeader || (lower - kPageHeader) % 2 != 0 || lower > upper || upper > page_size) {
+    return "free space from " + std::to_string(lower) + " to " + std::to_string(upper);
+  }
+  const std::size_t n = node_count(page);
+  if (n < (branch ? 2u : 1u)) return std::to_string(n) + " nodes";
+  ByteView previous;
+  for (std::size_t i = 0; i < n; ++i) {
+    auto bad = [i](const std::string& what) { return "node " + std::to_string(i) + what; };
+    const std::size_t at = u16(page + kPageHeader + 2 * i);
+    if (at < upper || at % 2 != 0 || at + kNodeHeader > page_size) {
+      return bad(" at offset " + std::to_string(at));
+    }
+    const Node node = node_at(page, i);
+    const std::size_t data_at = at + kNodeHeader + node.key.size();
+    if (data_at > page_size) return bad(": a key of " + std::to_string(node.key.size()) + " bytes");
+    if (branch) {
+      if (node.child < 2 || node.child >= pages || node.child == pgno) {
+        return bad(": child page " + std::to_string(node.child));
+      }
+      if (i == 0) continue;  // LMDB never reads the first key of a branch page
+    } else if (node.flags == kBigData) {
+      if (data_at + 8 > page_size) return bad(": no room for its overflow page number");
+      const std::uint64_t first = read_le(node.data, 8);
+      if (first < 2 || first >= pages || node.size > (pages - first) * page_size - kPageHeader) {
+        return bad(": a value of " + std::to_string(node.size) + " bytes at page " +
+                   std::to_string(first));
+      }
+    } else if (node.flags == kSubData && tables) {
+      if (node.size != kDbRecord || data_at + kDbRecord > page_size) {
+        return bad(": a table record of " + std::to_string(node.size) + " bytes");
+      }
+    } else if (node.flags != 0 || data_at + node.size > page_size) {
+      return bad(": flags " + std::to_string(node.flags) + ", a value of " +
+                 std::to_string(node.size) + " bytes");
+    }
+    if ((lo != nullptr && compare_keys(node.key, *lo) < 0) ||
+        (hi != nullptr && compare_keys(node.key, *hi) >= 0)) {
+      return bad(": its key is outside the range of the parent page");
+    }
+    if (i > (branch ? 1u : 0u) && compare_keys(previous, node.key) >= 0) {
+      return bad(": keys out of order");
+    }
+    previous = node.key;
+  }
+  return {};
+}
+
+// A meta page as mdb_env_open reads it.
+struct MetaPage {
+  bool valid = false;  // flagged P_META, with LMDB's magic and data version
+  std::uint64_t page_size = 0, last_pgno = 0, txnid = 0;
+  std::uint8_t main[kDbRecord] = {};  // the MDB_db record of the table of tables
+};
+
+MetaPage read_meta(int fd, std::uint64_t offset) {
+  std::uint8_t b[kMetaBytes];
+  MetaPage m;
+  if (::pread(fd, b, sizeof b, static_cast<off_t>(offset)) != static_cast<ssize_t>(sizeof b)) {
+    return m;
+  }
+  m.valid = (u16(b + 10) & kMetaPage) != 0 && read_le(b + kMetaMagic, 4) == kMagic &&
+            read_le(b + kMetaVersion, 4) == kDataVersion;
+  m.page_size = read_le(b + kMetaPageSize, 4);
+  m.last_pgno = read_le(b + kMetaLastPgno, 8);
+  m.txnid = read_le(b + kMetaTxnId, 8);
+  std::memcpy(m.main, b + kMetaMainDb, kDbRecord);
+  return m;
+}
+
+bool good_page_size(std::uint64_t size) {
+  return size >= kMinPageSize && size <= kMaxPageSize && (size & (size - 1)) == 0;
+}
+
+// The root page and depth of a tree, from its MDB_db record.
+struct Tree {
+  std::uint64_t root = kNoPage;
+  std::uint64_t depth = 0;
+};
+
+std::string check_tree_record(const std::uint8_t* db, std::uint64_t pages, Tree& tree) {
+  tree.root = read_le(db + kDbRoot, 8);
+  tree.depth = u16(db + kDbDepth);
+  if (u16(db + kDbFlags) != 0) {
+    // smrdb's tables are plain ones: with MDB_DUPSORT, MDB_INTEGERKEY... LMDB would read the
+    // pages another way.
+    return "flags " + std::to_string(u16(db + kDbFlags));
+  }
+  if (tree.root == kNoPage
+          ? tree.depth != 0
+          : tree.root < 2 || tree.root >= pages || tree.depth < 1 || tree.depth > kMaxDepth) {
+    return "root page " + std::to_string(tree.root) + ", depth " + std::to_string(tree.depth);
+  }
+  return {};
+}
+
+// What mdb_env_open will trust, read as it reads it: meta page 0 at offset 0, meta page 1 at
+// meta 0's page size, the newer one (meta 0 on a tie) giving the page size, the last page and
+// the table of tables; then that table's root page, which mdb_dbi_open reads. A file LMDB itself
+// rejects (no meta page, a wrong magic or version) is left to it: page_size stays 0.
+struct OpenCheck {
+  std::uint64_t page_size = 0, pages = 0;  // pages: last page + 1
+  std::uint64_t main_root = kNoPage;
+  std::vector<std::uint8_t> main_page;  // the table of tables (a leaf), when not empty
+  Tree trees[kTables];
+};
+
+OpenCheck check_before_open(const std::string& path, std::uint64_t file_bytes) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw_io(path + ": cannot open database: " + errno_text(errno));
+  struct Closer {
+    int fd;
+    ~Closer() { ::close(fd); }
+  } closer{fd};
+  OpenCheck out;
+  const MetaPage m0 = read_meta(fd, 0);
+  if (!m0.valid) return out;
+  if (!good_page_size(m0.page_size)) {
+    throw_corrupt(path + ": damaged LMDB meta page 0: page size " + std::to_string(m0.page_size));
+  }
+  const MetaPage m1 = read_meta(fd, m0.page_size);
+  if (!m1.valid) return out;
+  const MetaPage& m = m1.txnid > m0.txnid ? m1 : m0;
+  const std::string meta = path + ": damaged LMDB meta page " + (&m == &m1 ? "1" : "0");
+  if (m1.page_size != m0.page_size) {
+    throw_corrupt(path + ": damaged LMDB meta page: pages 0 and 1 disagree on the page size (" +
+                  std::to_string(m0.page_size) + ", " + std::to_string(m1.page_size) + ")");
+  }
+  if (m.last_pgno >= file_bytes / m.page_size) {
+    throw_corrupt(path + ": truncated database or damaged LMDB meta page: " +
+                  std::to_string(file_bytes) + " bytes, the meta page names page " +
+                  std::to_string(m.last_pgno) + " of " + std::to_string(m.page_size) + " bytes");
+  }
+  out.page_size = m.page_size;
+  out.pages = m.last_pgno + 1;
+  Tree main;
+  if (const std::string bad = check_tree_record(m.main, out.pages, main); !bad.empty()) {
+    throw_corrupt(meta + ": the table of tables has " + bad);
+  }
+  out.main_root = main.root;
+  if (main.root == kNoPage) return out;  // no tables: mdb_dbi_open reports the first missing one
+  const std::string page =
+      path + ": damaged LMDB page " + std::to_string(main.root) + " (the table of tables)";
+  out.main_page.resize(out.page_size);
+  if (::pread(fd, out.main_page.data(), out.page_size,
+              static_cast<off_t>(main.root * out.page_size)) !=
+      static_cast<ssize_t>(out.page_size)) {
+    throw_io(path + ": cannot read page " + std::to_string(main.root) + ": " + errno_text(errno));
+  }
+  const std::uint8_t* p = out.main_page.data();
+  if (const std::string bad =
+          check_tree_page(p, main.root, out.page_size, out.pages, true, nullptr, nullptr);
+      !bad.empty()) {
+    throw_corrupt(page + ": " + bad);
+  }
+  if (is_branch(p) || main.depth != 1) {
+    throw_corrupt(page + ": more than one page, not an smrdb database");
+  }
+  for (std::size_t i = 0; i < node_count(p); ++i) {
+    const Node node = node_at(p, i);
+    for (Table table : kAllTables) {
+      const std::string_view name = table_name(table);
+      if (node.flags != kSubData || node.key.size() != name.size() ||
+          std::memcmp(node.key.data(), name.data(), name.size()) != 0) {
+        continue;
+      }
+      if (const std::string bad =
+              check_tree_record(node.data, out.pages, out.trees[static_cast<std::size_t>(table)]);
+          !bad.empty()) {
+        throw_corrupt(page + ": table '" + std::string(name) + "' has " + bad);
+      }
+    }
+  }
+  for (std::size_t a = 0; a < kTables; ++a) {
+    for (std::size_t b = a + 1; b < kTables; ++b) {
+      if (out.trees[a].root != kNoPage && out.trees[a].root == out.trees[b].root) {
+        throw_corrupt(page + ": tables '" + std::string(table_name(kAllTables[a])) + "' and '" +
+                      std::string(table_name(kAllTables[b])) + "' have the same root page");
+      }
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 std::string_view table_name(Table table) {
@@ -94,12 +383,115 @@ struct EnvState {
   MDB_dbi dbis[kTables] = {};
   std::uint64_t file_bytes = 0;
   mutable std::atomic<std::uint64_t> bytes_read{0};
+  // The file as LMDB mapped it, and what has been checked of it.
+  const std::uint8_t* map = nullptr;  // page 0; the mapping is file_bytes long
+  std::uint64_t page_size = 0, pages = 0;
+  Tree trees[kTables];
+  // Per page: 0 until it passed check_page, then 1 + the table whose tree holds it.
+  std::unique_ptr<std::atomic<std::uint8_t>[]> owner;
 
   ~EnvState() {
     if (env != nullptr) mdb_env_close(env);
   }
   std::string where(Table table) const {
     return path + ", table '" + std::string(table_name(table)) + "'";
+  }
+  const std::uint8_t* page(std::uint64_t pgno) const { return map + pgno * page_size; }
+
+  // Throws kCorrupt naming the table and page unless `pgno` is a sound page of `table`'s tree
+  // (and of no other table's).
+  void check_page(Table table, std::uint64_t pgno, const ByteView* lo, const ByteView* hi) const {
+    const auto mine = static_cast<std::uint8_t>(index_of(table) + 1);
+    const std::uint8_t seen = owner[pgno].load(std::memory_order_acquire);
+    if (seen == mine) return;
+    std::string bad =
+        seen != 0 ? "it is a page of table '" + std::string(table_name(kAllTables[seen - 1])) + "'"
+                  : check_tree_page(page(pgno), pgno, page_size, pages, false, lo, hi);
+    if (!bad.empty()) {
+      throw_corrupt(where(table) + ": damaged LMDB page " + std::to_string(pgno) + ": " + bad);
+    }
+    owner[pgno].store(mine, std::memory_order_release);
+  }
+
+  // Follows LMDB's search for `key` down `table`'s tree, checking each page on the way, and
+  // returns the key's node, if there is one.
+  std::optional<Node> find(Table table, ByteView key, const std::string& key_text) const {
+    const Tree& tree = trees[index_of(table)];
+    if (tree.root == kNoPage) return std::nullopt;
+    std::uint64_t pgno = tree.root;
+    ByteView lo_key, hi_key;
+    const ByteView *lo = nullptr, *hi = nullptr;
+    for (std::uint64_t depth = 1;; ++depth) {
+      check_page(table, pgno, lo, hi);
+      const std::uint8_t* p = page(pgno);
+      if (!is_branch(p)) {
+        if (depth != tree.depth) break;
+        std::size_t a = 0, b = node_count(p);
+        while (a < b) {
+          const std::size_t mid = (a + b) / 2;
+          const Node node = node_at(p, mid);
+          const int c = compare_keys(node.key, key);
+          if (c == 0) return node;
+          if (c < 0) {
+            a = mid + 1;
+          } else {
+            b = mid;
+          }
+        }
+        return std::nullopt;
+      }
+      if (depth >= tree.depth) break;
+      const std::size_t i = child_index(p, key);
+      if (i > 0) lo_key = node_at(p, i).key, lo = &lo_key;
+      if (i + 1 < node_count(p)) hi_key = node_at(p, i + 1).key, hi = &hi_key;
+      pgno = node_at(p, i).child;
+    }
+    throw_corrupt(where(table) + ", key " + key_text + ": damaged LMDB page " +
+                  std::to_string(pgno) + ": the tree is not " + std::to_string(tree.depth) +
+                  " pages deep there");
+  }
+
+  // Checks every page of `table`'s tree (before a cursor walks it).
+  void check_tree(Table table) const {
+    const Tree& tree = trees[index_of(table)];
+    if (tree.root != kNoPage) check_subtree(table, tree.root, 1, nullptr, nullptr);
+  }
+  void check_subtree(Table table, std::uint64_t pgno, std::uint64_t depth, const ByteView* lo,
+                     const ByteView* hi) const {
+    check_page(table, pgno, lo, hi);
+    const std::uint8_t* p = page(pgno);
+    if (is_branch(p) != (depth < trees[index_of(table)].depth)) {
+      throw_corrupt(where(table) + ": damaged LMDB page " + std::to_string(pgno) +
+                    ": the tree is not " + std::to_string(trees[index_of(table)].depth) +
+                    " pages deep there");
+    }
+    if (!is_branch(p)) return;
+    const std::size_t n = node_count(p);
+    for (std::size_t i = 0; i < n; ++i) {
+      const ByteView first = node_at(p, i).key;
+      const ByteView next = i + 1 < n ? node_at(p, i + 1).key : ByteView();
+      check_subtree(table, node_at(p, i).child, depth + 1, i > 0 ? &first : lo,
+                    i + 1 < n ? &next : hi);
+    }
+  }
+
+  // The value LMDB returned for `node` is the one the check found, and lies in the file; an
+  // overflow value's first page says so. `what()` names the entry.
+  template <class What>
+  void check_value(const Node& node, const MDB_val& v, const What& what) const {
+    const std::uint8_t* expected = node.data;
+    if (node.flags == kBigData) {
+      const std::uint64_t first = read_le(node.data, 8);
+      const std::uint8_t* p = page(first);
+      const std::uint64_t count = (kPageHeader - 1 + node.size) / page_size + 1;  // OVPAGES
+      if (read_le(p, 8) != first || u16(p + 10) != kOverflowPage || read_le(p + 12, 4) != count) {
+        throw_corrupt(what() + ": damaged LMDB overflow page " + std::to_string(first));
+      }
+      expected = p + kPageHeader;
+    }
+    if (v.mv_data != expected || v.mv_size != node.size) {
+      throw_internal(what() + ": LMDB returned another value than its page holds");
+    }
   }
 };
 
@@ -113,6 +505,35 @@ Env::Env(Env&&) noexcept = default;
 Env& Env::operator=(Env&&) noexcept = default;
 Env::~Env() = default;
 
+namespace {
+
+// Where LMDB mapped the file. mdb_env_info's me_mapaddr is not it (that is the address stored in
+// the meta page, 0 unless MDB_FIXEDMAP) and LMDB has no call for it, so it is found from a key
+// whose place in the file is known: the first key of the table of tables (node 0 of its root
+// page, a checked leaf), which LMDB returns as a pointer into the mapping.
+const std::uint8_t* find_mapping(MDB_txn* txn, const OpenCheck& c, const std::string& path) {
+  MDB_dbi main = 0;
+  check(mdb_dbi_open(txn, nullptr, 0, &main), path + ": the table of tables");
+  MDB_cursor* cursor = nullptr;
+  check(mdb_cursor_open(txn, main, &cursor), path + ": the table of tables");
+  MDB_val k{}, v{};
+  const int rc = mdb_cursor_get(cursor, &k, &v, MDB_FIRST);
+  mdb_cursor_close(cursor);
+  check(rc, path + ": the table of tables");
+  const std::uint8_t* page = c.main_page.data();
+  const std::uint64_t offset =
+      c.main_root * c.page_size + u16(page + kPageHeader) + kNodeHeader;  // node 0's key
+  const auto at = reinterpret_cast<std::uintptr_t>(k.mv_data);
+  const auto os_page = static_cast<std::uintptr_t>(::sysconf(_SC_PAGESIZE));
+  if (at < offset || (at - offset) % os_page != 0 || k.mv_size != node_at(page, 0).key.size() ||
+      std::memcmp(k.mv_data, node_at(page, 0).key.data(), k.mv_size) != 0) {
+    throw_internal(path + ": LMDB's mapping of the file is not where its first key says");
+  }
+  return reinterpret_cast<const std::uint8_t*>(at - offset);
+}
+
+}  // namespace
+
 Env Env::open_read_only(const std::string& path) {
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0) {
@@ -124,8 +545,14 @@ Env Env::open_read_only(const std::string& path) {
   auto state = std::make_unique<detail::EnvState>();
   state->path = path;
   state->file_bytes = static_cast<std::uint64_t>(st.st_size);
+  const OpenCheck checked = check_before_open(path, state->file_bytes);
   check(mdb_env_create(&state->env), path + ": mdb_env_create");
   check(mdb_env_set_maxdbs(state->env, kMaxDbs), path + ": mdb_env_set_maxdbs");
+  // Map exactly the file, whatever map size the meta page records (LMDB maps at least up to its
+  // last page, checked to be in the file).
+  if (checked.page_size != 0) {
+    check(mdb_env_set_mapsize(state->env, state->file_bytes), path + ": mdb_env_set_mapsize");
+  }
   const int rc =
       mdb_env_open(state->env, path.c_str(),
                    MDB_RDONLY | MDB_NOSUBDIR | MDB_NOTLS | MDB_NOLOCK | MDB_NORDAHEAD, 0);
@@ -134,33 +561,38 @@ Env Env::open_read_only(const std::string& path) {
   }
   check(rc, path + ": cannot open database");
 
-  // A truncated file would map pages past its end (SIGBUS on access): LMDB only checks page
-  // numbers against the last page recorded in the meta page, so the file must hold them all.
+  // LMDB opened what was checked (it read the meta pages itself).
   MDB_envinfo info{};
   MDB_stat stat{};
   check(mdb_env_info(state->env, &info), path + ": mdb_env_info");
   check(mdb_env_stat(state->env, &stat), path + ": mdb_env_stat");
-  const std::uint64_t needed = (static_cast<std::uint64_t>(info.me_last_pgno) + 1) * stat.ms_psize;
-  if (needed > state->file_bytes) {
-    throw_corrupt(path + ": truncated database: " + std::to_string(state->file_bytes) +
-                  " bytes, its pages need " + std::to_string(needed));
+  if (checked.page_size == 0 || stat.ms_psize != checked.page_size ||
+      info.me_last_pgno + 1 != checked.pages || info.me_mapsize != state->file_bytes) {
+    throw_internal(path + ": LMDB opened another file than the one checked");
   }
+  state->page_size = checked.page_size;
+  state->pages = checked.pages;
+  std::copy(std::begin(checked.trees), std::end(checked.trees), std::begin(state->trees));
+  state->owner = std::make_unique<std::atomic<std::uint8_t>[]>(state->pages);
 
   MDB_txn* txn = nullptr;
   check(mdb_txn_begin(state->env, nullptr, MDB_RDONLY, &txn), path + ": mdb_txn_begin");
-  for (Table table : kAllTables) {
-    const std::string name(table_name(table));
-    const int open_rc = mdb_dbi_open(txn, name.c_str(), 0, &state->dbis[index_of(table)]);
-    if (open_rc != MDB_SUCCESS) {
-      mdb_txn_abort(txn);
+  try {
+    for (Table table : kAllTables) {
+      const std::string name(table_name(table));
+      const int open_rc = mdb_dbi_open(txn, name.c_str(), 0, &state->dbis[index_of(table)]);
       if (open_rc == MDB_NOTFOUND) {
         throw_corrupt(path + ": missing table '" + name + "', not an smrdb database");
       }
       if (open_rc == MDB_INCOMPATIBLE) {
         throw_corrupt(path + ": '" + name + "' is not a table, not an smrdb database");
       }
-      throw_mdb(open_rc, state->where(table));
+      check(open_rc, state->where(table));
     }
+    state->map = find_mapping(txn, checked, path);
+  } catch (...) {
+    mdb_txn_abort(txn);
+    throw;
   }
   // Committing a read-only txn keeps the opened DBI handles for the environment.
   check(mdb_txn_commit(txn), path + ": mdb_txn_commit");
@@ -185,11 +617,8 @@ ReadTxn Env::read() const {
 }
 
 void Env::release_mapped_pages() const {
-  MDB_envinfo info{};
-  check(mdb_env_info(state_->env, &info), state_->path + ": mdb_env_info");
-  if (info.me_mapaddr == nullptr || info.me_mapsize == 0) return;
   // Advisory: failure only means the pages stay resident.
-  (void)::madvise(info.me_mapaddr, info.me_mapsize, MADV_DONTNEED);
+  (void)::madvise(const_cast<std::uint8_t*>(state_->map), state_->file_bytes, MADV_DONTNEED);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -213,11 +642,22 @@ ReadTxn::~ReadTxn() {
 
 std::optional<ByteView> ReadTxn::get_bytes(Table table, ByteView key,
                                            const std::string& key_text) const {
+  const std::optional<Node> node = env_->find(table, key, key_text);  // checks LMDB's way there
   MDB_val k = to_val(key);
   MDB_val v{};
   const int rc = mdb_get(static_cast<MDB_txn*>(txn_), env_->dbis[index_of(table)], &k, &v);
-  if (rc == MDB_NOTFOUND) return std::nullopt;
-  if (rc != MDB_SUCCESS) throw_mdb(rc, env_->where(table) + ", key " + key_text);
+  if (rc == MDB_NOTFOUND && !node) return std::nullopt;
+  if (rc != MDB_SUCCESS && rc != MDB_NOTFOUND) {
+    throw_mdb(rc, env_->where(table) + ", key " + key_text);
+  }
+  if (!node) {
+    throw_internal(env_->where(table) + ", key " + key_text +
+                   ": LMDB found a key its pages do not hold");
+  }
+  if (rc == MDB_NOTFOUND) {
+    throw_internal(env_->where(table) + ", key " + key_text + ": LMDB missed a key of its pages");
+  }
+  env_->check_value(*node, v, [&] { return env_->where(table) + ", key " + key_text; });
   env_->bytes_read.fetch_add(v.mv_size, std::memory_order_relaxed);
   return from_val(v);
 }
@@ -233,6 +673,7 @@ std::optional<ByteView> ReadTxn::get(Table table, std::string_view key) const {
 
 void ReadTxn::for_each(Table table,
                        const std::function<void(ByteView key, ByteView value)>& visit) const {
+  env_->check_tree(table);  // every page the cursor will read
   MDB_cursor* cursor = nullptr;
   check(mdb_cursor_open(static_cast<MDB_txn*>(txn_), env_->dbis[index_of(table)], &cursor),
         env_->where(table) + ": mdb_cursor_open");
@@ -243,6 +684,11 @@ void ReadTxn::for_each(Table table,
   MDB_val k{}, v{};
   int rc = mdb_cursor_get(cursor, &k, &v, MDB_FIRST);
   while (rc == MDB_SUCCESS) {
+    const std::optional<Node> node =
+        env_->find(table, from_val(k), "the cursor visits");  // checked: finds the same node
+    if (!node) throw_internal(env_->where(table) + ": the cursor reads a key its pages lack");
+    env_->check_value(*node, v,
+                      [&] { return env_->where(table) + ", an entry the cursor visits"; });
     visit(from_val(k), from_val(v));
     rc = mdb_cursor_get(cursor, &k, &v, MDB_NEXT);
   }

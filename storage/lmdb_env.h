@@ -33,7 +33,10 @@ class Env {
   // Opens with MDB_RDONLY|MDB_NOSUBDIR|MDB_NOTLS|MDB_NOLOCK|MDB_NORDAHEAD: database files are never
   // modified after creation, so no lock file is needed and any number of threads and processes
   // may read. A missing file (kIo), an empty, truncated or non-LMDB file or a missing table
-  // (kCorrupt) throws smr::Error naming the path.
+  // (kCorrupt) throws smr::Error naming the path. LMDB trusts the file's structure, so each page
+  // is checked before LMDB first reads it (the meta pages and the table of tables here, the
+  // pages on the way to a key in get() and for_each()): a damaged page throws kCorrupt naming
+  // the path, the table and the page instead of crashing the process.
   static Env open_read_only(const std::string& path);
 
   Env(Env&&) noexcept;

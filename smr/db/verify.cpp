@@ -36,8 +36,9 @@ bool contains(const Box3& outer, const Box3& inner) {
 
 VerifyReport verify_database(const std::string& path, const std::function<void(double)>& progress) {
   VerifyReport rep;
-  auto fault = [&](const std::string& what) {
-    if (rep.faults.size() < kMaxFaults) rep.faults.push_back(what);
+  auto fault = [&](const std::string& what) {  // every fault names the file
+    if (rep.faults.size() >= kMaxFaults) return;
+    rep.faults.push_back(what.rfind(path, 0) == 0 ? what : path + ": " + what);
   };
   std::unique_ptr<Database> db;
   try {
