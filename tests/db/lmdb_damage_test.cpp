@@ -40,6 +40,8 @@
 #include "smr/rcf/spec.h"
 #include "storage/error.h"
 #include "storage/lmdb_env.h"
+#include "tests/support/extraction_result.h"
+#include "tests/support/files.h"
 
 namespace smr {
 namespace {
@@ -50,33 +52,12 @@ using Clock = std::chrono::steady_clock;
 constexpr std::size_t kPage = 4096;  // LMDB's page size on the platforms the suite runs on
 constexpr int kChildSeconds = 120;   // a child still running after this is a hang
 
-class TempDir {
- public:
-  TempDir() {
-    path_ = fs::temp_directory_path() /
-            ("smrdb-lmdb-damage-" + std::to_string(::getpid()) + "-" + std::to_string(counter_++));
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  std::string file(const std::string& name) const { return (path_ / name).string(); }
+using test::read_file;
+using test::write_file;
 
- private:
-  static inline int counter_ = 0;
-  fs::path path_;
+struct TempDir : test::TempDir {
+  TempDir() : test::TempDir("smrdb-lmdb-damage") {}
 };
-
-std::string read_file(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-void write_file(const std::string& path, const std::string& bytes) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-}
 
 // ------------------------------------------------------------------------------ the database
 
@@ -92,25 +73,9 @@ std::vector<RcfSpec> specs(const CrmrInfo& info) {
   return {fine, corner};
 }
 
-struct Result {
-  Extraction minimal, reduced;
-  TriangleMesh mesh;
-};
-
-Result extract_all(const Database& db, const RcfSpec& spec) {
-  const Rcf rcf = make_rcf(spec, ModelKind::kTerrain, nullptr);
-  Result r;
-  r.minimal = extract_minimal_surface(db, rcf);
-  r.reduced = extract_reduced(db, rcf);
-  r.mesh = to_mesh(db, r.minimal.triangles);
-  return r;
-}
-
-bool same(const Result& a, const Result& b) {
-  return a.minimal.x == b.minimal.x && a.minimal.triangles == b.minimal.triangles &&
-         a.reduced.x == b.reduced.x && a.reduced.triangles == b.reduced.triangles &&
-         a.mesh.positions == b.mesh.positions && a.mesh.triangles == b.mesh.triangles;
-}
+using test::extract_all;
+using test::Result;
+using test::same;
 
 // A 57 x 57 fBm terrain (2179 ops) in data pages of about 2.5 KiB: 600 KB, 147 LMDB pages. The
 // data pages are overflow values; the locators, R-tree nodes and meta are values inside leaf
@@ -400,9 +365,24 @@ std::vector<std::string> judge(const Case& c, const Outcome& o, const std::strin
   return failures;
 }
 
+void print_summary(const std::string& label, const std::map<std::string, Tally>& tally,
+                   Clock::time_point start) {
+  const Tally& t = tally.at("all");
+  std::printf("%s: %zu cases, %zu errors caught, %zu harmless, %zu crashes, %zu wrong (%.1f s)\n",
+              label.c_str(), t.cases, t.caught, t.harmless, t.crashes, t.wrong,
+              std::chrono::duration<double>(Clock::now() - start).count());
+  for (const auto& [group, g] : tally) {
+    if (group == "all") continue;
+    std::printf("  %-16s %4zu cases, %4zu caught, %4zu harmless, %zu crashes, %zu wrong; e.g. %s\n",
+                group.c_str(), g.cases, g.caught, g.harmless, g.crashes, g.wrong,
+                g.example.substr(0, 160).c_str());
+  }
+}
+
 // Runs every case, as many children at a time as there are cores (up to four; each with its own
 // damaged copy of the file), judges each outcome and counts them, overall ("all") and per group.
 std::map<std::string, Tally> sweep(const std::vector<Case>& cases, const std::string& label) {
+  const auto start = Clock::now();
   const SmallDb& clean = small_db();
   TempDir dir;
   const std::size_t slots = std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, 4);
@@ -469,21 +449,8 @@ std::map<std::string, Tally> sweep(const std::vector<Case>& cases, const std::st
     }
   }
   if (failing > 40) ADD_FAILURE() << label << ": " << failing - 40 << " more failing cases";
+  print_summary(label, tally, start);
   return tally;
-}
-
-void print_summary(const std::string& label, const std::map<std::string, Tally>& tally,
-                   Clock::time_point start) {
-  const Tally& t = tally.at("all");
-  std::printf("%s: %zu cases, %zu errors caught, %zu harmless, %zu crashes, %zu wrong (%.1f s)\n",
-              label.c_str(), t.cases, t.caught, t.harmless, t.crashes, t.wrong,
-              std::chrono::duration<double>(Clock::now() - start).count());
-  for (const auto& [group, g] : tally) {
-    if (group == "all") continue;
-    std::printf("  %-16s %4zu cases, %4zu caught, %4zu harmless, %zu crashes, %zu wrong; e.g. %s\n",
-                group.c_str(), g.cases, g.caught, g.harmless, g.crashes, g.wrong,
-                g.example.substr(0, 160).c_str());
-  }
 }
 
 // The cases of a list, each (offset, bit) once.
@@ -559,9 +526,7 @@ TEST(LmdbDamage, BitFlipsInTheMetaPages) {
                  byte < 16 ? "page header" : "meta");
     }
   }
-  const auto start = Clock::now();
   const auto tally = sweep(cases.list(), "meta pages");
-  print_summary("meta pages", tally, start);
   EXPECT_EQ(tally.at("all").crashes, 0u);
 }
 
@@ -610,9 +575,7 @@ TEST(LmdbDamage, BitFlipsInEveryPage) {
       add(kPage / 2, "value");  // a later page of an overflow value: no header
     }
   }
-  const auto start = Clock::now();
   const auto tally = sweep(cases.list(), "every page");
-  print_summary("every page", tally, start);
   EXPECT_EQ(tally.at("all").crashes, 0u);
 }
 
@@ -656,9 +619,7 @@ TEST(LmdbDamage, DamageThatCrashedLmdbIsAnError) {
       cases.flip(pgno, p, node + 3, 7, name + "value size ^ 2 GiB", true);
     }
   }
-  const auto start = Clock::now();
   const auto tally = sweep(cases.list(), "known crashes");
-  print_summary("known crashes", tally, start);
   EXPECT_EQ(tally.at("all").caught, cases.list().size());
 }
 
@@ -673,9 +634,7 @@ TEST(LmdbDamage, TruncationAtEveryPageBoundary) {
     if (p % 2 == 0) cases.truncate(p * kPage + 1 + (p * 977) % (kPage - 1), db.bytes.size());
   }
   cases.truncate(db.bytes.size() - 1, db.bytes.size());
-  const auto start = Clock::now();
   const auto tally = sweep(cases.list(), "truncation");
-  print_summary("truncation", tally, start);
   EXPECT_EQ(tally.at("all").caught, cases.list().size());
 }
 

@@ -21,6 +21,7 @@
 #include "storage/error.h"
 #include "storage/lmdb_env.h"
 #include "tests/support/datasets.h"
+#include "tests/support/extraction_result.h"
 #include "tests/support/files.h"
 
 namespace smr {
@@ -66,25 +67,9 @@ std::vector<std::pair<std::string, RcfSpec>> specs(const CrmrInfo& info) {
   return {{"full", full}, {"corner", corner}, {"coarse", coarse}};
 }
 
-struct Result {
-  Extraction minimal, reduced;
-  TriangleMesh mesh;
-};
-
-Result extract_all(const Database& db, const RcfSpec& spec) {
-  const Rcf rcf = make_rcf(spec, ModelKind::kTerrain, nullptr);
-  Result r;
-  r.minimal = extract_minimal_surface(db, rcf);
-  r.reduced = extract_reduced(db, rcf);
-  r.mesh = to_mesh(db, r.minimal.triangles);
-  return r;
-}
-
-bool same(const Result& a, const Result& b) {
-  return a.minimal.x == b.minimal.x && a.minimal.triangles == b.minimal.triangles &&
-         a.reduced.x == b.reduced.x && a.reduced.triangles == b.reduced.triangles &&
-         a.mesh.positions == b.mesh.positions && a.mesh.triangles == b.mesh.triangles;
-}
+using test::extract_all;
+using test::Result;
+using test::same;
 
 std::vector<Result> clean_results() {
   const auto db = Database::open(small_db().path, {std::size_t{1} << 30});
