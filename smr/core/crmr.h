@@ -46,6 +46,10 @@ class OpSource {
   virtual std::uint64_t op_count() const = 0;
   /// The op; throws smr::Error if `id` is out of range or its record cannot be read.
   virtual OpRef op(OpId id) const = 0;
+  /// Where the op is stored, as a number: ops with equal values are read together and reading in
+  /// increasing order is cheapest (smr/db: the op's data page). Reads no op. Traversals whose
+  /// result does not depend on the visiting order use it to visit ops page by page.
+  virtual std::uint64_t locality(OpId) const { return 0; }
 
   FragmentTriangle triangle(TriRef t) const { return op(t.op)->fragment.at(t.index); }
   double error_at(double res) const;

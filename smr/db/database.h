@@ -93,6 +93,7 @@ class Database final : public OpSource, public RcfIndexedSource {
   std::vector<OpId> not_completely_finer(const Rcf& rcf) const override;
   /// The entries the R-tree query accepts (a superset of not_completely_finer), reading no page.
   std::vector<OpId> maybe_not_completely_finer(const Rcf& rcf) const override;
+  std::uint64_t locality(OpId id) const override { return locate(id).page; }
   /// The R-tree query behind both: accepted entries, grouped by leaf (= data page).
   std::vector<index::Hit> rcf_hits(const Rcf& rcf) const;
   const index::RTree& rtree() const { return *rtree_; }

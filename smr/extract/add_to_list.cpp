@@ -1,6 +1,7 @@
 // Refinement operation extraction (Brown 5.1.1, Fig. 5.2; Lemma 5.2.1 for the reduced variant).
 // AddToList is run with an explicit stack; the set it reaches is the same fixed point.
 #include <algorithm>
+#include <map>
 #include <vector>
 
 #include "smr/core/id_map.h"
@@ -58,28 +59,52 @@ std::vector<OpId> traverse(const OpSource& source, const Rcf& rcf, bool with_anc
   if (indexed != nullptr) {
     for (OpId id : indexed->maybe_not_completely_finer(rcf)) candidates.insert(id.value);
   }
-  const auto completely_finer = [&](OpId c) {
-    if (indexed != nullptr && !candidates.contains(c.value)) return true;
-    return flags.completely_finer(*source.op(c));
+  const auto ruled_out = [&](OpId c) {  // completely finer by the index alone
+    return indexed != nullptr && !candidates.contains(c.value);
   };
-  std::vector<OpId> x, stack{kBaseOp};
-  while (!stack.empty()) {
-    const OpId id = stack.back();
-    stack.pop_back();
-    if (!flags.add_to_x(id)) continue;
-    x.push_back(id);
-    const OpRef op_ref = source.op(id);
-    const Op& op = *op_ref;
-    if (!flags.finer(op)) {
-      for (OpId c : op.children) {
-        if (!flags.in_x(c) && !completely_finer(c)) stack.push_back(c);
+  // X is a closure, the same whatever order ops are visited in; they are visited page by page
+  // (OpSource::locality), sweeping upwards through the pages and wrapping around, and a child is
+  // tested (IsCompletelyFiner) when its own page is visited, not when its parent is: a page is
+  // then fetched about once per sweep. Visiting depth first and testing children from the parent
+  // fetched 18 000 pages of 3 515 for a whole-database output under a 64 MiB cache.
+  struct Pending {
+    OpId id;
+    bool test;  // reached as a child: joins X only if not completely finer
+  };
+  std::map<std::uint64_t, std::vector<Pending>> pending;  // locality -> ops waiting in it
+  const auto push = [&](OpId id, bool test) {
+    if (!flags.in_x(id)) pending[source.locality(id)].push_back({id, test});
+  };
+  std::vector<OpId> x;
+  push(kBaseOp, false);
+  std::uint64_t cursor = 0;
+  while (!pending.empty()) {
+    auto bucket = pending.lower_bound(cursor);
+    if (bucket == pending.end()) bucket = pending.begin();
+    const std::uint64_t here = bucket->first;
+    // Ops pushed into this bucket while it is processed join it (hence the lookup each time).
+    for (;;) {
+      auto it = pending.find(here);
+      if (it == pending.end() || it->second.empty()) break;
+      const Pending next = it->second.back();
+      it->second.pop_back();
+      if (flags.in_x(next.id)) continue;
+      const OpRef op_ref = source.op(next.id);
+      const Op& op = *op_ref;
+      if (next.test && flags.completely_finer(op)) continue;
+      flags.add_to_x(next.id);
+      x.push_back(next.id);
+      if (!flags.finer(op)) {
+        for (OpId c : op.children) {
+          if (!ruled_out(c)) push(c, true);
+        }
+      }
+      if (with_ancestors) {
+        for (OpId p : op.parents) push(p, false);
       }
     }
-    if (with_ancestors) {
-      for (OpId p : op.parents) {
-        if (!flags.in_x(p)) stack.push_back(p);
-      }
-    }
+    pending.erase(here);
+    cursor = here + 1;
   }
   std::sort(x.begin(), x.end(), std::greater<>());
   return x;

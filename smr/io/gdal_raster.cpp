@@ -1,5 +1,6 @@
-// GDAL raster reading and GeoTIFF writing: the one place smrdb talks to GDAL.
-#include "smr/io/gdal_raster.h"
+// GDAL raster reading and GeoTIFF writing: the one place smrdb talks to GDAL. Built as the module
+// libsmrdb_gdal.so, loaded on first use by gdal_loader.cpp (gdal_module.h says why); the
+// functions' contracts are in dem_reader.h (read_gdal_raster) and gdal_raster.h (write_geotiff).
 
 #include <cpl_conv.h>
 #include <cpl_error.h>
@@ -17,8 +18,8 @@
 #include <mutex>
 #include <new>
 
-#include "smr/io/dem_reader.h"
-#include "smr/io/mesh_writer.h"
+#include "smr/io/atomic_file.h"
+#include "smr/io/gdal_module.h"
 #include "storage/error.h"
 
 namespace smr {
@@ -81,9 +82,7 @@ void check_readable_file(const std::string& path) {
 
 constexpr double kNoData = -3.4028234663852886e+38;  // lowest float32
 
-}  // namespace
-
-Heightfield read_gdal_raster(const std::string& path) {
+Heightfield read_raster(const std::string& path) {
   check_readable_file(path);
   ensure_registered();
   GdalErrors errors;
@@ -202,7 +201,7 @@ Heightfield read_gdal_raster(const std::string& path) {
   return h;
 }
 
-void write_geotiff(const std::string& path, const Heightfield& h) {
+void write_tiff(const std::string& path, const Heightfield& h) {
   if (h.width <= 0 || h.height <= 0 ||
       h.z.size() != static_cast<std::size_t>(h.width) * static_cast<std::size_t>(h.height) ||
       (!h.valid.empty() && h.valid.size() != h.z.size())) {
@@ -285,4 +284,12 @@ void write_geotiff(const std::string& path, const Heightfield& h) {
   file.commit();
 }
 
+}  // namespace
+
 }  // namespace smr
+
+extern "C" __attribute__((visibility("default"))) const smr::gdal_module::Api* smrdb_gdal_module() {
+  static const smr::gdal_module::Api api{smr::gdal_module::kAbi, &smr::read_raster,
+                                         &smr::write_tiff};
+  return &api;
+}
