@@ -273,6 +273,112 @@ void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
   }
 }
 
+// The 3-D counterpart of check_op_local: vertices, in-fragment neighbours, coarser links naming
+// the same edge in a coarser op, PreF triangles as their creators hold them, and completeness as
+// equal directed boundaries of F and PreF (no area or domain in 3-D). Minimality: F is one
+// edge-connected piece (a vertex split's star; two disjoint pieces could be two ops).
+void check_mesh_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
+                         std::unordered_map<std::uint64_t, std::pair<OpId, Vec3>>& vertex_owner) {
+  const std::string name = op_name(op.id);
+  for (std::size_t i = 0; i < op.vertices.size(); ++i) {
+    const Vertex& v = op.vertices[i];
+    ++r.checked;
+    auto it = vertex_owner.find(v.id.value);
+    if (i < op.new_vertex_count) {
+      if (it != vertex_owner.end()) {
+        r.fail(name + ": new vertex " + std::to_string(v.id.value) + " already introduced by " +
+               op_name(it->second.first));
+      } else {
+        vertex_owner.emplace(v.id.value, std::pair{op.id, v.p});
+      }
+    } else if (it == vertex_owner.end()) {
+      r.fail(name + ": vertex " + std::to_string(v.id.value) + " used before it is introduced");
+    } else if (it->second.second != v.p) {
+      r.fail(name + ": vertex " + std::to_string(v.id.value) +
+             " has a different position than in " + op_name(it->second.first));
+    }
+  }
+  std::unordered_set<DirectedEdge, EdgeHash> f_edges, pre_edges;
+  std::vector<DirectedEdge> linked;  // F boundary edges with a coarser version
+  std::vector<std::size_t> parent(op.fragment.size());
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&](std::size_t x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  };
+  for (std::size_t i = 0; i < op.fragment.size(); ++i) {
+    const FragmentTriangle& t = op.fragment[i];
+    ++r.checked;
+    for (auto v : t.v) {
+      if (v >= op.vertices.size()) {
+        r.fail(name + ": triangle " + std::to_string(i) + " has a vertex index out of range");
+        return;
+      }
+    }
+    for (int k = 0; k < 3; ++k) {
+      const VertexId a = op.vertex_id(t, k), b = op.vertex_id(t, (k + 1) % 3);
+      if (!f_edges.insert({a.value, b.value}).second)
+        r.fail(name + ": directed edge used twice in F");
+      if (t.nbr[k] >= 0) {
+        const auto& n = op.fragment.at(static_cast<std::size_t>(t.nbr[k]));
+        bool found = false;
+        for (int j = 0; j < 3; ++j) {
+          found |= op.vertex_id(n, j) == b && op.vertex_id(n, (j + 1) % 3) == a &&
+                   n.nbr[j] == static_cast<std::int32_t>(i);
+        }
+        if (!found) r.fail(name + ": asymmetric neighbour link at triangle " + std::to_string(i));
+        parent[find(i)] = find(static_cast<std::size_t>(t.nbr[k]));
+        continue;
+      }
+      const CoarserLink* link =
+          op.coarser_link(static_cast<std::uint32_t>(i), static_cast<std::uint8_t>(k));
+      if (link == nullptr) continue;  // model boundary (checked through extraction outputs)
+      linked.push_back({a.value, b.value});
+      if (op.id == kBaseOp || link->coarser.tri.op >= op.id) {
+        r.fail(name + ": coarser link points to a finer op");
+        continue;
+      }
+      const Op& target = crmr.ops.at(link->coarser.tri.op.value);
+      const FragmentTriangle& tt = target.fragment.at(link->coarser.tri.index);
+      const int e = link->coarser.edge;
+      const VertexId ta = target.vertex_id(tt, e), tb = target.vertex_id(tt, (e + 1) % 3);
+      if (!((ta == a && tb == b) || (ta == b && tb == a))) {
+        r.fail(name + ": coarser link of triangle " + std::to_string(i) +
+               " names a different edge");
+      }
+    }
+  }
+  if (op.pre_tris.size() != op.pre.size()) r.fail(name + ": pre_tris does not match PreF");
+  for (std::size_t i = 0; i < op.pre.size(); ++i) {
+    const TriRef& t = op.pre[i];
+    const Op& p = crmr.ops.at(t.op.value);
+    const FragmentTriangle& pt = p.fragment.at(t.index);
+    for (int k = 0; k < 3; ++k) {
+      pre_edges.insert({p.vertex_id(pt, k).value, p.vertex_id(pt, (k + 1) % 3).value});
+    }
+    if (i >= op.pre_tris.size()) continue;
+    const PreTriangle& mine = op.pre_tris[i];
+    bool same = mine.flags == pt.flags;
+    for (int k = 0; k < 3 && same; ++k) {
+      same = mine.v[k] < op.vertices.size() && op.vertices[mine.v[k]] == p.vertices[pt.v[k]];
+    }
+    if (!same)
+      r.fail(name + ": PreF triangle " + std::to_string(i) + " differs from its creator's");
+  }
+  if (op.id == kBaseOp) return;
+  ++r.checked;
+  for (const DirectedEdge& e : linked) {
+    if (!pre_edges.count(e) || pre_edges.count({e.b, e.a})) {
+      r.fail(name + " is incomplete: F boundary edge " + std::to_string(e.a) + "-" +
+             std::to_string(e.b) + " is not on the boundary of PreF");
+      break;
+    }
+  }
+  std::size_t pieces = 0;
+  for (std::size_t i = 0; i < parent.size(); ++i) pieces += find(i) == i;
+  if (pieces != 1) r.fail(name + " is not minimal: F has " + std::to_string(pieces) + " pieces");
+}
+
 void check_geometry(const Crmr& crmr, const Op& op, InvariantReport& r) {
   const std::string name = op_name(op.id);
   ++r.checked;
@@ -366,11 +472,15 @@ InvariantReport check_crmr(const Crmr& crmr) {
       if (t.death_res < op.birth_res)
         r.fail(op_name(op.id) + ": a triangle dies before it is born");
     }
-    check_op_local(crmr, op, r, vertex_owner);
+    if (crmr.header.kind == ModelKind::kTerrain) {
+      check_op_local(crmr, op, r, vertex_owner);
+    } else {
+      check_mesh_op_local(crmr, op, r, vertex_owner);
+    }
     if (r.failures > 200) return r;
     check_geometry(crmr, op, r);
   }
-  // M^0 and M^m tile the domain.
+  // M^0 and M^m tile the domain (terrain) or are oriented manifold surfaces (3-D).
   std::vector<TriRef> base, finest;
   for (const Op& op : crmr.ops) {
     for (std::uint32_t j = 0; j < op.fragment.size(); ++j) {
@@ -379,7 +489,8 @@ InvariantReport check_crmr(const Crmr& crmr) {
     }
   }
   for (const auto& [label, set] : {std::pair{"M^0", &base}, std::pair{"M^m", &finest}}) {
-    InvariantReport t = check_tiling(crmr, *set);
+    InvariantReport t = crmr.header.kind == ModelKind::kTerrain ? check_tiling(crmr, *set)
+                                                                : check_surface(crmr, *set).report;
     for (const std::string& e : t.errors) r.fail(std::string(label) + ": " + e);
     r.checked += t.checked;
   }
@@ -458,6 +569,83 @@ DelaunayReport check_delaunay(const OpSource& source, std::span<const TriRef> tr
     }
   }
   return rep;
+}
+
+SurfaceReport check_surface(const OpSource& source, std::span<const TriRef> triangles) {
+  SurfaceReport out;
+  InvariantReport& r = out.report;
+  std::unordered_map<DirectedEdge, TriRef, EdgeHash> edges;
+  std::unordered_set<TriRef> seen;
+  std::unordered_map<std::uint64_t, std::uint64_t> vertex_index;
+  std::vector<std::array<std::uint64_t, 3>> tris;
+  for (const TriRef& ref : triangles) {
+    ++r.checked;
+    if (!seen.insert(ref).second) {
+      r.fail("triangle " + op_name(ref.op) + "/" + std::to_string(ref.index) + " appears twice");
+      continue;
+    }
+    const OpRef op_ref = source.op(ref.op);
+    const Op& op = *op_ref;
+    const FragmentTriangle& t = op.fragment.at(ref.index);
+    std::array<std::uint64_t, 3> ids{};
+    for (int k = 0; k < 3; ++k) {
+      ids[k] = op.vertex_id(t, k).value;
+      vertex_index.emplace(ids[k], vertex_index.size());
+    }
+    if (ids[0] == ids[1] || ids[1] == ids[2] || ids[0] == ids[2]) {
+      r.fail("triangle " + op_name(ref.op) + "/" + std::to_string(ref.index) + " is degenerate");
+    }
+    for (int k = 0; k < 3; ++k) {
+      const DirectedEdge e{ids[k], ids[(k + 1) % 3]};
+      if (!edges.emplace(e, ref).second) {
+        r.fail("directed edge " + std::to_string(e.a) + "-" + std::to_string(e.b) +
+               " used twice (inconsistent orientation, overlap or a non-manifold edge)");
+      }
+    }
+    tris.push_back(ids);
+  }
+  // Components (edge-connected through shared vertices), boundary edges and loops, Euler.
+  const std::size_t nv = vertex_index.size();
+  std::vector<std::size_t> parent(nv);
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&](std::size_t x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  };
+  for (const auto& t : tris) {
+    for (int k = 1; k < 3; ++k) parent[find(vertex_index[t[k]])] = find(vertex_index[t[0]]);
+  }
+  std::uint64_t undirected = 0;
+  std::unordered_map<std::uint64_t, std::uint64_t> next_on_boundary;
+  for (const auto& [e, ref] : edges) {
+    if (edges.count({e.b, e.a})) {
+      if (e.a < e.b) ++undirected;
+      continue;
+    }
+    ++undirected;
+    ++out.boundary_edges;
+    if (!next_on_boundary.emplace(e.a, e.b).second) {
+      r.fail("vertex " + std::to_string(e.a) + " starts two boundary edges (non-manifold vertex)");
+    }
+  }
+  std::unordered_set<std::uint64_t> visited;
+  for (const auto& [a, b] : next_on_boundary) {
+    if (visited.count(a)) continue;
+    ++out.boundary_loops;
+    for (std::uint64_t v = a; visited.insert(v).second;) {
+      auto it = next_on_boundary.find(v);
+      if (it == next_on_boundary.end()) {
+        r.fail("boundary chain through vertex " + std::to_string(v) + " does not close");
+        break;
+      }
+      v = it->second;
+    }
+  }
+  for (std::size_t v = 0; v < nv; ++v) out.components += find(v) == v;
+  out.vertices = nv;
+  out.triangles = tris.size();
+  out.euler = std::int64_t(nv) - std::int64_t(undirected) + std::int64_t(tris.size());
+  return out;
 }
 
 }  // namespace smr

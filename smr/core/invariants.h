@@ -21,11 +21,27 @@ struct InvariantReport {
   std::string summary() const;
 };
 
-/// Validates a whole terrain CRMR: ids and ordering, non-decreasing birth_res, every op complete
+/// Validates a whole CRMR. Terrain: ids and ordering, non-decreasing birth_res, every op complete
 /// and minimal, PreF references and killers, death_res, parents/children derived from PreF (so the
 /// DAG is acyclic: parents precede children), Hypermesh neighbour and coarser-edge links, geometry
 /// (box, sphere, cone contain F and PreF) and ROI containment, M^0 and M^m tiling the domain.
+/// 3-D meshes: the same DAG, resolution and geometry checks; per op, vertices, neighbour and
+/// coarser links, PreF, completeness (F and PreF have the same directed boundary) and one
+/// connected F; M^0 and M^m oriented manifold surfaces (check_surface).
 InvariantReport check_crmr(const Crmr& crmr);
+
+/// A 3-D output surface: no triangle twice, none degenerate, every directed edge at most once
+/// (so every edge has 1 or 2 triangles, oriented consistently), boundary edges forming closed
+/// loops with one boundary edge leaving each boundary vertex (no non-manifold vertex on them);
+/// and its topology for comparison with the source: components, boundary loops, Euler
+/// characteristic (V - E + F).
+struct SurfaceReport {
+  InvariantReport report;
+  std::uint64_t vertices = 0, triangles = 0, components = 0;
+  std::uint64_t boundary_edges = 0, boundary_loops = 0;
+  std::int64_t euler = 0;
+};
+SurfaceReport check_surface(const OpSource& source, std::span<const TriRef> triangles);
 
 /// Grid coordinates of a terrain vertex (exact integers by construction).
 struct GridPoint {

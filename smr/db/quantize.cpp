@@ -1,5 +1,6 @@
 #include "smr/db/quantize.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <glm/geometric.hpp>
@@ -23,9 +24,36 @@ std::array<std::int32_t, 3> QuantGrid::quantize(const Vec3& p) const {
   return q;
 }
 
-QuantGrid choose_grid(const CrmrInfo& info, double z_step) {
+namespace {
+
+// 3-D meshes: one power-of-two step on every axis, 2^-28 of the largest extent rounded up to a
+// power of two (auto), so source coordinates of float32 precision near the extent are exact
+// and the rest move by less than 2^-29 of it; at most 2^29 steps per axis.
+QuantGrid choose_mesh_grid(const CrmrInfo& info, double step) {
   QuantGrid g;
-  if (info.kind != ModelKind::kTerrain) throw_internal("quantization: only terrains so far");
+  if (info.bounds.empty()) throw_input("the mesh has no vertices");
+  const Vec3 lo = info.bounds.lo, hi = info.bounds.hi;
+  for (int k = 0; k < 3; ++k) {
+    if (!(std::isfinite(lo[k]) && std::isfinite(hi[k])))
+      throw_input("mesh coordinates are not finite");
+  }
+  const double extent = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z, 1e-30});
+  if (step < 0.0 || !std::isfinite(step)) throw_input("the quantum must be a positive number");
+  if (step == 0.0) step = std::exp2(std::ceil(std::log2(extent)) - 28);
+  if (extent / step > double(1 << 30)) {
+    throw_input("quantum " + std::to_string(step) + " is too fine for a mesh extent of " +
+                std::to_string(extent) + " (at most 2^30 steps)");
+  }
+  g.step = Vec3(step);
+  for (int k = 0; k < 3; ++k) g.origin[k] = std::floor(lo[k] / step) * step;
+  return g;
+}
+
+}  // namespace
+
+QuantGrid choose_grid(const CrmrInfo& info, double z_step) {
+  if (info.kind == ModelKind::kMesh3d) return choose_mesh_grid(info, z_step);
+  QuantGrid g;
   g.origin = {info.georef.x0, info.georef.y0, 0.0};
   g.step = {info.georef.dx, info.georef.dy, 1.0};
   const double lo = info.bounds.empty() ? 0.0 : info.bounds.lo.z;

@@ -197,6 +197,18 @@ class Expander {
       }
     } else {
       drain(op, stack);
+      // Parts of F that no op of X replaces and the front never reached: other connected
+      // components of the model (a 3-D mesh of several pieces in one fragment, Brown's spawned
+      // meshes, Fig. 4.9d). Front edges reach an op only from finer ops, all visited before it,
+      // so nothing else will expand them; each is a starting point of its own. (Minimal surface
+      // only: reduced extraction decides overlaps with its domain test.)
+      for (std::uint32_t i = 0; !reduced_ && i < op.fragment.size() && !budget_reached(); ++i) {
+        const FragmentTriangle& t = op.fragment[i];
+        if (expanded_[i] || (t.killer.valid() && in_x_.contains(t.killer.value))) continue;
+        ++out_.stats.starting_points;
+        emit(op, i, -1, stack);
+        drain(op, stack);
+      }
     }
   }
 

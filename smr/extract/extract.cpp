@@ -8,6 +8,7 @@
 #include <unordered_set>
 
 #include "smr/extract/expansion.h"
+#include "storage/error.h"
 
 namespace smr {
 
@@ -36,6 +37,12 @@ Extraction extract_minimal_surface(const OpSource& source, const Rcf& rcf,
 
 Extraction extract_reduced(const OpSource& source, const Rcf& rcf,
                            const ExpansionOptions& options) {
+  if (source.info().kind != ModelKind::kTerrain) {
+    // Its starting-point test compares xy-domains (Brown 5.2: 2.5-D models).
+    throw_input(
+        "reduced extraction is defined for 2.5-D terrains (Brown 5.2); use the minimal "
+        "surface algorithm for 3-D meshes");
+  }
   auto t0 = std::chrono::steady_clock::now();
   const std::vector<OpId> x = add_to_list_reduced(source, rcf);
   const double t_extract = seconds_since(t0);

@@ -66,7 +66,7 @@ std::vector<OpId> add_to_list_reduced(const OpSource& source, const Rcf& rcf);
 Extraction extract_minimal_surface(const OpSource& source, const Rcf& rcf,
                                    const ExpansionOptions& options = {});
 
-/// Reduced extraction SMR (Brown 5.2), 2.5-D only.
+/// Reduced extraction SMR (Brown 5.2), 2.5-D only: a 3-D mesh source is kInvalidInput.
 Extraction extract_reduced(const OpSource& source, const Rcf& rcf,
                            const ExpansionOptions& options = {});
 

@@ -1,0 +1,699 @@
+// Quadric edge collapse into a CRMR (see qem_pm.h). Two passes:
+//  1. simplify: half-edge collapses from a lazy priority queue (one best candidate per vertex,
+//     re-validated when popped), recording for each collapse the triangles it removed and made;
+//  2. emit: order the reversed collapses (vertex splits) topologically, largest error first,
+//     and replay them from the base mesh to assign triangles to ops, find each fragment boundary
+//     edge's closest coarser version (Brown 4.5.1) and the mesh error before each split.
+#include "smr/build/qem_pm.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <queue>
+#include <unordered_map>
+
+#include <glm/geometric.hpp>
+
+#include "smr/core/geometry.h"
+#include "storage/error.h"
+
+namespace smr {
+
+namespace {
+
+constexpr std::uint32_t kNone = ~std::uint32_t{0};
+
+// Garland & Heckbert's fundamental error quadric: the sum of w (n.p + d)^2 over planes.
+struct Quadric {
+  std::array<double, 10> q{};  // aa ab ac ad bb bc bd cc cd dd
+  void add_plane(const Vec3& n, double d, double w) {
+    const double a = n.x, b = n.y, c = n.z;
+    const std::array<double, 10> t{a * a, a * b, a * c, a * d, b * b,
+                                   b * c, b * d, c * c, c * d, d * d};
+    for (int i = 0; i < 10; ++i) q[i] += w * t[i];
+  }
+  Quadric& operator+=(const Quadric& o) {
+    for (int i = 0; i < 10; ++i) q[i] += o.q[i];
+    return *this;
+  }
+  double eval(const Vec3& p) const {
+    const double x = p.x, y = p.y, z = p.z;
+    return q[0] * x * x + 2 * q[1] * x * y + 2 * q[2] * x * z + 2 * q[3] * x + q[4] * y * y +
+           2 * q[5] * y * z + 2 * q[6] * y + q[7] * z * z + 2 * q[8] * z + q[9];
+  }
+};
+
+struct Tri {
+  std::array<std::uint32_t, 3> v{};
+  double e = 0.0;                   // two-sided Hausdorff bound to the source (qem_pm.h)
+  std::uint32_t creator = kNone;    // collapse that made it (kNone: a source triangle)
+  std::uint32_t destroyer = kNone;  // collapse that removed it (kNone: in the base mesh)
+};
+
+struct Collapse {
+  std::uint32_t removed = 0, kept = 0;
+  std::uint32_t old_begin = 0, old_end = 0;  // into old_tris_: the star of `removed` before
+  std::uint32_t new_begin = 0, new_end = 0;  // into new_tris_: the triangles that replaced it
+  double error = 0.0;                        // bound of the new triangles
+};
+
+struct Candidate {
+  double cost;
+  std::uint32_t from, to, stamp;
+  // std::priority_queue is a max-heap: the "largest" is the cheapest, ties by vertex ids.
+  bool operator<(const Candidate& o) const {
+    if (cost != o.cost) return cost > o.cost;
+    if (from != o.from) return from > o.from;
+    return to > o.to;
+  }
+};
+
+std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
+  return (std::uint64_t(a) << 32) | b;
+}
+
+// Upper bound of max over q in triangle (a, b, c) of min over targets k of
+// (dist(q, target k) + offset k): the distance to one triangle is convex, so over a piece it is
+// at most its largest value at the piece's corners. Pieces are split in four while their bound
+// could raise `floor` and depth remains (branch and bound).
+class StarDistance {
+ public:
+  struct Target {
+    Vec3 a, b, c;
+    double offset;
+  };
+  explicit StarDistance(const std::vector<Target>& targets) : targets_(targets) {}
+
+  double bound(const Vec3& a, const Vec3& b, const Vec3& c, double floor, int depth) const {
+    double ub = std::numeric_limits<double>::infinity();
+    for (const Target& t : targets_) {
+      const double d = std::max({point_triangle_distance3d(a, t.a, t.b, t.c),
+                                 point_triangle_distance3d(b, t.a, t.b, t.c),
+                                 point_triangle_distance3d(c, t.a, t.b, t.c)}) +
+                       t.offset;
+      ub = std::min(ub, d);
+      if (ub <= floor) return ub;
+    }
+    if (depth == 0) return ub;
+    const Vec3 ab = 0.5 * (a + b), bc = 0.5 * (b + c), ca = 0.5 * (c + a);
+    double m = floor;
+    m = std::max(m, bound(a, ab, ca, m, depth - 1));
+    m = std::max(m, bound(ab, b, bc, m, depth - 1));
+    m = std::max(m, bound(ca, bc, c, m, depth - 1));
+    m = std::max(m, bound(ab, bc, ca, m, depth - 1));
+    return std::min(m, ub);
+  }
+
+ private:
+  const std::vector<Target>& targets_;
+};
+
+constexpr int kBoundDepth = 3;
+
+class Builder {
+ public:
+  Builder(const TriangleMesh& mesh, const QemPmOptions& options) : options_(options) {
+    pos_ = mesh.positions;
+    const std::size_t n = pos_.size();
+    star_.resize(n);
+    quad_.resize(n);
+    removed_.assign(n, 0);
+    boundary_.assign(n, 0);
+    stamp_.assign(n, 0);
+    tris_.reserve(mesh.triangles.size() * 2);
+    for (const auto& t : mesh.triangles) {
+      for (std::uint32_t v : t) {
+        if (v >= n) throw_input("mesh: a triangle references a vertex out of range");
+      }
+      add_triangle(Tri{t, 0.0, kNone, kNone});
+    }
+    cos_max_turn_ = std::cos(options_.max_normal_turn_degrees * 3.14159265358979323846 / 180.0);
+    init_quadrics_and_boundary();
+    init_components();
+  }
+
+  Crmr run(const std::string& name, QemPmStats* stats) {
+    simplify();
+    Crmr crmr = emit(name);
+    if (stats != nullptr) {
+      stats_.collapses = collapses_.size();
+      stats_.base_triangles = crmr.ops[0].fragment.size();
+      stats_.base_vertices = crmr.ops[0].vertices.size();
+      *stats = stats_;
+    }
+    return crmr;
+  }
+
+ private:
+  // ---- mesh state ---------------------------------------------------------------------------
+
+  std::uint32_t add_triangle(const Tri& t) {
+    const auto id = static_cast<std::uint32_t>(tris_.size());
+    tris_.push_back(t);
+    for (std::uint32_t v : t.v) star_[v].push_back(id);
+    return id;
+  }
+  void unlink_triangle(std::uint32_t id, std::uint32_t except) {
+    for (std::uint32_t v : tris_[id].v) {
+      if (v == except) continue;
+      auto& s = star_[v];
+      s.erase(std::find(s.begin(), s.end(), id));
+    }
+  }
+  static bool has(const Tri& t, std::uint32_t v) {
+    return t.v[0] == v || t.v[1] == v || t.v[2] == v;
+  }
+  Vec3 normal(const std::array<std::uint32_t, 3>& v) const {
+    return glm::cross(pos_[v[1]] - pos_[v[0]], pos_[v[2]] - pos_[v[0]]);
+  }
+
+  void init_quadrics_and_boundary() {
+    // Face planes weighted by area; each boundary edge adds a constraint plane through it,
+    // perpendicular to its face (Garland & Heckbert 1997, section 6.1).
+    std::unordered_map<std::uint64_t, std::uint32_t> directed;
+    directed.reserve(tris_.size() * 3);
+    for (std::uint32_t id = 0; id < tris_.size(); ++id) {
+      const Tri& t = tris_[id];
+      for (int k = 0; k < 3; ++k) directed.emplace(edge_key(t.v[k], t.v[(k + 1) % 3]), id);
+    }
+    for (const Tri& t : tris_) {
+      const Vec3 c = normal(t.v);
+      const double len = glm::length(c);
+      if (!(len > 0.0)) continue;
+      const Vec3 n = c / len;
+      const double d = -glm::dot(n, pos_[t.v[0]]);
+      Quadric q;
+      q.add_plane(n, d, 0.5 * len);
+      for (std::uint32_t v : t.v) quad_[v] += q;
+      for (int k = 0; k < 3; ++k) {
+        const std::uint32_t a = t.v[k], b = t.v[(k + 1) % 3];
+        if (directed.count(edge_key(b, a)) != 0) continue;
+        boundary_[a] = boundary_[b] = 1;
+        const Vec3 e = pos_[b] - pos_[a];
+        Vec3 m = glm::cross(e, n);
+        const double ml = glm::length(m);
+        if (!(ml > 0.0)) continue;
+        m /= ml;
+        Quadric bq;
+        bq.add_plane(m, -glm::dot(m, pos_[a]), options_.boundary_weight * glm::dot(e, e));
+        quad_[a] += bq;
+        quad_[b] += bq;
+      }
+    }
+  }
+
+  void init_components() {
+    const std::size_t n = pos_.size();
+    std::vector<std::uint32_t> parent(n);
+    std::iota(parent.begin(), parent.end(), 0u);
+    auto find = [&](std::uint32_t x) {
+      while (parent[x] != x) x = parent[x] = parent[parent[x]];
+      return x;
+    };
+    for (const Tri& t : tris_) {
+      for (int k = 1; k < 3; ++k) parent[find(t.v[k])] = find(t.v[0]);
+    }
+    comp_.resize(n);
+    std::unordered_map<std::uint32_t, std::uint32_t> ids;
+    for (std::uint32_t v = 0; v < n; ++v) {
+      if (star_[v].empty()) {
+        comp_[v] = kNone;
+        removed_[v] = 1;  // unreferenced: never part of the model
+        continue;
+      }
+      auto [it, fresh] = ids.emplace(find(v), std::uint32_t(comp_vertices_.size()));
+      if (fresh) {
+        comp_vertices_.push_back(0);
+        comp_open_.push_back(0);
+      }
+      comp_[v] = it->second;
+      ++comp_vertices_[it->second];
+      if (boundary_[v]) comp_open_[it->second] = 1;
+    }
+  }
+
+  std::uint64_t alive_vertices() const {
+    return std::accumulate(comp_vertices_.begin(), comp_vertices_.end(), std::uint64_t{0});
+  }
+
+  // ---- candidates ---------------------------------------------------------------------------
+
+  // Neighbours of v (sorted, unique) from its star.
+  void neighbours(std::uint32_t v, std::vector<std::uint32_t>& out) const {
+    out.clear();
+    for (std::uint32_t id : star_[v]) {
+      for (std::uint32_t w : tris_[id].v) {
+        if (w != v) out.push_back(w);
+      }
+    }
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+  }
+
+  // Whether collapsing from -> to keeps the mesh a manifold of the same topology with no
+  // flipped or degenerate triangle (counts the reason when not).
+  bool valid(std::uint32_t from, std::uint32_t to) {
+    std::uint32_t shared = 0;
+    std::array<std::uint32_t, 2> opposite{kNone, kNone};
+    std::uint32_t replaced = 0;
+    for (std::uint32_t id : star_[from]) {
+      const Tri& t = tris_[id];
+      if (has(t, to)) {
+        if (shared < 2) {
+          for (std::uint32_t w : t.v) {
+            if (w != from && w != to) opposite[shared] = w;
+          }
+        }
+        ++shared;
+      } else {
+        ++replaced;
+      }
+    }
+    if (shared == 0 || shared > 2 || replaced == 0) return false;
+    const bool boundary_edge = shared == 1;
+    if (boundary_[from] && !boundary_edge) {
+      ++stats_.rejected_boundary;
+      return false;
+    }
+    const std::uint32_t comp = comp_[from];
+    if (comp_vertices_[comp] <= (comp_open_[comp] ? 3u : 4u)) return false;
+    // Link condition: the common neighbours of from and to are exactly the edge's opposite
+    // vertices (with a virtual vertex joined to the boundary, Dey et al.).
+    neighbours(from, nf_);
+    neighbours(to, nt_);
+    std::uint32_t common = 0;
+    for (std::size_t i = 0, j = 0; i < nf_.size() && j < nt_.size();) {
+      if (nf_[i] < nt_[j]) {
+        ++i;
+      } else if (nt_[j] < nf_[i]) {
+        ++j;
+      } else {
+        if (nf_[i] != opposite[0] && nf_[i] != opposite[1]) {
+          ++stats_.rejected_link;
+          return false;
+        }
+        ++common;
+        ++i, ++j;
+      }
+    }
+    if (common != shared) {
+      ++stats_.rejected_link;
+      return false;
+    }
+    // No triangle may flip, turn too far or degenerate.
+    for (std::uint32_t id : star_[from]) {
+      const Tri& t = tris_[id];
+      if (has(t, to)) continue;
+      std::array<std::uint32_t, 3> nv = t.v;
+      for (std::uint32_t& w : nv) {
+        if (w == from) w = to;
+      }
+      const Vec3 before = normal(t.v), after = normal(nv);
+      const double lb = glm::length(before), la = glm::length(after);
+      if (!(la > 1e-12 * (lb + 1e-300)) || !(la > 0.0)) {
+        ++stats_.rejected_flip;
+        return false;
+      }
+      if (lb > 0.0 && glm::dot(before, after) < cos_max_turn_ * lb * la) {
+        ++stats_.rejected_flip;
+        return false;
+      }
+    }
+    return true;
+  }
+
+  double cost(std::uint32_t from, std::uint32_t to) const {
+    Quadric q = quad_[from];
+    q += quad_[to];
+    return std::max(0.0, q.eval(pos_[to]));
+  }
+
+  void push_best(std::uint32_t from) {
+    ++stamp_[from];
+    if (removed_[from]) return;
+    neighbours(from, cand_);
+    const std::vector<std::uint32_t> around = cand_;
+    double best = std::numeric_limits<double>::infinity();
+    std::uint32_t best_to = kNone;
+    for (std::uint32_t to : around) {
+      const double c = cost(from, to);
+      if (c >= best) continue;  // ties: the smaller id (iterated first) wins
+      if (!valid(from, to)) continue;
+      best = c;
+      best_to = to;
+    }
+    if (best_to != kNone) heap_.push({best, from, best_to, stamp_[from]});
+  }
+
+  // ---- error bound --------------------------------------------------------------------------
+
+  double collapse_error(std::uint32_t from, std::uint32_t to) {
+    old_targets_.clear();
+    new_targets_.clear();
+    double floor = 0.0;
+    for (std::uint32_t id : star_[from]) {
+      const Tri& t = tris_[id];
+      old_targets_.push_back({pos_[t.v[0]], pos_[t.v[1]], pos_[t.v[2]], t.e});
+      floor = std::max(floor, t.e);
+      if (has(t, to)) continue;
+      std::array<std::uint32_t, 3> nv = t.v;
+      for (std::uint32_t& w : nv) {
+        if (w == from) w = to;
+      }
+      new_targets_.push_back({pos_[nv[0]], pos_[nv[1]], pos_[nv[2]], 0.0});
+    }
+    // Forward: source points assigned to an old triangle (within its e) to the new star.
+    const StarDistance to_new(new_targets_);
+    double e = floor;
+    for (const StarDistance::Target& t : old_targets_) {
+      e = std::max(e, t.offset + to_new.bound(t.a, t.b, t.c, e - t.offset, kBoundDepth));
+    }
+    // Backward: points of the new star to the old one, plus the old bounds.
+    const StarDistance to_old(old_targets_);
+    for (const StarDistance::Target& t : new_targets_) {
+      e = std::max(e, to_old.bound(t.a, t.b, t.c, e, kBoundDepth));
+    }
+    return e;
+  }
+
+  // ---- simplification -----------------------------------------------------------------------
+
+  void apply(std::uint32_t from, std::uint32_t to, double error) {
+    const auto c = static_cast<std::uint32_t>(collapses_.size());
+    Collapse col;
+    col.removed = from;
+    col.kept = to;
+    col.error = error;
+    col.old_begin = static_cast<std::uint32_t>(old_tris_.size());
+    const std::vector<std::uint32_t> old = star_[from];
+    for (std::uint32_t id : old) {
+      old_tris_.push_back(id);
+      tris_[id].destroyer = c;
+      unlink_triangle(id, from);
+    }
+    col.old_end = static_cast<std::uint32_t>(old_tris_.size());
+    star_[from].clear();
+    col.new_begin = static_cast<std::uint32_t>(new_tris_.size());
+    for (std::uint32_t id : old) {
+      if (has(tris_[id], to)) continue;
+      Tri t;
+      t.v = tris_[id].v;
+      for (std::uint32_t& w : t.v) {
+        if (w == from) w = to;
+      }
+      t.e = error;
+      t.creator = c;
+      new_tris_.push_back(add_triangle(t));
+    }
+    col.new_end = static_cast<std::uint32_t>(new_tris_.size());
+    collapses_.push_back(col);
+    removed_[from] = 1;
+    --comp_vertices_[comp_[from]];
+    const Quadric qf = quad_[from];
+    quad_[to] += qf;
+  }
+
+  void simplify() {
+    const std::size_t n = pos_.size();
+    for (std::uint32_t v = 0; v < n; ++v) push_best(v);
+    const std::uint64_t start = alive_vertices();
+    std::uint64_t alive = start;
+    const std::uint64_t floor_vertices = options_.base_vertices;
+    std::uint64_t next_report = 0;
+    while (!heap_.empty() && alive > floor_vertices) {
+      const Candidate top = heap_.top();
+      heap_.pop();
+      if (removed_[top.from] || top.stamp != stamp_[top.from]) continue;
+      if (removed_[top.to] || !valid(top.from, top.to)) {
+        push_best(top.from);
+        continue;
+      }
+      const double error = collapse_error(top.from, top.to);
+      if (options_.max_base_error > 0.0 && error > options_.max_base_error) {
+        ++stamp_[top.from];  // retried only when its neighbourhood changes
+        continue;
+      }
+      apply(top.from, top.to, error);
+      --alive;
+      neighbours(top.to, ring_);
+      const std::vector<std::uint32_t> ring = ring_;
+      push_best(top.to);
+      for (std::uint32_t w : ring) push_best(w);
+      if (options_.progress && start - alive >= next_report) {
+        options_.progress(0.8 * double(start - alive) / double(start));
+        next_report += std::max<std::uint64_t>(1, start / 200);
+      }
+    }
+  }
+
+  // ---- emission -----------------------------------------------------------------------------
+
+  // Splits in a topological order of their dependencies, largest error first.
+  std::vector<std::uint32_t> split_order() const {
+    const std::size_t m = collapses_.size();
+    std::vector<std::uint32_t> indegree(m, 0);
+    std::vector<std::uint32_t> tmp;
+    for (std::uint32_t c = 0; c < m; ++c) {
+      tmp.clear();
+      for (std::uint32_t i = collapses_[c].new_begin; i < collapses_[c].new_end; ++i) {
+        const std::uint32_t d = tris_[new_tris_[i]].destroyer;
+        if (d != kNone) tmp.push_back(d);
+      }
+      std::sort(tmp.begin(), tmp.end());
+      indegree[c] = static_cast<std::uint32_t>(std::unique(tmp.begin(), tmp.end()) - tmp.begin());
+    }
+    using Entry = std::pair<double, std::uint32_t>;  // (error, collapse): largest, then latest
+    std::priority_queue<Entry> ready;
+    for (std::uint32_t c = 0; c < m; ++c) {
+      if (indegree[c] == 0) ready.push({collapses_[c].error, c});
+    }
+    std::vector<std::uint32_t> order;
+    order.reserve(m);
+    while (!ready.empty()) {
+      const std::uint32_t c = ready.top().second;
+      ready.pop();
+      order.push_back(c);
+      tmp.clear();
+      for (std::uint32_t i = collapses_[c].old_begin; i < collapses_[c].old_end; ++i) {
+        const std::uint32_t k = tris_[old_tris_[i]].creator;
+        if (k != kNone) tmp.push_back(k);
+      }
+      std::sort(tmp.begin(), tmp.end());
+      tmp.erase(std::unique(tmp.begin(), tmp.end()), tmp.end());
+      for (std::uint32_t k : tmp) {
+        if (--indegree[k] == 0) ready.push({collapses_[k].error, k});
+      }
+    }
+    if (order.size() != m) throw_internal("QEM PM: the split dependencies have a cycle");
+    return order;
+  }
+
+  // Fills an op's vertices (the new ones first, then every other corner of `frag`) and its
+  // fragment triangles with in-fragment neighbours.
+  void fill_fragment(Op& op, const std::vector<std::uint32_t>& frag,
+                     const std::vector<std::uint32_t>& new_vertices) {
+    local_.clear();
+    for (std::uint32_t v : new_vertices) local_.push_back(v);
+    for (std::uint32_t id : frag) {
+      for (std::uint32_t v : tris_[id].v) local_.push_back(v);
+    }
+    std::sort(local_.begin() + std::ptrdiff_t(new_vertices.size()), local_.end());
+    local_.erase(std::unique(local_.begin() + std::ptrdiff_t(new_vertices.size()), local_.end()),
+                 local_.end());
+    local_.erase(std::remove_if(local_.begin() + std::ptrdiff_t(new_vertices.size()), local_.end(),
+                                [&](std::uint32_t v) {
+                                  return std::find(new_vertices.begin(), new_vertices.end(), v) !=
+                                         new_vertices.end();
+                                }),
+                 local_.end());
+    op.new_vertex_count = static_cast<std::uint32_t>(new_vertices.size());
+    op.vertices.clear();
+    op.vertices.reserve(local_.size());
+    for (std::uint32_t v : local_) op.vertices.push_back({VertexId(v), pos_[v]});
+    const auto index_of = [&](std::uint32_t v) {
+      const auto first = local_.begin() + std::ptrdiff_t(new_vertices.size());
+      for (auto it = local_.begin(); it != first; ++it) {
+        if (*it == v) return static_cast<std::uint32_t>(it - local_.begin());
+      }
+      return static_cast<std::uint32_t>(std::lower_bound(first, local_.end(), v) - local_.begin());
+    };
+    op.fragment.assign(frag.size(), FragmentTriangle{});
+    frag_edges_.clear();
+    for (std::uint32_t i = 0; i < frag.size(); ++i) {
+      const Tri& t = tris_[frag[i]];
+      for (int k = 0; k < 3; ++k) {
+        op.fragment[i].v[k] = index_of(t.v[k]);
+        frag_edges_.emplace(edge_key(t.v[k], t.v[(k + 1) % 3]), i);
+      }
+    }
+    for (std::uint32_t i = 0; i < frag.size(); ++i) {
+      const Tri& t = tris_[frag[i]];
+      for (int k = 0; k < 3; ++k) {
+        auto it = frag_edges_.find(edge_key(t.v[(k + 1) % 3], t.v[k]));
+        if (it != frag_edges_.end()) op.fragment[i].nbr[k] = static_cast<std::int32_t>(it->second);
+      }
+    }
+  }
+
+  static std::uint8_t edge_index(const Tri& t, std::uint32_t a, std::uint32_t b) {
+    for (std::uint8_t k = 0; k < 3; ++k) {
+      if (t.v[k] == a && t.v[(k + 1) % 3] == b) return k;
+    }
+    throw_internal("QEM PM: a triangle lacks the edge it was found by");
+  }
+
+  Crmr emit(const std::string& name) {
+    Crmr crmr;
+    CrmrInfo& h = crmr.header;
+    h.kind = ModelKind::kMesh3d;
+    h.source = name;
+    h.err_final = 0.0;
+    for (std::uint32_t v = 0; v < pos_.size(); ++v) {
+      if (comp_[v] != kNone) {
+        h.bounds.add(pos_[v]);
+        ++h.vertex_count;
+      }
+    }
+    h.builder = "qem-pm max-normal-turn=" + std::to_string(options_.max_normal_turn_degrees) +
+                " boundary-weight=" + std::to_string(options_.boundary_weight) +
+                " base-vertices=" + std::to_string(options_.base_vertices) +
+                " max-base-error=" + std::to_string(options_.max_base_error);
+
+    const std::vector<std::uint32_t> order = split_order();
+    const std::size_t nt = tris_.size();
+    tri_op_.assign(nt, kNone);
+    tri_local_.assign(nt, kNone);
+
+    // R^0: the triangles never removed, and every vertex they use.
+    std::vector<std::uint32_t> base;
+    for (std::uint32_t id = 0; id < nt; ++id) {
+      if (tris_[id].destroyer == kNone) base.push_back(id);
+    }
+    std::vector<std::uint32_t> base_vertices;
+    for (std::uint32_t id : base) {
+      for (std::uint32_t v : tris_[id].v) base_vertices.push_back(v);
+    }
+    std::sort(base_vertices.begin(), base_vertices.end());
+    base_vertices.erase(std::unique(base_vertices.begin(), base_vertices.end()),
+                        base_vertices.end());
+    crmr.ops.resize(order.size() + 1);
+    Op& r0 = crmr.ops[0];
+    r0.id = kBaseOp;
+    fill_fragment(r0, base, base_vertices);
+
+    std::unordered_map<std::uint64_t, std::uint32_t> edges;  // directed edge -> current triangle
+    edges.reserve(nt);
+    using Err = std::pair<double, std::uint32_t>;
+    std::priority_queue<Err> errors;  // lazy max of e over the current mesh
+    std::vector<std::uint8_t> current(nt, 0);
+    const auto enter = [&](std::uint32_t id) {
+      const Tri& t = tris_[id];
+      for (int k = 0; k < 3; ++k) edges[edge_key(t.v[k], t.v[(k + 1) % 3])] = id;
+      current[id] = 1;
+      errors.push({t.e, id});
+    };
+    for (std::uint32_t i = 0; i < base.size(); ++i) {
+      tri_op_[base[i]] = 0;
+      tri_local_[base[i]] = i;
+      enter(base[i]);
+    }
+    const auto mesh_error = [&]() {
+      while (!errors.empty() && !current[errors.top().second]) errors.pop();
+      return errors.empty() ? 0.0 : errors.top().first;
+    };
+    h.err0 = mesh_error();
+    r0.error = h.err0;
+    r0.birth_res = 0.0;
+
+    std::vector<std::uint32_t> frag, pre;
+    for (std::size_t i = 0; i < order.size(); ++i) {
+      const Collapse& c = collapses_[order[i]];
+      const auto op_id = static_cast<std::uint32_t>(i + 1);
+      Op& op = crmr.ops[op_id];
+      op.id = OpId(op_id);
+      op.error = mesh_error();
+      op.birth_res = resolution_of(h, op.error);
+      frag.assign(old_tris_.begin() + c.old_begin, old_tris_.begin() + c.old_end);
+      pre.assign(new_tris_.begin() + c.new_begin, new_tris_.begin() + c.new_end);
+      fill_fragment(op, frag, {c.removed});
+      for (std::uint32_t k = 0; k < frag.size(); ++k) {
+        tri_op_[frag[k]] = op_id;
+        tri_local_[frag[k]] = k;
+      }
+      op.pre.clear();
+      for (std::uint32_t id : pre) {
+        if (!current[id]) throw_internal("QEM PM: a split's PreF is not in the mesh");
+        op.pre.push_back({OpId(tri_op_[id]), tri_local_[id]});
+      }
+      std::sort(op.pre.begin(), op.pre.end());
+      // Coarser links of the fragment's boundary edges: the newer of the replaced triangle
+      // inside and the surviving one outside (both hold the edge just before the split).
+      op.coarser.clear();
+      for (std::uint32_t k = 0; k < frag.size(); ++k) {
+        const Tri& t = tris_[frag[k]];
+        for (std::uint8_t e = 0; e < 3; ++e) {
+          if (op.fragment[k].nbr[e] != FragmentTriangle::kNoNeighbour) continue;
+          const std::uint32_t a = t.v[e], b = t.v[(e + 1) % 3];
+          auto out = edges.find(edge_key(b, a));
+          if (out == edges.end()) continue;  // model boundary
+          auto in = edges.find(edge_key(a, b));
+          if (in == edges.end() || tris_[in->second].creator != order[i]) {
+            throw_internal("QEM PM: a fragment boundary edge has no replaced triangle");
+          }
+          const std::uint32_t inside = in->second, outside = out->second;
+          const bool outer = tri_op_[outside] > tri_op_[inside];
+          const std::uint32_t tri = outer ? outside : inside;
+          const std::uint8_t edge =
+              outer ? edge_index(tris_[tri], b, a) : edge_index(tris_[tri], a, b);
+          op.coarser.push_back({k, e, EdgeRef{TriRef{OpId(tri_op_[tri]), tri_local_[tri]}, edge}});
+        }
+      }
+      for (std::uint32_t id : pre) {
+        const Tri& t = tris_[id];
+        for (int k = 0; k < 3; ++k) edges.erase(edge_key(t.v[k], t.v[(k + 1) % 3]));
+        current[id] = 0;
+      }
+      for (std::uint32_t id : frag) enter(id);
+      if (options_.progress && (i % std::max<std::size_t>(1, order.size() / 50)) == 0) {
+        options_.progress(0.8 + 0.15 * double(i) / double(order.size()));
+      }
+    }
+    link_dag(crmr);
+    if (options_.progress) options_.progress(1.0);
+    return crmr;
+  }
+
+  QemPmOptions options_;
+  QemPmStats stats_;
+  double cos_max_turn_ = 0.0;
+  std::vector<Vec3> pos_;
+  std::vector<Tri> tris_;
+  std::vector<std::vector<std::uint32_t>> star_;
+  std::vector<Quadric> quad_;
+  std::vector<std::uint8_t> removed_, boundary_;
+  std::vector<std::uint32_t> stamp_, comp_, comp_vertices_;
+  std::vector<std::uint8_t> comp_open_;
+  std::priority_queue<Candidate> heap_;
+  std::vector<Collapse> collapses_;
+  std::vector<std::uint32_t> old_tris_, new_tris_;
+  std::vector<StarDistance::Target> old_targets_, new_targets_;
+  std::vector<std::uint32_t> nf_, nt_, cand_, ring_, local_;
+  std::unordered_map<std::uint64_t, std::uint32_t> frag_edges_;
+  std::vector<std::uint32_t> tri_op_, tri_local_;
+};
+
+}  // namespace
+
+Crmr build_qem_pm(const TriangleMesh& mesh, const std::string& name, const QemPmOptions& options,
+                  QemPmStats* stats) {
+  if (mesh.triangles.empty()) throw_input("mesh '" + name + "' has no triangles");
+  if (!(options.max_normal_turn_degrees > 0.0 && options.max_normal_turn_degrees <= 180.0)) {
+    throw_input("QEM PM: max normal turn must be in (0, 180] degrees");
+  }
+  Builder b(mesh, options);
+  return b.run(name, stats);
+}
+
+}  // namespace smr

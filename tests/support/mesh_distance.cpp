@@ -1,0 +1,93 @@
+#include "tests/support/mesh_distance.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <glm/geometric.hpp>
+
+namespace smr::test {
+
+TriangleSoupDistance::TriangleSoupDistance(std::vector<std::array<Vec3, 3>> triangles)
+    : tris_(std::move(triangles)) {
+  for (const auto& t : tris_) {
+    for (const Vec3& p : t) box_.add(p);
+  }
+  if (tris_.empty()) return;
+  const Vec3 ext = glm::max(box_.hi - box_.lo, Vec3(1e-9));
+  // About two triangles per bucket.
+  const double volume = ext.x * ext.y * ext.z;
+  cell_ = std::cbrt(volume / std::max<double>(1.0, double(tris_.size()) / 2.0));
+  cell_ = std::max(cell_, std::max({ext.x, ext.y, ext.z}) / 256.0);
+  for (int k = 0; k < 3; ++k)
+    dims_[k] = std::max<std::int64_t>(1, std::int64_t(ext[k] / cell_) + 1);
+  const auto bucket = [&](std::int64_t x, std::int64_t y, std::int64_t z) {
+    return std::size_t((z * dims_[1] + y) * dims_[0] + x);
+  };
+  std::vector<std::uint32_t> count(std::size_t(dims_[0] * dims_[1] * dims_[2]) + 1, 0);
+  for (int pass = 0; pass < 2; ++pass) {
+    for (std::uint32_t i = 0; i < tris_.size(); ++i) {
+      Box3 b;
+      for (const Vec3& p : tris_[i]) b.add(p);
+      const auto lo = cell_of(b.lo), hi = cell_of(b.hi);
+      for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
+        for (std::int64_t y = lo[1]; y <= hi[1]; ++y) {
+          for (std::int64_t x = lo[0]; x <= hi[0]; ++x) {
+            if (pass == 0) {
+              ++count[bucket(x, y, z) + 1];
+            } else {
+              items_[count[bucket(x, y, z)]++] = i;
+            }
+          }
+        }
+      }
+    }
+    if (pass == 0) {
+      for (std::size_t b = 1; b < count.size(); ++b) count[b] += count[b - 1];
+      start_ = count;
+      items_.resize(count.back());
+    }
+  }
+}
+
+std::array<std::int64_t, 3> TriangleSoupDistance::cell_of(const Vec3& p) const {
+  std::array<std::int64_t, 3> c{};
+  for (int k = 0; k < 3; ++k) {
+    c[k] = std::clamp<std::int64_t>(std::int64_t(std::floor((p[k] - box_.lo[k]) / cell_)), 0,
+                                    dims_[k] - 1);
+  }
+  return c;
+}
+
+double TriangleSoupDistance::distance(const Vec3& p) const {
+  double best = std::numeric_limits<double>::infinity();
+  if (tris_.empty()) return best;
+  // Buckets at ring r or beyond are at least (r - 1) cells away, and never nearer than the box.
+  const Vec3 outside = glm::max(glm::max(box_.lo - p, p - box_.hi), Vec3(0.0));
+  const double to_box = glm::length(outside);
+  const auto c = cell_of(p);
+  const std::int64_t max_ring = std::max({dims_[0], dims_[1], dims_[2]});
+  for (std::int64_t r = 0; r <= max_ring; ++r) {
+    if (r > 0 && best <= std::max(to_box, double(r - 1) * cell_)) break;
+    for (std::int64_t z = c[2] - r; z <= c[2] + r; ++z) {
+      if (z < 0 || z >= dims_[2]) continue;
+      for (std::int64_t y = c[1] - r; y <= c[1] + r; ++y) {
+        if (y < 0 || y >= dims_[1]) continue;
+        for (std::int64_t x = c[0] - r; x <= c[0] + r; ++x) {
+          if (x < 0 || x >= dims_[0]) continue;
+          if (std::max({std::abs(x - c[0]), std::abs(y - c[1]), std::abs(z - c[2])}) != r) {
+            continue;
+          }
+          const std::size_t b = std::size_t((z * dims_[1] + y) * dims_[0] + x);
+          for (std::uint32_t k = start_[b]; k < start_[b + 1]; ++k) {
+            const auto& t = tris_[items_[k]];
+            best = std::min(best, point_triangle_distance3d(p, t[0], t[1], t[2]));
+          }
+        }
+      }
+    }
+  }
+  return best;
+}
+
+}  // namespace smr::test
