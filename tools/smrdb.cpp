@@ -17,10 +17,12 @@
 #include <nlohmann/json.hpp>
 
 #include "smr/build/greedy_tin.h"
+#include "smr/build/qem_pm.h"
 #include "smr/core/invariants.h"
 #include "smr/db/database.h"
 #include "smr/extract/extract.h"
 #include "smr/io/dem_reader.h"
+#include "smr/io/mesh_reader.h"
 #include "smr/io/mesh_writer.h"
 #include "smr/io/render.h"
 #include "smr/io/synthetic.h"
@@ -170,15 +172,25 @@ struct IngestArgs {
   double z_quantum = 0.0;
   std::uint32_t page_kb = 16;
   bool force = false;
+  bool repair = false;
+
+  bool is_mesh() const { return smr::is_mesh_path(dem); }
 
   void add_to(CLI::App& app) {
-    app.add_option("dem", dem, "DEM: GeoTIFF or any GDAL raster (one band), .npy or .npz")
+    app.add_option("input", dem,
+                   "DEM (GeoTIFF or any GDAL raster with one band, .npy, .npz) or 3-D mesh (.ply, "
+                   ".obj, .off, .stl)")
         ->required();
+    app.add_flag("--repair", repair,
+                 "Meshes: weld equal vertices, drop degenerate and duplicate faces, split "
+                 "non-manifold edges and vertices, orient faces consistently");
     app.add_option("--max-error", max_error,
                    "Stop refining at this vertical error (data units; 0 = lossless)")
         ->capture_default_str();
     app.add_option("--max-vertices", max_vertices, "Stop at this many vertices (0 = no limit)");
-    app.add_option("--base-vertices", base_vertices, "Vertices of the base mesh (4 = the corners)")
+    app.add_option("--base-vertices", base_vertices,
+                   "Vertices of the base mesh (terrain: 4 = the corners; meshes: simplify down to "
+                   "this many where the collapse rules allow)")
         ->capture_default_str();
     app.add_option("--codec", codec, "Geometry codec of the pages: draco, zstd or raw")
         ->capture_default_str();
@@ -198,6 +210,12 @@ struct IngestArgs {
     if (!(z_quantum >= 0.0) || !std::isfinite(z_quantum))
       throw_input("--z-quantum must be >= 0 (0 = automatic)");
     if (page_kb < 1 || page_kb > 4096) throw_input("--page-kb must be in [1, 4096]");
+    if (is_mesh() && (max_error != 0.0 || max_vertices != 0)) {
+      throw_input(
+          "--max-error and --max-vertices apply to DEMs: a mesh database always refines "
+          "to the source mesh (use --base-vertices to choose the coarsest level)");
+    }
+    if (!is_mesh() && repair) throw_input("--repair applies to meshes (.ply, .obj, .off, .stl)");
   }
   // What the database records of how it was built: the input's file name and every build
   // parameter, in a fixed order. Not the command line: output path, flag order, -q or --json
@@ -210,7 +228,8 @@ struct IngestArgs {
     return "input=" + std::filesystem::path(dem).filename().string() +
            " max-error=" + number(max_error) + " max-vertices=" + std::to_string(max_vertices) +
            " base-vertices=" + std::to_string(base_vertices) + " codec=" + codec +
-           " z-quantum=" + number(z_quantum) + " page-kb=" + std::to_string(page_kb);
+           " z-quantum=" + number(z_quantum) + " page-kb=" + std::to_string(page_kb) +
+           (is_mesh() ? std::string(" repair=") + (repair ? "yes" : "no") : std::string());
   }
 };
 
@@ -218,22 +237,44 @@ struct IngestArgs {
 nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quiet, bool verify) {
   nlohmann::json report;
   auto t0 = Clock::now();
-  const smr::Heightfield dem = smr::read_dem(a.dem);
-  report["input"] = {{"path", a.dem},
-                     {"width", dem.width},
-                     {"height", dem.height},
-                     {"samples", dem.sample_count()},
-                     {"nodata", dem.has_nodata()},
-                     {"geographic", dem.georef.geographic},
-                     {"read_seconds", seconds_since(t0)}};
   smr::tools::GdalProgress progress(quiet ? nullptr : stderr);
-  smr::GreedyTinOptions opt;
-  opt.max_error = a.max_error;
-  opt.max_vertices = a.max_vertices;
-  opt.base_vertices = a.base_vertices;
-  opt.progress = [&](double f) { progress.update(0.8 * f); };
-  t0 = Clock::now();
-  smr::Crmr crmr = smr::build_greedy_tin(dem, opt);
+  smr::Crmr crmr;
+  if (a.is_mesh()) {
+    smr::MeshReport mr;
+    const smr::TriangleMesh mesh =
+        smr::read_mesh(a.dem, a.repair ? smr::MeshRepair::all() : smr::MeshRepair{}, &mr);
+    report["input"] = {{"path", a.dem},
+                       {"kind", "mesh"},
+                       {"vertices", mr.vertices},
+                       {"triangles", mr.faces},
+                       {"components", mr.components},
+                       {"boundary_edges", mr.boundary_edges},
+                       {"repairs", mr.repairs()},
+                       {"summary", mr.summary()},
+                       {"read_seconds", seconds_since(t0)}};
+    smr::QemPmOptions opt;
+    opt.base_vertices = a.base_vertices;
+    opt.progress = [&](double f) { progress.update(0.8 * f); };
+    t0 = Clock::now();
+    crmr = smr::build_qem_pm(mesh, a.dem, opt);
+  } else {
+    const smr::Heightfield dem = smr::read_dem(a.dem);
+    report["input"] = {{"path", a.dem},
+                       {"kind", "terrain"},
+                       {"width", dem.width},
+                       {"height", dem.height},
+                       {"samples", dem.sample_count()},
+                       {"nodata", dem.has_nodata()},
+                       {"geographic", dem.georef.geographic},
+                       {"read_seconds", seconds_since(t0)}};
+    smr::GreedyTinOptions opt;
+    opt.max_error = a.max_error;
+    opt.max_vertices = a.max_vertices;
+    opt.base_vertices = a.base_vertices;
+    opt.progress = [&](double f) { progress.update(0.8 * f); };
+    t0 = Clock::now();
+    crmr = smr::build_greedy_tin(dem, opt);
+  }
   // The database names its source by file name only, like describe(): where the input sits
   // must not change the bytes.
   crmr.header.source = std::filesystem::path(a.dem).filename().string();
@@ -317,9 +358,13 @@ nlohmann::json extract(const smr::Database& db, const smr::Heightfield* dem,
   report["rcf"] = rcf.describe();
   report["extraction"] = stats_json(e.stats);
   report["extraction"]["algorithm"] = a.algorithm;
-  if (verify) {
+  if (verify && db.info().kind == smr::ModelKind::kTerrain) {
     const smr::InvariantReport r = smr::check_tiling(db, e.triangles);
     if (!r.ok()) smr::throw_internal("output does not tile the domain: " + r.summary());
+  } else if (verify) {
+    const smr::SurfaceReport r = smr::check_surface(db, e.triangles);
+    if (!r.report.ok())
+      smr::throw_internal("output is not a manifold surface: " + r.report.summary());
   }
   const smr::TriangleMesh mesh = smr::to_mesh(db, e.triangles);
   const smr::DatabaseStats st = db.stats();
@@ -416,9 +461,10 @@ int cmd_build(IngestArgs a, std::string db_path, const RcfOptions& rcf_options,
     }
   } remove{scratch};
   nlohmann::json r = ingest(a, db_path, quiet, verify);
-  const smr::Heightfield dem = smr::read_dem(a.dem);
+  std::optional<smr::Heightfield> dem;
+  if (!a.is_mesh()) dem = smr::read_dem(a.dem);
   const auto db = smr::Database::open(db_path, {std::size_t(e.cache_mb) << 20});
-  r.update(extract(*db, &dem, spec, e, verify));
+  r.update(extract(*db, dem ? &*dem : nullptr, spec, e, verify));
   print_report(r, json);
   if (!json && !quiet) {
     std::fprintf(stderr, "%s: %llu ops, %llu output triangles (|X| = %llu) -> %s\n", a.dem.c_str(),
@@ -450,8 +496,12 @@ int cmd_info(const std::string& db_path, bool json) {
   std::printf("database        %s (format %d, %s pages, checksum %s)\n", db_path.c_str(),
               meta["version"].get<int>(), meta["codec"].get<std::string>().c_str(),
               meta["checksum"].get<std::string>().c_str());
-  std::printf("source          %s (%dx%d samples)\n", m["source"].get<std::string>().c_str(),
-              m["grid_width"].get<int>(), m["grid_height"].get<int>());
+  if (m["kind"].get<std::string>() == "terrain") {
+    std::printf("source          %s (%dx%d samples)\n", m["source"].get<std::string>().c_str(),
+                m["grid_width"].get<int>(), m["grid_height"].get<int>());
+  } else {
+    std::printf("source          %s (3-D mesh)\n", m["source"].get<std::string>().c_str());
+  }
   std::printf("builder         %s\n", m["builder"].get<std::string>().c_str());
   std::printf("ops             %llu (DAG depth %llu), %llu triangles, %llu vertices\n",
               static_cast<unsigned long long>(meta["counts"]["ops"].get<std::uint64_t>()),

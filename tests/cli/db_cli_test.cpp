@@ -32,6 +32,7 @@
 #include "storage/lmdb_env.h"
 #include "tests/support/files.h"
 #include "tests/support/process.h"
+#include "tests/support/test_data.h"
 
 namespace {
 
@@ -507,6 +508,39 @@ TEST_F(DbCli, EveryCodecGivesTheSameExtraction) {
       EXPECT_TRUE(mesh == first) << codec << " extracts another mesh";
     }
   }
+}
+
+}  // namespace
+
+namespace {
+
+// 3-D meshes through the CLI: ingest detects the mesh, info/verify/extract work unchanged, the
+// finest extraction is the whole source mesh, mesh-only and DEM-only options are refused, and a
+// broken mesh file is exit code 1 naming it with no database left behind.
+TEST_F(DbCli, MeshIngestExtractInfoVerify) {
+  const std::string mesh = smr::test::data_path("meshes/blobby_3cc.off");
+  const std::string db = path("mesh.smrdb");
+  CliRun r = smrdb("ingest " + mesh + " -q --json -o " + db);
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("\"kind\": \"mesh\""), std::string::npos) << r.out;
+  r = smrdb("info " + db);
+  EXPECT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("3-D mesh"), std::string::npos) << r.out;
+  EXPECT_EQ(smrdb("verify -q " + db).code, 0);
+  r = smrdb("extract " + db + " --floor 1 --verify --json -q -o " + path("all.ply"));
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("\"triangles\": 3417"), std::string::npos) << r.out;
+  r = smrdb("extract " + db + " --floor 0.5 --verify -q -o " + path("half.obj"));
+  EXPECT_EQ(r.code, 0) << r.out;
+  expect_user_error("extract " + db + " --floor 0.5 --algorithm reduced -o " + path("r.obj"),
+                    "reduced extraction");
+  expect_user_error("ingest " + mesh + " --max-error 1 -o " + path("x.smrdb"), "--max-error");
+  expect_user_error("ingest " + dem_ + " --repair -o " + path("y.smrdb"), "--repair");
+
+  const std::string broken = path("broken.off");
+  write_file(broken, "OFF\n3 1 0\n0 0 0\n1 0 0\nnan 1 0\n3 0 1 2\n");
+  expect_user_error("ingest " + broken + " -o " + path("z.smrdb"), "broken.off");
+  EXPECT_FALSE(fs::exists(path("z.smrdb")));
 }
 
 }  // namespace

@@ -24,4 +24,8 @@ const Heightfield& dem(const std::string& name);
 /// The DEM with a CRMR built at the dataset's standard tolerance (cached).
 const Dataset& dataset(const std::string& name);
 
+/// Full path of a real mesh in <data dir>/meshes (bunny00.off, pig.stl, ...); like data_path, a
+/// missing file fails the current test.
+std::string mesh_path(const std::string& name);
+
 }  // namespace smr::test

@@ -59,7 +59,7 @@ std::array<std::int64_t, 3> TriangleSoupDistance::cell_of(const Vec3& p) const {
   return c;
 }
 
-double TriangleSoupDistance::distance(const Vec3& p) const {
+double TriangleSoupDistance::search(const Vec3& p, double radius) const {
   double best = std::numeric_limits<double>::infinity();
   if (tris_.empty()) return best;
   // Buckets at ring r or beyond are at least (r - 1) cells away, and never nearer than the box.
@@ -68,7 +68,9 @@ double TriangleSoupDistance::distance(const Vec3& p) const {
   const auto c = cell_of(p);
   const std::int64_t max_ring = std::max({dims_[0], dims_[1], dims_[2]});
   for (std::int64_t r = 0; r <= max_ring; ++r) {
-    if (r > 0 && best <= std::max(to_box, double(r - 1) * cell_)) break;
+    const double nearest_beyond = std::max(to_box, double(r - 1) * cell_);
+    if (r > 0 && best <= nearest_beyond) break;
+    if (radius >= 0.0 && (best <= radius || nearest_beyond > radius)) break;
     for (std::int64_t z = c[2] - r; z <= c[2] + r; ++z) {
       if (z < 0 || z >= dims_[2]) continue;
       for (std::int64_t y = c[1] - r; y <= c[1] + r; ++y) {

@@ -16,10 +16,14 @@ class TriangleSoupDistance {
  public:
   explicit TriangleSoupDistance(std::vector<std::array<Vec3, 3>> triangles);
   /// min over triangles of the distance from p to the closed triangle.
-  double distance(const Vec3& p) const;
+  double distance(const Vec3& p) const { return search(p, -1.0); }
+  /// distance(p) <= radius, searching only the buckets within `radius` of p.
+  bool within(const Vec3& p, double radius) const { return search(p, radius) <= radius; }
 
  private:
   std::array<std::int64_t, 3> cell_of(const Vec3& p) const;
+  // The distance, or (radius >= 0) any value <= radius once one is found, or > radius when none.
+  double search(const Vec3& p, double radius) const;
   std::vector<std::array<Vec3, 3>> tris_;
   Box3 box_;
   double cell_ = 1.0;

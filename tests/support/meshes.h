@@ -1,0 +1,28 @@
+// The 3-D test meshes (CGAL's demo data, fetched by scripts/fetch-data.sh), each read and built
+// into a QEM progressive-mesh CRMR once per process, and a spread of 3-D RCFs placed relative to
+// a model's bounds.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "smr/build/qem_pm.h"
+#include "smr/core/mesh.h"
+#include "tests/support/rcf_spread.h"
+
+namespace smr::test {
+
+struct BuiltMesh {
+  TriangleMesh source;
+  Crmr crmr;
+  QemPmStats stats;
+};
+
+/// `name` is a file of <data>/meshes (e.g. "bunny00.off").
+const BuiltMesh& built_mesh(const std::string& name);
+
+/// Object-space levels 0..1 and cameras from three directions at 3 and 1.2 model radii with
+/// 0.5, 2 and 8 px tolerances (frustum and back-face culling on).
+std::vector<NamedSpec> mesh_rcf_spread(const CrmrInfo& info);
+
+}  // namespace smr::test
