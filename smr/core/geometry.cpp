@@ -33,19 +33,33 @@ double point_segment_distance3d(const Vec3& p, const Vec3& a, const Vec3& b) {
 }  // namespace
 
 double point_triangle_distance3d(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Vec3 n = glm::cross(b - a, c - a);
-  const double n2 = glm::dot(n, n);
-  if (n2 > 0.0) {
-    // Project onto the plane; inside test by barycentric signs.
-    const double dist = glm::dot(p - a, n) / std::sqrt(n2);
-    const Vec3 q = p - dist * (n / std::sqrt(n2));
-    const double s0 = glm::dot(glm::cross(b - a, q - a), n);
-    const double s1 = glm::dot(glm::cross(c - b, q - b), n);
-    const double s2 = glm::dot(glm::cross(a - c, q - c), n);
-    if (s0 >= 0.0 && s1 >= 0.0 && s2 >= 0.0) return std::abs(dist);
+  // The closest point by the Voronoi region of p (Ericson, Real-Time Collision Detection 5.1.5):
+  // dot products only, no square root but the last. Degenerate triangles: nearest edge.
+  const Vec3 ab = b - a, ac = c - a;
+  const Vec3 n = glm::cross(ab, ac);
+  if (!(glm::dot(n, n) > 0.0)) {
+    return std::min({point_segment_distance3d(p, a, b), point_segment_distance3d(p, b, c),
+                     point_segment_distance3d(p, c, a)});
   }
-  return std::min({point_segment_distance3d(p, a, b), point_segment_distance3d(p, b, c),
-                   point_segment_distance3d(p, c, a)});
+  const Vec3 ap = p - a;
+  const double d1 = glm::dot(ab, ap), d2 = glm::dot(ac, ap);
+  if (d1 <= 0.0 && d2 <= 0.0) return glm::length(ap);
+  const Vec3 bp = p - b;
+  const double d3 = glm::dot(ab, bp), d4 = glm::dot(ac, bp);
+  if (d3 >= 0.0 && d4 <= d3) return glm::length(bp);
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) return glm::length(ap - (d1 / (d1 - d3)) * ab);
+  const Vec3 cp = p - c;
+  const double d5 = glm::dot(ab, cp), d6 = glm::dot(ac, cp);
+  if (d6 >= 0.0 && d5 <= d6) return glm::length(cp);
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) return glm::length(ap - (d2 / (d2 - d6)) * ac);
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0) {
+    return glm::length(bp - ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b));
+  }
+  const double inv = 1.0 / (va + vb + vc);
+  return glm::length(ap - ab * (vb * inv) - ac * (vc * inv));
 }
 
 Sphere bounding_sphere(std::span<const Vec3> points) {
