@@ -173,6 +173,8 @@ struct IngestArgs {
   std::uint32_t page_kb = 16;
   bool force = false;
   bool repair = false;
+  std::uint32_t coalesce = 32;
+  double coalesce_ratio = 0.7;
 
   bool is_mesh() const { return smr::is_mesh_path(dem); }
 
@@ -181,6 +183,14 @@ struct IngestArgs {
                    "DEM (GeoTIFF or any GDAL raster with one band, .npy, .npz) or 3-D mesh (.ply, "
                    ".obj, .off, .stl)")
         ->required();
+    app.add_option("--coalesce", coalesce,
+                   "Meshes: merge vertex splits into ops of at most this many fragment "
+                   "triangles (Brown 4.4.3.3; 0 = one op per split)")
+        ->capture_default_str();
+    app.add_option("--coalesce-ratio", coalesce_ratio,
+                   "Meshes: merge a split only when its error is at least this fraction of the "
+                   "op's (1 = only equal errors; lower = fewer, larger ops, less selective)")
+        ->capture_default_str();
     app.add_flag("--repair", repair,
                  "Meshes: weld equal vertices, drop degenerate and duplicate faces, split "
                  "non-manifold edges and vertices, orient faces consistently");
@@ -216,6 +226,8 @@ struct IngestArgs {
           "to the source mesh (use --base-vertices to choose the coarsest level)");
     }
     if (!is_mesh() && repair) throw_input("--repair applies to meshes (.ply, .obj, .off, .stl)");
+    if (!(coalesce_ratio >= 0.0 && coalesce_ratio <= 1.0))
+      throw_input("--coalesce-ratio must be in [0, 1]");
   }
   // What the database records of how it was built: the input's file name and every build
   // parameter, in a fixed order. Not the command line: output path, flag order, -q or --json
@@ -229,7 +241,9 @@ struct IngestArgs {
            " max-error=" + number(max_error) + " max-vertices=" + std::to_string(max_vertices) +
            " base-vertices=" + std::to_string(base_vertices) + " codec=" + codec +
            " z-quantum=" + number(z_quantum) + " page-kb=" + std::to_string(page_kb) +
-           (is_mesh() ? std::string(" repair=") + (repair ? "yes" : "no") : std::string());
+           (is_mesh() ? std::string(" repair=") + (repair ? "yes" : "no") + " coalesce=" +
+                            std::to_string(coalesce) + " coalesce-ratio=" + number(coalesce_ratio)
+                      : std::string());
   }
 };
 
@@ -254,6 +268,8 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
                        {"read_seconds", seconds_since(t0)}};
     smr::QemPmOptions opt;
     opt.base_vertices = a.base_vertices;
+    opt.max_fragment_triangles = a.coalesce;
+    opt.coalesce_error_ratio = a.coalesce_ratio;
     opt.progress = [&](double f) { progress.update(0.8 * f); };
     t0 = Clock::now();
     crmr = smr::build_qem_pm(mesh, a.dem, opt);

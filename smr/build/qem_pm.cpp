@@ -490,6 +490,51 @@ class Builder {
     return order;
   }
 
+  // Coalescing (Brown 4.4.3.3, Fig. 4.12b: a finer op merged into the coarser one it overlaps):
+  // walking the splits in order, a split joins the latest group holding one of its parents when
+  // the group's fragment stays within the size bound and the split's error is at least the given
+  // fraction of the group's. The group then stands where its first split stood: the split's
+  // other parents are in earlier groups (or R^0), and everything that depends on a member comes
+  // after it, so the groups keep a topological order.
+  std::vector<std::vector<std::uint32_t>> coalesce(const std::vector<std::uint32_t>& order) {
+    std::vector<std::vector<std::uint32_t>> groups;
+    if (options_.max_fragment_triangles == 0) {
+      for (std::uint32_t c : order) groups.push_back({c});
+      return groups;
+    }
+    std::vector<std::uint32_t> group_of(collapses_.size(), kNone);
+    std::vector<std::uint32_t> size, parents;
+    std::vector<double> first_error;
+    for (std::uint32_t c : order) {
+      const Collapse& col = collapses_[c];
+      parents.clear();
+      for (std::uint32_t i = col.new_begin; i < col.new_end; ++i) {
+        const std::uint32_t d = tris_[new_tris_[i]].destroyer;
+        if (d != kNone) parents.push_back(group_of[d]);
+      }
+      const std::uint32_t own = col.old_end - col.old_begin;
+      if (!parents.empty()) {
+        const std::uint32_t g = *std::max_element(parents.begin(), parents.end());
+        // Joining g, the fragment loses the split's PreF triangles g made and gains its star.
+        const auto from_g =
+            static_cast<std::uint32_t>(std::count(parents.begin(), parents.end(), g));
+        const std::uint32_t grown = own - from_g;
+        if (size[g] + grown <= options_.max_fragment_triangles &&
+            col.error >= options_.coalesce_error_ratio * first_error[g]) {
+          groups[g].push_back(c);
+          size[g] += grown;
+          group_of[c] = g;
+          continue;
+        }
+      }
+      group_of[c] = static_cast<std::uint32_t>(groups.size());
+      groups.push_back({c});
+      size.push_back(own);
+      first_error.push_back(col.error);
+    }
+    return groups;
+  }
+
   // Fills an op's vertices (the new ones first, then every other corner of `frag`) and its
   // fragment triangles with in-fragment neighbours.
   void fill_fragment(Op& op, const std::vector<std::uint32_t>& frag,
@@ -557,11 +602,13 @@ class Builder {
       }
     }
     h.builder = "qem-pm max-normal-turn=" + std::to_string(options_.max_normal_turn_degrees) +
+                " coalesce=" + std::to_string(options_.max_fragment_triangles) +
+                " coalesce-ratio=" + std::to_string(options_.coalesce_error_ratio) +
                 " boundary-weight=" + std::to_string(options_.boundary_weight) +
                 " base-vertices=" + std::to_string(options_.base_vertices) +
                 " max-base-error=" + std::to_string(options_.max_base_error);
 
-    const std::vector<std::uint32_t> order = split_order();
+    const std::vector<std::vector<std::uint32_t>> groups = coalesce(split_order());
     const std::size_t nt = tris_.size();
     tri_op_.assign(nt, kNone);
     tri_local_.assign(nt, kNone);
@@ -578,7 +625,7 @@ class Builder {
     std::sort(base_vertices.begin(), base_vertices.end());
     base_vertices.erase(std::unique(base_vertices.begin(), base_vertices.end()),
                         base_vertices.end());
-    crmr.ops.resize(order.size() + 1);
+    crmr.ops.resize(groups.size() + 1);
     Op& r0 = crmr.ops[0];
     r0.id = kBaseOp;
     fill_fragment(r0, base, base_vertices);
@@ -607,17 +654,36 @@ class Builder {
     r0.error = h.err0;
     r0.birth_res = 0.0;
 
-    std::vector<std::uint32_t> frag, pre;
-    for (std::size_t i = 0; i < order.size(); ++i) {
-      const Collapse& c = collapses_[order[i]];
+    std::vector<std::uint32_t> frag, pre, removed;
+    std::vector<std::uint8_t> in_group(collapses_.size(), 0);
+    for (std::size_t i = 0; i < groups.size(); ++i) {
+      const std::vector<std::uint32_t>& group = groups[i];
       const auto op_id = static_cast<std::uint32_t>(i + 1);
       Op& op = crmr.ops[op_id];
       op.id = OpId(op_id);
       op.error = mesh_error();
       op.birth_res = resolution_of(h, op.error);
-      frag.assign(old_tris_.begin() + c.old_begin, old_tris_.begin() + c.old_end);
-      pre.assign(new_tris_.begin() + c.new_begin, new_tris_.begin() + c.new_end);
-      fill_fragment(op, frag, {c.removed});
+      // F: the members' stars, PreF: their replacements, less the triangles one member makes
+      // and another removes (inside the group they never appear).
+      for (std::uint32_t c : group) in_group[c] = 1;
+      frag.clear();
+      pre.clear();
+      removed.clear();
+      for (std::uint32_t c : group) {
+        const Collapse& col = collapses_[c];
+        removed.push_back(col.removed);
+        for (std::uint32_t k = col.old_begin; k < col.old_end; ++k) {
+          const std::uint32_t id = old_tris_[k];
+          if (tris_[id].creator == kNone || !in_group[tris_[id].creator]) frag.push_back(id);
+        }
+        for (std::uint32_t k = col.new_begin; k < col.new_end; ++k) {
+          const std::uint32_t id = new_tris_[k];
+          if (tris_[id].destroyer == kNone || !in_group[tris_[id].destroyer]) pre.push_back(id);
+        }
+      }
+      for (std::uint32_t c : group) in_group[c] = 0;
+      std::sort(frag.begin(), frag.end());
+      fill_fragment(op, frag, removed);
       for (std::uint32_t k = 0; k < frag.size(); ++k) {
         tri_op_[frag[k]] = op_id;
         tri_local_[frag[k]] = k;
@@ -639,7 +705,8 @@ class Builder {
           auto out = edges.find(edge_key(b, a));
           if (out == edges.end()) continue;  // model boundary
           auto in = edges.find(edge_key(a, b));
-          if (in == edges.end() || tris_[in->second].creator != order[i]) {
+          if (in == edges.end() ||
+              std::find(group.begin(), group.end(), tris_[in->second].creator) == group.end()) {
             throw_internal("QEM PM: a fragment boundary edge has no replaced triangle");
           }
           const std::uint32_t inside = in->second, outside = out->second;
@@ -656,8 +723,8 @@ class Builder {
         current[id] = 0;
       }
       for (std::uint32_t id : frag) enter(id);
-      if (options_.progress && (i % std::max<std::size_t>(1, order.size() / 50)) == 0) {
-        options_.progress(0.8 + 0.15 * double(i) / double(order.size()));
+      if (options_.progress && (i % std::max<std::size_t>(1, groups.size() / 50)) == 0) {
+        options_.progress(0.8 + 0.15 * double(i) / double(groups.size()));
       }
     }
     link_dag(crmr);
@@ -691,6 +758,9 @@ Crmr build_qem_pm(const TriangleMesh& mesh, const std::string& name, const QemPm
   if (mesh.triangles.empty()) throw_input("mesh '" + name + "' has no triangles");
   if (!(options.max_normal_turn_degrees > 0.0 && options.max_normal_turn_degrees <= 180.0)) {
     throw_input("QEM PM: max normal turn must be in (0, 180] degrees");
+  }
+  if (!(options.coalesce_error_ratio >= 0.0 && options.coalesce_error_ratio <= 1.0)) {
+    throw_input("QEM PM: the coalescing error ratio must be in [0, 1]");
   }
   Builder b(mesh, options);
   return b.run(name, stats);

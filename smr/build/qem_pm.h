@@ -18,7 +18,8 @@
 //
 // Order (Brown 4.4.3.3 reordering): splits are emitted in a topological order of their
 // dependencies (a split needs the splits that created its PreF), largest bound first, so the
-// mesh error falls as fast as the dependencies allow.
+// mesh error falls as fast as the dependencies allow; optionally a split is coalesced into the
+// op of its parents (bounded fragment size).
 #pragma once
 
 #include <cstdint>
@@ -39,6 +40,11 @@ struct QemPmOptions {
   double max_normal_turn_degrees = 75.0;
   /// Weight of the boundary constraint planes relative to the face planes.
   double boundary_weight = 100.0;
+  /// Coalescing (Brown 4.4.3.3): a split joins the op of its parents when they are one op, the
+  /// merged fragment has at most this many triangles and the split's error is at least
+  /// coalesce_error_ratio of that op's first split. 0 = one op per vertex split.
+  std::uint32_t max_fragment_triangles = 32;
+  double coalesce_error_ratio = 0.7;
   /// Progress in [0, 1]; called at most a few hundred times.
   std::function<void(double)> progress;
 };

@@ -5,8 +5,8 @@
 #include <cmath>
 #include <random>
 
-#include <glm/geometric.hpp>
 #include <gtest/gtest.h>
+#include <glm/geometric.hpp>
 
 #include "smr/core/geometry.h"
 

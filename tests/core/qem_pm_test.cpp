@@ -14,6 +14,7 @@
 #include "smr/build/qem_pm.h"
 #include "smr/core/invariants.h"
 #include "smr/extract/extract.h"
+#include "storage/error.h"
 #include "tests/support/mesh_distance.h"
 #include "tests/support/meshes.h"
 #include "tests/support/oracles.h"
@@ -50,8 +51,19 @@ TEST_P(QemPm, CrmrInvariantsHoldAndTheFinestMeshIsTheSource) {
   const InvariantReport r = check_crmr(b.crmr);
   EXPECT_TRUE(r.ok()) << r.summary();
   EXPECT_EQ(b.crmr.header.kind, ModelKind::kMesh3d);
-  EXPECT_EQ(b.crmr.ops.size(), b.stats.collapses + 1);
   EXPECT_GT(b.stats.collapses, b.source.positions.size() / 2) << "simplified too little";
+  // Coalescing (default: fragments of at most 32 triangles) merged splits, each op at least one.
+  std::uint64_t new_vertices = 0;
+  for (const Op& op : b.crmr.ops) {
+    if (op.id == kBaseOp) continue;
+    new_vertices += op.new_vertex_count;
+    EXPECT_GE(op.new_vertex_count, 1u);
+    if (op.new_vertex_count > 1) {
+      EXPECT_LE(op.fragment.size(), QemPmOptions{}.max_fragment_triangles) << "op " << op.id.value;
+    }
+  }
+  EXPECT_EQ(new_vertices, b.stats.collapses);
+  EXPECT_LT(b.crmr.ops.size(), b.stats.collapses + 1) << "nothing was coalesced";
 
   std::vector<std::array<std::uint64_t, 3>> want, got;
   for (const auto& t : b.source.triangles) want.push_back(canonical({t[0], t[1], t[2]}));
@@ -162,6 +174,25 @@ TEST_P(QemPm, ExtractionsAreManifoldSatisfyTheRcfAndHoldTheErrorBound) {
                             << max_bound;
   }
   EXPECT_GE(sizes_seen, 5u) << "the RCFs should give many different outputs";
+}
+
+// Without coalescing every vertex split is its own op, and the CRMR is as valid.
+TEST(QemPmOptions, OneOpPerSplitWithoutCoalescing) {
+  const TriangleMesh mesh = test::built_mesh("elephant-with-holes.off").source;
+  QemPmOptions o;
+  o.max_fragment_triangles = 0;
+  QemPmStats stats;
+  const Crmr crmr = build_qem_pm(mesh, "elephant-with-holes.off", o, &stats);
+  EXPECT_EQ(crmr.ops.size(), stats.collapses + 1);
+  for (const Op& op : crmr.ops) {
+    if (op.id != kBaseOp) {
+      EXPECT_EQ(op.new_vertex_count, 1u);
+    }
+  }
+  const InvariantReport r = check_crmr(crmr);
+  EXPECT_TRUE(r.ok()) << r.summary();
+  o.coalesce_error_ratio = 1.5;
+  EXPECT_THROW((void)build_qem_pm(mesh, "x", o), Error);
 }
 
 INSTANTIATE_TEST_SUITE_P(CgalMeshes, QemPm,

@@ -58,6 +58,8 @@ const Dataset& dataset(const std::string& name) {
   return *slot;
 }
 
-std::string mesh_path(const std::string& name) { return data_path("meshes/" + name); }
+std::string mesh_path(const std::string& name) {
+  return data_path("meshes/" + name);
+}
 
 }  // namespace smr::test
