@@ -74,7 +74,7 @@ struct RcfOptions {
   double fov = 60.0, near = 0.0, far = 0.0;
   std::optional<double> pixel_error, floor, frustum_level, critical_level;
   double critical_relief = 0.0;
-  std::vector<std::string> aois, discs;
+  std::vector<std::string> aois, discs, volumes, balls;
   bool no_cull = false;
 
   void add_to(CLI::App& app) {
@@ -93,6 +93,9 @@ struct RcfOptions {
     app.add_option("--floor", floor, "Constant object-space resolution level in [0,1]");
     app.add_option("--aoi", aois, "Gaussian area of interest x,y,radius,level (repeatable)");
     app.add_option("--disc", discs, "Thresholded disc x,y,radius,level (repeatable)");
+    app.add_option("--volume", volumes,
+                   "3-D Gaussian volume of significance x,y,z,radius,level (repeatable)");
+    app.add_option("--ball", balls, "3-D thresholded ball x,y,z,radius,level (repeatable)");
     app.add_option("--frustum-level", frustum_level,
                    "Object-space level inside the view frustum's footprint");
     app.add_option("--centre-cone", centre_cone, "Screen-centre cone half_angle_deg,level");
@@ -132,6 +135,13 @@ struct RcfOptions {
     s.floor = floor;
     for (const auto& a : aois) s.aois.push_back(parse_aoi(a, "--aoi"));
     for (const auto& a : discs) s.discs.push_back(parse_aoi(a, "--disc"));
+    for (const auto& [list, gaussian] : {std::pair{&volumes, true}, std::pair{&balls, false}}) {
+      for (const auto& text : *list) {
+        const auto v =
+            parse_numbers(text, 5, gaussian ? "--volume" : "--ball", "x,y,z,radius,level");
+        s.volumes.push_back({v[0], v[1], v[2], v[3], v[4], gaussian});
+      }
+    }
     s.frustum_level = frustum_level;
     if (!centre_cone.empty()) {
       const auto v = parse_numbers(centre_cone, 2, "--centre-cone", "half_angle_deg,level");

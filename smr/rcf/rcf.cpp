@@ -66,6 +66,44 @@ bool ObjectSpaceCriterion::region_satisfies(const Box3& box, double min_res,
   return min_res >= g_.max_over_rect(xy(box.lo), xy(box.hi));
 }
 
+// ---- volumes of significance ----
+double Volume::at_distance(double d) const {
+  if (gaussian) return level * std::exp(-(d * d) / (2.0 * radius * radius));
+  return d <= radius ? level : 0.0;
+}
+
+std::string VolumeCriterion::describe() const {
+  std::ostringstream os;
+  os << "volumes of significance (";
+  for (std::size_t i = 0; i < volumes_.size(); ++i) {
+    const Volume& v = volumes_[i];
+    os << (i ? ", " : "") << (v.gaussian ? "gaussian " : "ball ") << v.level << " r=" << v.radius
+       << " at " << v.center.x << "," << v.center.y << "," << v.center.z;
+  }
+  return os.str() + ")";
+}
+
+double VolumeCriterion::value(const Vec3& p) const {
+  double g = 0.0;
+  for (const Volume& v : volumes_) g = std::max(g, v.at_distance(glm::length(p - v.center)));
+  return std::min(g, 1.0);
+}
+
+bool VolumeCriterion::triangle_satisfies(const Triangle3& t, double res, const CrmrInfo&) const {
+  for (const Volume& v : volumes_) {
+    if (res < v.at_distance(point_triangle_distance3d(v.center, t[0], t[1], t[2]))) return false;
+  }
+  return true;
+}
+
+bool VolumeCriterion::region_satisfies(const Box3& box, double min_res, const CrmrInfo&) const {
+  for (const Volume& v : volumes_) {
+    const Vec3 outside = glm::max(glm::max(box.lo - v.center, v.center - box.hi), Vec3(0.0));
+    if (min_res < v.at_distance(glm::length(outside))) return false;
+  }
+  return true;
+}
+
 // ---- screen space ----
 std::string ScreenSpaceCriterion::describe() const {
   std::ostringstream os;

@@ -93,6 +93,35 @@ class ObjectSpaceCriterion final : public SimilarityComponent {
   ObjectSpaceFunction g_;
 };
 
+/// A volume of significance (Brown 4.6.2, 3-D): a ball with a resolution level, either Gaussian
+/// (level * exp(-d^2 / (2 radius^2)), d = distance to the centre) or thresholded (level within
+/// the closed ball, 0 outside).
+struct Volume {
+  Vec3 center{0.0};
+  double radius = 1.0;
+  double level = 0.0;
+  bool gaussian = true;
+  /// The largest value over points at distance >= d from the centre.
+  double at_distance(double d) const;
+};
+
+/// g3 = max over volumes, evaluated in space: t satisfies it when its resolution is >= g3(p) for
+/// every p of the triangle itself (the triangle's nearest point to each centre decides, exactly);
+/// a region when min_res >= g3 anywhere in its box. For 3-D meshes, where the 2.5-D g over xy
+/// would make every area of interest an infinite vertical cylinder.
+class VolumeCriterion final : public SimilarityComponent {
+ public:
+  explicit VolumeCriterion(std::vector<Volume> volumes) : volumes_(std::move(volumes)) {}
+  std::string describe() const override;
+  bool triangle_satisfies(const Triangle3& v, double res, const CrmrInfo& info) const override;
+  bool region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const override;
+  /// g3 at a point.
+  double value(const Vec3& p) const;
+
+ private:
+  std::vector<Volume> volumes_;
+};
+
 /// A screen-space area of interest: inside the disc (pixels) the tolerance is `pixel_error`.
 struct ScreenAoi {
   Vec2 center_px{0.0};

@@ -24,7 +24,7 @@ void check_aoi(const AoiSpec& a, const std::string& option) {
 
 bool RcfSpec::has_similarity() const {
   return pixel_error || floor || !aois.empty() || !discs.empty() || frustum_level || centre_cone ||
-         critical_level;
+         critical_level || !volumes.empty();
 }
 
 void validate(const RcfSpec& s) {
@@ -46,6 +46,15 @@ void validate(const RcfSpec& s) {
   if (s.floor) check_level(*s.floor, "--floor");
   for (const AoiSpec& a : s.aois) check_aoi(a, "--aoi");
   for (const AoiSpec& a : s.discs) check_aoi(a, "--disc");
+  for (const VolumeSpec& v : s.volumes) {
+    const std::string option = v.gaussian ? "--volume" : "--ball";
+    if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
+      throw_input(option + ": centre must be finite");
+    if (!(v.radius > 0.0) || !std::isfinite(v.radius)) {
+      throw_input(option + ": radius must be a positive number, got " + std::to_string(v.radius));
+    }
+    check_level(v.level, option);
+  }
   if (s.frustum_level) {
     if (!s.camera) throw_input("--frustum-level needs a camera (--eye and --target)");
     check_level(*s.frustum_level, "--frustum-level");
@@ -65,6 +74,19 @@ void validate(const RcfSpec& s) {
 
 Rcf make_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem) {
   validate(spec);
+  if (kind == ModelKind::kMesh3d) {
+    const char* flat = !spec.aois.empty()    ? "--aoi"
+                       : !spec.discs.empty() ? "--disc"
+                       : spec.frustum_level  ? "--frustum-level"
+                       : spec.centre_cone    ? "--centre-cone"
+                       : spec.critical_level ? "--critical-lines"
+                                             : nullptr;
+    if (flat != nullptr) {
+      throw_input(std::string(flat) +
+                  " is a 2.5-D (terrain) criterion; for a 3-D mesh use --volume or --ball "
+                  "x,y,z,radius,level");
+    }
+  }
   Rcf rcf;
   if (spec.camera && spec.cull) {
     rcf.add(std::make_shared<FrustumCulling>(*spec.camera));
@@ -89,6 +111,12 @@ Rcf make_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem) {
     auto lines =
         std::make_shared<CriticalLines>(CriticalLines::detect(*dem, {spec.critical_relief}));
     g.add(std::make_shared<CriticalLineTerm>(lines, *spec.critical_level));
+  }
+  if (!spec.volumes.empty()) {
+    std::vector<Volume> volumes;
+    for (const VolumeSpec& v : spec.volumes)
+      volumes.push_back({Vec3{v.x, v.y, v.z}, v.radius, v.level, v.gaussian});
+    rcf.add(std::make_shared<VolumeCriterion>(std::move(volumes)));
   }
   if (!spec.has_similarity()) g.add(std::make_shared<ConstantTerm>(1.0));
   if (!g.empty()) rcf.add(std::make_shared<ObjectSpaceCriterion>(std::move(g)));

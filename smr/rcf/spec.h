@@ -16,6 +16,12 @@ struct AoiSpec {
   double x = 0, y = 0, radius = 0, level = 0;
 };
 
+/// A 3-D volume of significance (rcf.h Volume): a ball, Gaussian or thresholded.
+struct VolumeSpec {
+  double x = 0, y = 0, z = 0, radius = 0, level = 0;
+  bool gaussian = true;
+};
+
 struct RcfSpec {
   std::optional<Camera> camera;
   bool cull = true;
@@ -24,6 +30,7 @@ struct RcfSpec {
   std::optional<double> floor;          // constant object-space level
   std::vector<AoiSpec> aois;            // Gaussian areas of interest
   std::vector<AoiSpec> discs;           // thresholded discs
+  std::vector<VolumeSpec> volumes;      // 3-D volumes of significance
   std::optional<double> frustum_level;  // object-space frustum footprint term (needs a camera)
   std::optional<std::pair<double, double>> centre_cone;  // degrees, level (needs a camera)
   std::optional<double> critical_level;                  // critical-line term (needs the DEM)
@@ -36,7 +43,9 @@ struct RcfSpec {
 void validate(const RcfSpec& spec);
 
 /// Builds the RCF. `dem` is needed only for the critical-line term; `kind` selects the
-/// screen-space error direction (vertical for terrain).
+/// screen-space error direction (vertical for terrain). For a 3-D mesh the 2.5-D terms over xy
+/// (areas of interest, discs, frustum footprint, centre cone, critical lines) are kInvalidInput:
+/// volumes of significance are their 3-D form.
 Rcf make_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem);
 
 }  // namespace smr

@@ -534,6 +534,11 @@ TEST_F(DbCli, MeshIngestExtractInfoVerify) {
   EXPECT_EQ(r.code, 0) << r.out;
   expect_user_error("extract " + db + " --floor 0.5 --algorithm reduced -o " + path("r.obj"),
                     "reduced extraction");
+  expect_user_error("extract " + db + " --aoi 0,0,1,1 -o " + path("a.obj"), "--volume");
+  r = smrdb("extract " + db + " --volume 0,0,0,0.2,1 --ball 0.1,0,0,0.1,0.8 --verify -q -o " +
+            path("v.obj"));
+  EXPECT_EQ(r.code, 0) << r.out;
+  expect_user_error("extract " + db + " --volume 0,0,0,-1,1 -o " + path("b.obj"), "radius");
   expect_user_error("ingest " + mesh + " --max-error 1 -o " + path("x.smrdb"), "--max-error");
   expect_user_error("ingest " + dem_ + " --repair -o " + path("y.smrdb"), "--repair");
 

@@ -132,6 +132,27 @@ TEST_P(QemPm, ExtractionsAreManifoldSatisfyTheRcfAndHoldTheErrorBound) {
     const test::OracleResult xdef = test::check_x_definition(crmr, e.x, rcf, true);
     EXPECT_TRUE(xdef.ok()) << xdef.first_failure;
 
+    // Volumes of significance, pointwise from their definition: at the corners, edge midpoints
+    // and centroid of every output triangle that some op could refine, the level asked for is
+    // at most the triangle's death_res.
+    std::uint64_t volume_failures = 0;
+    for (const VolumeSpec& v : c.spec.volumes) {
+      for (const TriRef& ref : e.triangles) {
+        const Op& op = crmr.ops[ref.op.value];
+        const FragmentTriangle& t = op.fragment[ref.index];
+        if (!t.killer.valid()) continue;  // final: the finest the model has
+        const Vec3 a = op.position(t, 0), b2 = op.position(t, 1), c2 = op.position(t, 2);
+        for (const Vec3& q :
+             {a, b2, c2, 0.5 * (a + b2), 0.5 * (b2 + c2), 0.5 * (c2 + a), (a + b2 + c2) / 3.0}) {
+          const double d = glm::length(q - Vec3{v.x, v.y, v.z});
+          const double g = v.gaussian ? v.level * std::exp(-d * d / (2 * v.radius * v.radius))
+                                      : (d <= v.radius ? v.level : 0.0);
+          if (g > t.death_res + 1e-12) ++volume_failures;
+        }
+      }
+    }
+    EXPECT_EQ(volume_failures, 0u);
+
     // Error bound, output -> source: points of each (sampled) output triangle lie within the
     // triangle's stored error of the source surface.
     std::vector<std::array<Vec3, 3>> out_tris;

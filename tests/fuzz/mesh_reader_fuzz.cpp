@@ -13,7 +13,8 @@
 // $SMRDB_DATA_DIR/meshes, mutated with a fixed-seed RNG (bit flips, interesting bytes, insertions,
 // deletions, truncations, chunk copies, splices, numeric tokens replaced by huge / negative / NaN
 // values, binary words overwritten).
-//   mesh_reader_fuzz [iterations]      smoke mode (default 3000; or $SMRDB_FUZZ_ITERATIONS)
+//   mesh_reader_fuzz [iterations]      smoke mode (default 5000, about 6 s of CPU under ASan; or
+//                                      $SMRDB_FUZZ_ITERATIONS; $SMRDB_FUZZ_SEED changes the RNG)
 //   mesh_reader_fuzz FILE...           run the given inputs (to reproduce a failure)
 #include <algorithm>
 #include <array>
@@ -59,7 +60,8 @@ struct Stats {
   std::fprintf(stderr, "mesh_reader_fuzz: FAILURE: %s\n", why.c_str());
   std::fprintf(stderr, "input (%zu bytes):", input.size());
   for (std::size_t i = 0; i < input.size() && i < 512; ++i) {
-    std::fprintf(stderr, "%s%02x", i % 32 == 0 ? "\n  " : " ", static_cast<unsigned char>(input[i]));
+    std::fprintf(stderr, "%s%02x", i % 32 == 0 ? "\n  " : " ",
+                 static_cast<unsigned char>(input[i]));
   }
   std::fprintf(stderr, "\n");
   std::abort();
@@ -101,8 +103,8 @@ std::string check_mesh(const TriangleMesh& m, const MeshReport& rep) {
     sorted[t] = tri;
     std::sort(sorted[t].begin(), sorted[t].end());
     for (int k = 0; k < 3; ++k) {
-      halves.push_back({std::uint64_t{tri[k]} << 32 | tri[(k + 1) % 3],
-                        static_cast<std::uint32_t>(t)});
+      halves.push_back(
+          {std::uint64_t{tri[k]} << 32 | tri[(k + 1) % 3], static_cast<std::uint32_t>(t)});
     }
   }
   for (std::size_t v = 0; v < n; ++v) {
@@ -110,7 +112,8 @@ std::string check_mesh(const TriangleMesh& m, const MeshReport& rep) {
   }
   std::sort(sorted.begin(), sorted.end());
   if (std::adjacent_find(sorted.begin(), sorted.end()) != sorted.end()) return "duplicate face";
-  std::sort(halves.begin(), halves.end(), [](const Half& a, const Half& b) { return a.key < b.key; });
+  std::sort(halves.begin(), halves.end(),
+            [](const Half& a, const Half& b) { return a.key < b.key; });
   for (std::size_t i = 1; i < halves.size(); ++i) {
     if (halves[i].key == halves[i - 1].key) return "an edge traversed twice in one direction";
   }
@@ -186,7 +189,8 @@ void run_input(std::string_view bytes, Stats& stats) {
                    ": " + bad,
                bytes);
         }
-        if (!repair.any() && rep.repairs() != 0) fail("repairs were made without being asked", bytes);
+        if (!repair.any() && rep.repairs() != 0)
+          fail("repairs were made without being asked", bytes);
         ++stats.valid;
         ++stats.valid_by_format[fi];
         if (repair.any() && rep.repairs() > 0) ++stats.repaired;
@@ -220,7 +224,9 @@ namespace {
 // ---------------------------------------------------------------------------------------------
 // Seeds
 
-Bytes text(const std::string& s) { return Bytes(s.begin(), s.end()); }
+Bytes text(const std::string& s) {
+  return Bytes(s.begin(), s.end());
+}
 
 template <typename T>
 void put(Bytes& b, T v, bool big = false) {
@@ -240,7 +246,8 @@ Shape cube() {  // quads, outward
           {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4}, {1, 2, 6, 5}, {2, 3, 7, 6}, {3, 0, 4, 7}}};
 }
 Shape tetra() {
-  return {{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}}, {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}}};
+  return {{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}},
+          {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}}};
 }
 Shape bowtie() {
   return {{{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {-1, 0, 0}, {-1, -1, 0}}, {{0, 1, 2}, {0, 3, 4}}};
@@ -250,7 +257,11 @@ Shape book() {
           {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}, {0, 4, 2}, {1, 2, 4}, {0, 1, 5}}};
 }
 Shape moebius() {
-  return {{{1, 0, 0.2}, {-0.5, 0.87, 0.2}, {-0.5, -0.87, 0.2}, {1, 0, -0.2}, {-0.5, 0.87, -0.2},
+  return {{{1, 0, 0.2},
+           {-0.5, 0.87, 0.2},
+           {-0.5, -0.87, 0.2},
+           {1, 0, -0.2},
+           {-0.5, 0.87, -0.2},
            {-0.5, -0.87, -0.2}},
           {{0, 1, 4}, {0, 4, 3}, {1, 2, 5}, {1, 5, 4}, {2, 3, 0}, {2, 0, 5}}};
 }
@@ -419,8 +430,7 @@ std::vector<Bytes> real_meshes(std::size_t max_size, std::vector<std::string>& n
   if (!std::filesystem::is_directory(meshes, ec)) return out;
   std::vector<std::filesystem::path> paths;
   for (const auto& e : std::filesystem::directory_iterator(meshes, ec)) {
-    if (e.is_regular_file() && smr::is_mesh_path(e.path().string()) &&
-        e.file_size() <= max_size) {
+    if (e.is_regular_file() && smr::is_mesh_path(e.path().string()) && e.file_size() <= max_size) {
       paths.push_back(e.path());
     }
   }
@@ -451,16 +461,50 @@ class Rng {
   std::uint64_t s_;
 };
 
-const char* const kTokens[] = {"0",          "-1",         "1",        "2",
-                               "3",          "255",        "256",      "65535",
-                               "2147483647", "-2147483648", "4000000000", "4294967295",
-                               "4294967296", "18446744073709551615", "99999999999999999999",
-                               "nan",        "-nan",       "inf",      "-inf",
-                               "1e308",      "1e999",      "1e-320",   "-0",
-                               "0.5",        "1.0"};
-const char* const kInserts[] = {" ", "\n", "\r\n", "#", "/", "//", "-", "\\\n", "e", "nan",
-                                "end_header\n", "endsolid\n", "facet normal 0 0 0\n", "f 1 2 3\n",
-                                "3 0 1 2\n", "v 0 0 0\n", "element face 1\n", "\x00", "\xff"};
+const char* const kTokens[] = {"0",
+                               "-1",
+                               "1",
+                               "2",
+                               "3",
+                               "255",
+                               "256",
+                               "65535",
+                               "2147483647",
+                               "-2147483648",
+                               "4000000000",
+                               "4294967295",
+                               "4294967296",
+                               "18446744073709551615",
+                               "99999999999999999999",
+                               "nan",
+                               "-nan",
+                               "inf",
+                               "-inf",
+                               "1e308",
+                               "1e999",
+                               "1e-320",
+                               "-0",
+                               "0.5",
+                               "1.0"};
+const char* const kInserts[] = {" ",
+                                "\n",
+                                "\r\n",
+                                "#",
+                                "/",
+                                "//",
+                                "-",
+                                "\\\n",
+                                "e",
+                                "nan",
+                                "end_header\n",
+                                "endsolid\n",
+                                "facet normal 0 0 0\n",
+                                "f 1 2 3\n",
+                                "3 0 1 2\n",
+                                "v 0 0 0\n",
+                                "element face 1\n",
+                                "\x00",
+                                "\xff"};
 const std::uint32_t kWords[] = {0,          1,          2,          3,          0xff,
                                 0xffff,     0x7fffffff, 0x80000000, 0xffffffff, 0x7fc00000,
                                 0x7f800000, 0xff800000, 0x3f800000};
@@ -551,13 +595,14 @@ void mutate(Bytes& b, Rng& rng, const std::vector<Bytes>& pool) {
       if (rng.below(2) == 1) {
         w = (w >> 24) | ((w >> 8) & 0xff00u) | ((w << 8) & 0xff0000u) | (w << 24);
       }
-      const std::size_t at = rng.below(2) == 1 ? rng.below(b.size() - 3) : (rng.below(b.size() / 4) * 4);
+      const std::size_t at =
+          rng.below(2) == 1 ? rng.below(b.size() - 3) : (rng.below(b.size() / 4) * 4);
       std::memcpy(b.data() + at, &w, 4);
     }
   }
 }
 
-int smoke(std::size_t iterations) {
+int smoke(std::size_t iterations, std::uint64_t seed) {
   const auto t0 = std::chrono::steady_clock::now();
   const std::vector<Bytes> seeds = make_seeds();
   std::vector<std::string> real_names;
@@ -573,7 +618,7 @@ int smoke(std::size_t iterations) {
   for (const Bytes& s : seeds) {
     run_input(std::string_view(reinterpret_cast<const char*>(s.data()), s.size()), stats);
   }
-  Rng rng(0x5eed5eedULL);
+  Rng rng(seed);
   for (std::size_t it = 0; it < iterations; ++it) {
     const bool use_real = !small_real.empty() && rng.below(100) < 2;
     Bytes b = use_real ? small_real[rng.below(small_real.size())] : seeds[rng.below(seeds.size())];
@@ -583,11 +628,12 @@ int smoke(std::size_t iterations) {
   }
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf(
-      "mesh_reader_fuzz smoke: %zu seeds (+%zu real meshes), %zu mutated inputs, %zu parses in "
+      "mesh_reader_fuzz smoke (seed %#llx): %zu seeds (+%zu real meshes), %zu mutated inputs, %zu "
+      "parses in "
       "%.2f s: %zu valid meshes (ply %zu, obj %zu, off %zu, stl %zu; %zu needed repairs), %zu "
       "smr::Errors, 0 failures\n",
-      seeds.size(), real.size(), iterations, stats.parses, s, stats.valid,
-      stats.valid_by_format[0], stats.valid_by_format[1], stats.valid_by_format[2],
+      static_cast<unsigned long long>(seed), seeds.size(), real.size(), iterations, stats.parses, s,
+      stats.valid, stats.valid_by_format[0], stats.valid_by_format[1], stats.valid_by_format[2],
       stats.valid_by_format[3], stats.repaired, stats.errors);
   return 0;
 }
@@ -595,7 +641,11 @@ int smoke(std::size_t iterations) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::size_t iterations = 3000;
+  std::size_t iterations = 5000;
+  std::uint64_t seed = 0x5eed5eedULL;
+  if (const char* env = std::getenv("SMRDB_FUZZ_SEED"); env != nullptr && *env != '\0') {
+    seed = std::strtoull(env, nullptr, 0);
+  }
   if (const char* env = std::getenv("SMRDB_FUZZ_ITERATIONS"); env != nullptr && *env != '\0') {
     iterations = static_cast<std::size_t>(std::strtoull(env, nullptr, 10));
   }
@@ -612,7 +662,8 @@ int main(int argc, char** argv) {
           std::fprintf(stderr, "mesh_reader_fuzz: cannot open %s\n", argv[i]);
           return 1;
         }
-        const std::string bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+        const std::string bytes{std::istreambuf_iterator<char>(in),
+                                std::istreambuf_iterator<char>()};
         run_input(bytes, stats);
       }
       std::printf("mesh_reader_fuzz: %zu inputs, %zu parses: %zu valid, %zu smr::Errors\n",
@@ -620,7 +671,7 @@ int main(int argc, char** argv) {
       return 0;
     }
   }
-  return smoke(iterations);
+  return smoke(iterations, seed);
 }
 
 #endif  // SMRDB_LIBFUZZER

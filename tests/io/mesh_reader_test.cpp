@@ -82,7 +82,9 @@ void expect_valid(const TriangleMesh& m, const std::string& what) {
   }
 }
 
-std::size_t edge_count(const MeshReport& r) { return (3 * r.faces + r.boundary_edges) / 2; }
+std::size_t edge_count(const MeshReport& r) {
+  return (3 * r.faces + r.boundary_edges) / 2;
+}
 long euler(const MeshReport& r) {
   return static_cast<long>(r.vertices) - static_cast<long>(edge_count(r)) +
          static_cast<long>(r.faces);
@@ -123,7 +125,9 @@ void put(Bytes& b, T v, bool big) {
   b.insert(b.end(), raw, raw + sizeof(T));
 }
 
-Bytes text_bytes(const std::string& s) { return Bytes(s.begin(), s.end()); }
+Bytes text_bytes(const std::string& s) {
+  return Bytes(s.begin(), s.end());
+}
 
 /// Binary PLY with double x, y, z among other vertex properties, an int-indexed face list with a
 /// per-face property after it, and an extra element with a list before and after the faces.
@@ -193,10 +197,13 @@ std::string stl_ascii(const TriangleMesh& m) {
 // Not inlined on purpose: g++ 12.2 at -O2 miscompiles the loop below when the three
 // (double)(float) conversions are visible to its SLP vectorizer (x and y come out unrounded; see
 // the reproducer in the commit message / report).
-[[gnu::noinline]] double round_to_float(double v) { return static_cast<float>(v); }
+[[gnu::noinline]] double round_to_float(double v) {
+  return static_cast<float>(v);
+}
 
 TriangleMesh to_float(TriangleMesh m) {
-  for (Vec3& p : m.positions) p = Vec3(round_to_float(p.x), round_to_float(p.y), round_to_float(p.z));
+  for (Vec3& p : m.positions)
+    p = Vec3(round_to_float(p.x), round_to_float(p.y), round_to_float(p.z));
   return m;
 }
 
@@ -290,7 +297,7 @@ struct RealMesh {
 const RealMesh kReal[] = {
     {"bunny00.off", 37706, 75408, 1, 0, 2, false},
     {"armadillo.off", 26002, 52000, 1, 0, 2, false},
-    {"refined_elephant.off", 44460, 88928, 1, 0, -4, false},  // genus 3
+    {"refined_elephant.off", 44460, 88928, 1, 0, -4, false},   // genus 3
     {"ChineseDragon-10kv.off", 10000, 19994, 1, 6, 0, false},  // two holes
     {"blobby_3cc.off", 1820, 3417, 3, 219, 2, false},
     {"elephant-with-holes.off", 2798, 4463, 1, 1353, -110, false},
@@ -395,10 +402,10 @@ TEST(MeshReaderFormats, OffCommentsColoursPolygonsAndVariants) {
   // Counts on the keyword line, no edge count; COFF / NOFF / STOFF vertex lines.
   EXPECT_EQ(parse("OFF 3 1\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", MeshFormat::kOff).triangles.size(),
             1u);
-  EXPECT_EQ(parse("COFF\n3 1 0\n0 0 0 1 0 0 1\n1 0 0 0 1 0 1\n0 1 0 0 0 1 1\n3 0 1 2\n",
-                  MeshFormat::kOff)
-                .positions[1],
-            Vec3(1, 0, 0));
+  EXPECT_EQ(
+      parse("COFF\n3 1 0\n0 0 0 1 0 0 1\n1 0 0 0 1 0 1\n0 1 0 0 0 1 1\n3 0 1 2\n", MeshFormat::kOff)
+          .positions[1],
+      Vec3(1, 0, 0));
   EXPECT_EQ(parse("NOFF\n3 1 0\n0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0 1\n3 0 1 2\n", MeshFormat::kOff)
                 .positions[2],
             Vec3(0, 1, 0));
@@ -408,8 +415,8 @@ TEST(MeshReaderFormats, OffCommentsColoursPolygonsAndVariants) {
                 .positions.size(),
             3u);
   // CRLF line ends, exponents, signs.
-  const TriangleMesh c =
-      parse("OFF\r\n3 1 0\r\n+1e0 -0 .5\r\n1.5E+1 0 0\r\n0 1e-3 0\r\n3 0 1 2\r\n", MeshFormat::kOff);
+  const TriangleMesh c = parse(
+      "OFF\r\n3 1 0\r\n+1e0 -0 .5\r\n1.5E+1 0 0\r\n0 1e-3 0\r\n3 0 1 2\r\n", MeshFormat::kOff);
   EXPECT_EQ(c.positions[0], Vec3(1, 0, 0.5));
   EXPECT_EQ(c.positions[1], Vec3(15, 0, 0));
   EXPECT_EQ(c.positions[2], Vec3(0, 1e-3, 0));
@@ -456,7 +463,8 @@ TEST(MeshReaderFormats, PlyAsciiAnyTypesAndSkippedElements) {
 
 TEST(MeshReaderFormats, PlyBinaryFloatCoordinatesAndUcharIndices) {
   for (bool big : {false, true}) {
-    std::string h = std::string("ply\nformat ") + (big ? "binary_big_endian" : "binary_little_endian") +
+    std::string h = std::string("ply\nformat ") +
+                    (big ? "binary_big_endian" : "binary_little_endian") +
                     " 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
                     "element face 1\nproperty list uint16 uchar vertex_indices\nend_header\n";
     Bytes b = text_bytes(h);
@@ -554,11 +562,10 @@ TEST(MeshReaderBroken, EveryTruncatedPrefixIsAnError) {
         const std::string msg = e.what();
         EXPECT_EQ(e.kind(), ErrorKind::kInvalidInput) << msg;
         EXPECT_NE(msg.find(c.name), std::string::npos) << msg;
-        const bool keyword = msg.find("truncated") != std::string::npos ||
-                             msg.find("empty") != std::string::npos ||
-                             msg.find("header") != std::string::npos ||
-                             msg.find("not a") != std::string::npos ||
-                             msg.find("room for") != std::string::npos;
+        const bool keyword =
+            msg.find("truncated") != std::string::npos || msg.find("empty") != std::string::npos ||
+            msg.find("header") != std::string::npos || msg.find("not a") != std::string::npos ||
+            msg.find("room for") != std::string::npos;
         EXPECT_TRUE(keyword) << c.name << " prefix " << n << ": " << msg;
       }
     }
@@ -605,8 +612,7 @@ TEST(MeshReaderBroken, HugeCountsAreRejectedBeforeAllocating) {
                     {"18446744073709551615 faces", "room for at most"});
   expect_file_error(dir, "overflow.off", "OFF\n3 99999999999999999999999 0\n",
                     {"malformed OFF header", "face count"});
-  expect_file_error(dir, "polygon.off",
-                    "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2000000000 0 1 2\n",
+  expect_file_error(dir, "polygon.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2000000000 0 1 2\n",
                     {"face 0", "2000000000 vertices", "more than the rest"});
   const std::string head = "ply\nformat binary_little_endian 1.0\nelement vertex ";
   const std::string rest =
@@ -639,11 +645,13 @@ TEST(MeshReaderBroken, IndicesOutOfRange) {
   const std::string v = "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n";
   expect_file_error(dir, "big.off", v + "3 0 1 2\n3 1 4 2\n",
                     {"face 1", "line 8", "vertex 4", "out of range", "4 vertices"});
-  expect_file_error(dir, "neg.off", v + "3 0 -1 2\n3 1 3 2\n", {"face 0", "vertex -1", "out of range"});
+  expect_file_error(dir, "neg.off", v + "3 0 -1 2\n3 1 3 2\n",
+                    {"face 0", "vertex -1", "out of range"});
   expect_file_error(dir, "float.off", v + "3 0 1.0 2\n3 1 3 2\n", {"face 0", "'1.0'", "integer"});
   expect_file_error(dir, "short.off", v + "3 0 1\n3 1 3 2\n", {"face 0", "lists only 2"});
   const std::string o = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
-  expect_file_error(dir, "big.obj", o + "f 1 2 9\n", {"face 0 (line 4)", "vertex 9", "out of range"});
+  expect_file_error(dir, "big.obj", o + "f 1 2 9\n",
+                    {"face 0 (line 4)", "vertex 9", "out of range"});
   expect_file_error(dir, "zero.obj", o + "f 0 1 2\n", {"line 4", "vertex 0", "start at 1"});
   expect_file_error(dir, "rel.obj", o + "f -4 1 2\n", {"line 4", "relative vertex -4", "only 3"});
   expect_file_error(dir, "bad.obj", o + "f 1 x 2\n", {"line 4", "'x'"});
@@ -680,13 +688,14 @@ TEST(MeshReaderBroken, DegenerateAndZeroAreaFaces) {
   const std::string flat = "OFF\n4 2 0\n0 0 0\n1 0 0\n2 0 0\n0 1 0\n3 0 1 3\n3 1 2 3\n";
   const TriangleMesh ok = parse(flat + "", MeshFormat::kOff, {}, &rep);
   EXPECT_EQ(rep.zero_area_faces, 0u);
-  const TriangleMesh z =
-      parse("OFF\n4 2 0\n0 0 0\n1 0 0\n2 0 0\n0 1 0\n3 0 1 3\n3 0 2 1\n", MeshFormat::kOff, {}, &rep);
+  const TriangleMesh z = parse("OFF\n4 2 0\n0 0 0\n1 0 0\n2 0 0\n0 1 0\n3 0 1 3\n3 0 2 1\n",
+                               MeshFormat::kOff, {}, &rep);
   EXPECT_EQ(z.triangles.size(), 2u);
   EXPECT_EQ(rep.zero_area_faces, 1u);
   expect_valid(z, "zero area");
   // Everything degenerate.
-  expect_file_error(dir, "alldeg.off", "OFF\n2 1 0\n0 0 0\n1 0 0\n3 0 1 1\n", {"no faces left"}, drop);
+  expect_file_error(dir, "alldeg.off", "OFF\n2 1 0\n0 0 0\n1 0 0\n3 0 1 1\n", {"no faces left"},
+                    drop);
   expect_file_error(dir, "nofaces.off", "OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n", {"no faces"});
   expect_file_error(dir, "points.obj", "v 0 0 0\n", {"no faces"});
 }
@@ -697,9 +706,9 @@ TEST(MeshReaderBroken, DuplicateFaces) {
   const std::string faces = "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
   for (const char* dup : {"3 1 3 0\n", "3 0 3 1\n"}) {  // same and opposite orientation
     SCOPED_TRACE(dup);
-    expect_file_error(dir, "dup.off", v + faces + dup,
-                      {"face 4 (line 11) is a duplicate of face 1 (line 8)", "both use vertices",
-                       "--repair"});
+    expect_file_error(
+        dir, "dup.off", v + faces + dup,
+        {"face 4 (line 11) is a duplicate of face 1 (line 8)", "both use vertices", "--repair"});
     MeshReport rep;
     MeshRepair r;
     r.drop_duplicates = true;
@@ -709,8 +718,9 @@ TEST(MeshReaderBroken, DuplicateFaces) {
   }
   // Three copies: two dropped.
   MeshReport rep;
-  const TriangleMesh m = parse("OFF\n4 6 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n" + faces + "3 0 2 1\n3 2 1 0\n",
-                               MeshFormat::kOff, MeshRepair::all(), &rep);
+  const TriangleMesh m =
+      parse("OFF\n4 6 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n" + faces + "3 0 2 1\n3 2 1 0\n",
+            MeshFormat::kOff, MeshRepair::all(), &rep);
   EXPECT_EQ(m.triangles.size(), 4u);
   EXPECT_EQ(rep.duplicate_faces_dropped, 2u);
   EXPECT_TRUE(rep.closed);
@@ -720,9 +730,10 @@ TEST(MeshReaderBroken, NonManifoldEdge) {
   TempDir dir;
   // Three faces on edge (0, 1).
   const std::string book = off_of(kSix, {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}});
-  expect_file_error(dir, "book.off", book,
-                    {"edge between vertex 0 (0, 0, 0) and vertex 1 (1, 0, 0)", "non-manifold",
-                     "3 faces (face 0 (line 10), face 1 (line 11), face 2 (line 12))", "--repair detaches"});
+  expect_file_error(
+      dir, "book.off", book,
+      {"edge between vertex 0 (0, 0, 0) and vertex 1 (1, 0, 0)", "non-manifold",
+       "3 faces (face 0 (line 10), face 1 (line 11), face 2 (line 12))", "--repair detaches"});
   MeshReport rep;
   const TriangleMesh m = parse(book, MeshFormat::kOff, MeshRepair::all(), &rep);
   expect_valid(m, "book");
@@ -738,8 +749,7 @@ TEST(MeshReaderBroken, NonManifoldEdge) {
 
   // The same, but the pages are joined around both ends of the spine, so cutting the spine alone
   // leaves face 2 on the same two vertices: it is detached completely.
-  const std::string joined =
-      off_of(kSix, {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}, {0, 4, 2}, {1, 2, 4}});
+  const std::string joined = off_of(kSix, {{0, 1, 2}, {1, 0, 3}, {0, 1, 4}, {0, 4, 2}, {1, 2, 4}});
   const TriangleMesh j = parse(joined, MeshFormat::kOff, MeshRepair::all(), &rep);
   expect_valid(j, "joined book");
   EXPECT_EQ(rep.nonmanifold_edges_cut, 1u);
@@ -755,10 +765,11 @@ TEST(MeshReaderBroken, NonManifoldEdge) {
 
 TEST(MeshReaderBroken, NonManifoldVertex) {
   TempDir dir;
-  const std::string bowtie = off_of({{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {-1, 0, 0}, {-1, -1, 0}},
-                                    {{0, 1, 2}, {0, 3, 4}});
+  const std::string bowtie =
+      off_of({{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {-1, 0, 0}, {-1, -1, 0}}, {{0, 1, 2}, {0, 3, 4}});
   expect_file_error(dir, "bowtie.off", bowtie,
-                    {"vertex 0 (0, 0, 0) is non-manifold", "face 0 (line 9) and face 1 (line 10)", "--repair splits"});
+                    {"vertex 0 (0, 0, 0) is non-manifold", "face 0 (line 9) and face 1 (line 10)",
+                     "--repair splits"});
   MeshReport rep;
   MeshRepair r;
   r.split_nonmanifold = true;
@@ -771,7 +782,8 @@ TEST(MeshReaderBroken, NonManifoldVertex) {
   EXPECT_EQ(rep.components, 2u);
   // Two cones touching at their apex (closed surfaces pinched at a point).
   TriangleMesh two;
-  two.positions = {{0, 0, 0}, {1, 0, 1}, {0, 1, 1}, {-1, -1, 1}, {1, 0, -1}, {-1, -1, -1}, {0, 1, -1}};
+  two.positions = {{0, 0, 0},  {1, 0, 1},    {0, 1, 1}, {-1, -1, 1},
+                   {1, 0, -1}, {-1, -1, -1}, {0, 1, -1}};
   two.triangles = {{0, 1, 2}, {0, 2, 3}, {0, 3, 1}, {1, 3, 2},
                    {0, 4, 5}, {0, 5, 6}, {0, 6, 4}, {4, 6, 5}};
   validate_mesh(two, "pinched", r, &rep);
@@ -785,10 +797,11 @@ TEST(MeshReaderBroken, InconsistentOrientation) {
   TempDir dir;
   const std::vector<Vec3> sq = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
   const std::string flipped = off_of(sq, {{0, 1, 2}, {0, 3, 2}});
-  expect_file_error(dir, "flip.off", flipped,
-                    {"face 0 (line 8) and face 1 (line 9) both go from vertex 2 (1, 1, 0) to vertex 0 "
-                     "(0, 0, 0)",
-                     "orientation", "--repair flips"});
+  expect_file_error(
+      dir, "flip.off", flipped,
+      {"face 0 (line 8) and face 1 (line 9) both go from vertex 2 (1, 1, 0) to vertex 0 "
+       "(0, 0, 0)",
+       "orientation", "--repair flips"});
   MeshReport rep;
   MeshRepair r;
   r.orient = true;
@@ -797,8 +810,9 @@ TEST(MeshReaderBroken, InconsistentOrientation) {
   EXPECT_EQ(rep.faces_flipped, 1u);
   // A tetrahedron with three faces flipped: flipping the fourth is cheaper.
   TriangleMesh t = tetrahedron();
-  for (int f = 0; f < 3; ++f) std::swap(t.triangles[static_cast<std::size_t>(f)][1],
-                                        t.triangles[static_cast<std::size_t>(f)][2]);
+  for (int f = 0; f < 3; ++f)
+    std::swap(t.triangles[static_cast<std::size_t>(f)][1],
+              t.triangles[static_cast<std::size_t>(f)][2]);
   const TriangleMesh expected = t;
   validate_mesh(t, "tet", r, &rep);
   EXPECT_EQ(rep.faces_flipped, 1u);
@@ -810,7 +824,7 @@ TEST(MeshReaderBroken, InconsistentOrientation) {
 TEST(MeshReaderBroken, MoebiusStripIsNotOrientable) {
   TempDir dir;
   // A strip of three quads, u0 u1 u2 / w0 w1 w2, closed with a half twist: u3 = w0, w3 = u0.
-  const std::vector<Vec3> p = {{1, 0, 0.2},   {-0.5, 0.87, 0.2}, {-0.5, -0.87, 0.2},
+  const std::vector<Vec3> p = {{1, 0, 0.2},  {-0.5, 0.87, 0.2},  {-0.5, -0.87, 0.2},
                                {1, 0, -0.2}, {-0.5, 0.87, -0.2}, {-0.5, -0.87, -0.2}};
   const std::uint32_t u0 = 0, u1 = 1, u2 = 2, w0 = 3, w1 = 4, w2 = 5;
   const std::vector<Tri> t = {{u0, u1, w1}, {u0, w1, w0}, {u1, u2, w2},
@@ -887,10 +901,10 @@ TEST(MeshReaderBroken, EmptyFilesAndHeaderGarbage) {
                     {"property before any element"});
   expect_file_error(dir, "twice.ply", ply + "element vertex 0\nelement vertex 0\nend_header\n",
                     {"declared twice"});
-  expect_file_error(dir, "noy.ply",
-                    ply + "element vertex 0\nproperty float x\nproperty float z\n" + face +
-                        "end_header\n",
-                    {"no property 'y'"});
+  expect_file_error(
+      dir, "noy.ply",
+      ply + "element vertex 0\nproperty float x\nproperty float z\n" + face + "end_header\n",
+      {"no property 'y'"});
   expect_file_error(dir, "noface.ply", ply + "element vertex 0\n" + xyz + "end_header\n",
                     {"no 'face' element", "point cloud"});
   expect_file_error(dir, "nolist.ply",
@@ -910,7 +924,8 @@ TEST(MeshReaderBroken, EmptyFilesAndHeaderGarbage) {
                     {"'endloop'", "facet 0", "expected a number"});
   expect_file_error(dir, "b.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n",
                     {"truncated", "facet 0"});
-  expect_file_error(dir, "c.stl", "solid x\nfacets\n", {"'facets'", "expected 'facet' or 'endsolid'"});
+  expect_file_error(dir, "c.stl", "solid x\nfacets\n",
+                    {"'facets'", "expected 'facet' or 'endsolid'"});
   expect_file_error(dir, "d.stl", "solid x\n", {"truncated", "without 'endsolid'"});
 }
 
@@ -952,8 +967,10 @@ TEST(MeshReaderBroken, MutatedFilesNeverCrash) {
   // smr::Error.
   const TriangleMesh t = tetrahedron();
   const std::vector<std::pair<Bytes, MeshFormat>> seeds = {
-      {ply_binary(t, false), MeshFormat::kPly}, {ply_binary(t, true), MeshFormat::kPly},
-      {text_bytes(off_text(t)), MeshFormat::kOff}, {stl_binary(t), MeshFormat::kStl},
+      {ply_binary(t, false), MeshFormat::kPly},
+      {ply_binary(t, true), MeshFormat::kPly},
+      {text_bytes(off_text(t)), MeshFormat::kOff},
+      {stl_binary(t), MeshFormat::kStl},
       {text_bytes(stl_ascii(t)), MeshFormat::kStl},
       {text_bytes("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"),
        MeshFormat::kObj}};

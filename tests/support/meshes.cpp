@@ -32,6 +32,17 @@ std::vector<NamedSpec> mesh_rcf_spread(const CrmrInfo& info) {
   }
   const Vec3 c = 0.5 * (info.bounds.lo + info.bounds.hi);
   const double radius = 0.5 * glm::length(info.bounds.hi - info.bounds.lo);
+  // Volumes of significance around a corner region of the box: Gaussian, thresholded, and a
+  // Gaussian over a floor.
+  const Vec3 corner = info.bounds.lo + 0.3 * (info.bounds.hi - info.bounds.lo);
+  for (int kind = 0; kind < 3; ++kind) {
+    RcfSpec s;
+    s.volumes.push_back({corner.x, corner.y, corner.z, 0.25 * radius, 0.95, kind != 1});
+    if (kind == 2) s.floor = 0.4;
+    out.push_back(
+        {std::string(kind == 1 ? "ball" : "gaussian volume") + (kind == 2 ? " over floor 0.4" : ""),
+         s});
+  }
   const std::array<Vec3, 3> dirs{Vec3{1, 0.3, 0.2}, Vec3{-0.4, 1, -0.5}, Vec3{0.2, -0.6, 1}};
   for (std::size_t d = 0; d < dirs.size(); ++d) {
     for (double distance : {3.0, 1.2}) {

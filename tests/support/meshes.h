@@ -21,8 +21,9 @@ struct BuiltMesh {
 /// `name` is a file of <data>/meshes (e.g. "bunny00.off").
 const BuiltMesh& built_mesh(const std::string& name);
 
-/// Object-space levels 0..1 and cameras from three directions at 3 and 1.2 model radii with
-/// 0.5, 2 and 8 px tolerances (frustum and back-face culling on).
+/// Object-space levels 0..1, volumes of significance (Gaussian, ball, Gaussian over a floor) and
+/// cameras from three directions at 3 and 1.2 model radii with 0.5, 2 and 8 px tolerances
+/// (frustum and back-face culling on).
 std::vector<NamedSpec> mesh_rcf_spread(const CrmrInfo& info);
 
 }  // namespace smr::test
