@@ -53,7 +53,10 @@ struct Tri {
 };
 
 struct Collapse {
+  // A component removal (its refinement spawns the component, Brown Fig. 4.9d) has kept == kNone,
+  // no new triangles, and removes every vertex in spawn_vertices.
   std::uint32_t removed = 0, kept = 0;
+  std::vector<std::uint32_t> spawn_vertices;
   std::uint32_t old_begin = 0, old_end = 0;  // into old_tris_: the star of `removed` before
   std::uint32_t new_begin = 0, new_end = 0;  // into new_tris_: the triangles that replaced it
   double error = 0.0;                        // bound of the new triangles
@@ -136,9 +139,10 @@ class Builder {
 
   Crmr run(const std::string& name, QemPmStats* stats) {
     simplify();
+    if (options_.spawn_components && exhausted_) remove_components();
     Crmr crmr = emit(name);
     if (stats != nullptr) {
-      stats_.collapses = collapses_.size();
+      stats_.collapses = collapses_.size() - stats_.spawned_components;
       stats_.base_triangles = crmr.ops[0].fragment.size();
       stats_.base_vertices = crmr.ops[0].vertices.size();
       *stats = stats_;
@@ -446,6 +450,81 @@ class Builder {
         next_report += std::max<std::uint64_t>(1, start / 200);
       }
     }
+    exhausted_ = heap_.empty() && options_.max_base_error == 0.0;
+  }
+
+  // ---- spawned components -------------------------------------------------------------------
+
+  // After simplification every component is at its smallest. All but one are then removed, each
+  // as one more "collapse" with no replacement; reversed, its op spawns the component (Brown
+  // 4.4.1, Fig. 4.9d). The bound: a source point assigned to a triangle T of the component is
+  // within e(T) of a point q of T, and q within (distance from a corner of T to the rest of the
+  // mesh) + (T's longest edge) of the rest. The component with the largest bound stays.
+  void remove_components() {
+    if (collapses_.empty()) return;  // a spawn needs an op to hold it
+    std::vector<std::vector<std::uint32_t>> tris_of(comp_vertices_.size());
+    for (std::uint32_t id = 0; id < tris_.size(); ++id) {
+      if (tris_[id].destroyer == kNone) tris_of[comp_[tris_[id].v[0]]].push_back(id);
+    }
+    struct Removal {
+      double error;
+      std::uint32_t comp;
+    };
+    std::vector<Removal> removals;
+    for (std::uint32_t comp = 0; comp < tris_of.size(); ++comp) {
+      if (tris_of[comp].empty()) continue;
+      double e = 0.0;
+      for (std::uint32_t id : tris_of[comp]) {
+        const Tri& t = tris_[id];
+        double nearest = 0.0, longest = 0.0;
+        for (int k = 0; k < 3; ++k) {
+          nearest = std::max(nearest, distance_to_others(pos_[t.v[k]], comp, tris_of));
+          longest = std::max(longest, glm::length(pos_[t.v[k]] - pos_[t.v[(k + 1) % 3]]));
+        }
+        e = std::max(e, t.e + nearest + longest);
+      }
+      removals.push_back({e, comp});
+    }
+    if (removals.size() < 2) return;
+    std::sort(removals.begin(), removals.end(), [](const Removal& a, const Removal& b) {
+      return a.error != b.error ? a.error < b.error : a.comp < b.comp;
+    });
+    removals.pop_back();  // the coarsest mesh keeps one component
+    for (const Removal& r : removals) {
+      Collapse col;
+      col.removed = kNone;
+      col.kept = kNone;
+      col.error = r.error;
+      col.old_begin = static_cast<std::uint32_t>(old_tris_.size());
+      const auto c = static_cast<std::uint32_t>(collapses_.size());
+      for (std::uint32_t id : tris_of[r.comp]) {
+        old_tris_.push_back(id);
+        tris_[id].destroyer = c;
+        for (std::uint32_t v : tris_[id].v) col.spawn_vertices.push_back(v);
+      }
+      std::sort(col.spawn_vertices.begin(), col.spawn_vertices.end());
+      col.spawn_vertices.erase(std::unique(col.spawn_vertices.begin(), col.spawn_vertices.end()),
+                               col.spawn_vertices.end());
+      col.old_end = static_cast<std::uint32_t>(old_tris_.size());
+      col.new_begin = col.new_end = static_cast<std::uint32_t>(new_tris_.size());
+      collapses_.push_back(std::move(col));
+      ++stats_.spawned_components;
+    }
+  }
+
+  // Distance from p to the alive triangles of every component but `comp`.
+  double distance_to_others(const Vec3& p, std::uint32_t comp,
+                            const std::vector<std::vector<std::uint32_t>>& tris_of) const {
+    double best = std::numeric_limits<double>::infinity();
+    for (std::uint32_t other = 0; other < tris_of.size(); ++other) {
+      if (other == comp) continue;
+      for (std::uint32_t id : tris_of[other]) {
+        const Tri& t = tris_[id];
+        best =
+            std::min(best, point_triangle_distance3d(p, pos_[t.v[0]], pos_[t.v[1]], pos_[t.v[2]]));
+      }
+    }
+    return best;
   }
 
   // ---- emission -----------------------------------------------------------------------------
@@ -498,40 +577,55 @@ class Builder {
   // after it, so the groups keep a topological order.
   std::vector<std::vector<std::uint32_t>> coalesce(const std::vector<std::uint32_t>& order) {
     std::vector<std::vector<std::uint32_t>> groups;
-    if (options_.max_fragment_triangles == 0) {
-      for (std::uint32_t c : order) groups.push_back({c});
-      return groups;
-    }
     std::vector<std::uint32_t> group_of(collapses_.size(), kNone);
-    std::vector<std::uint32_t> size, parents;
+    std::vector<std::uint32_t> size, parents, pending_spawns;
     std::vector<double> first_error;
+    std::uint32_t last = kNone;  // the group that took the previous split
     for (std::uint32_t c : order) {
       const Collapse& col = collapses_[c];
+      if (col.kept == kNone) {
+        // A spawn replaces nothing, so it cannot be an op of its own (nothing would lead
+        // AddToList to it): it joins the op before it, or the first op when it comes first.
+        if (last == kNone) {
+          pending_spawns.push_back(c);
+        } else {
+          groups[last].push_back(c);
+          group_of[c] = last;
+        }
+        continue;
+      }
       parents.clear();
       for (std::uint32_t i = col.new_begin; i < col.new_end; ++i) {
         const std::uint32_t d = tris_[new_tris_[i]].destroyer;
         if (d != kNone) parents.push_back(group_of[d]);
       }
       const std::uint32_t own = col.old_end - col.old_begin;
-      if (!parents.empty()) {
+      if (!parents.empty() && options_.max_fragment_triangles != 0) {
         const std::uint32_t g = *std::max_element(parents.begin(), parents.end());
         // Joining g, the fragment loses the split's PreF triangles g made and gains its star.
         const auto from_g =
             static_cast<std::uint32_t>(std::count(parents.begin(), parents.end(), g));
         const std::uint32_t grown = own - from_g;
-        if (size[g] + grown <= options_.max_fragment_triangles &&
+        if (g != kNone && size[g] + grown <= options_.max_fragment_triangles &&
             col.error >= options_.coalesce_error_ratio * first_error[g]) {
           groups[g].push_back(c);
           size[g] += grown;
-          group_of[c] = g;
+          group_of[c] = last = g;
           continue;
         }
       }
-      group_of[c] = static_cast<std::uint32_t>(groups.size());
+      group_of[c] = last = static_cast<std::uint32_t>(groups.size());
       groups.push_back({c});
       size.push_back(own);
       first_error.push_back(col.error);
+      for (std::uint32_t p : pending_spawns) {
+        groups[last].push_back(p);
+        group_of[p] = last;
+      }
+      pending_spawns.clear();
     }
+    if (!pending_spawns.empty())
+      throw_internal("QEM PM: spawned components with no op to hold them");
     return groups;
   }
 
@@ -634,7 +728,19 @@ class Builder {
     edges.reserve(nt);
     using Err = std::pair<double, std::uint32_t>;
     std::priority_queue<Err> errors;  // lazy max of e over the current mesh
-    std::vector<std::uint8_t> current(nt, 0);
+    // A removed component counts in the mesh error until its op spawns it again: one virtual
+    // entry per spawn, after the triangles.
+    std::vector<std::uint32_t> spawn_slot(collapses_.size(), kNone);
+    std::uint32_t spawns = 0;
+    for (std::uint32_t c = 0; c < collapses_.size(); ++c) {
+      if (collapses_[c].kept == kNone) spawn_slot[c] = spawns++;
+    }
+    std::vector<std::uint8_t> current(nt + spawns, 0);
+    for (std::uint32_t c = 0; c < collapses_.size(); ++c) {
+      if (spawn_slot[c] == kNone) continue;
+      current[nt + spawn_slot[c]] = 1;
+      errors.push({collapses_[c].error, nt + spawn_slot[c]});
+    }
     const auto enter = [&](std::uint32_t id) {
       const Tri& t = tris_[id];
       for (int k = 0; k < 3; ++k) edges[edge_key(t.v[k], t.v[(k + 1) % 3])] = id;
@@ -671,7 +777,12 @@ class Builder {
       removed.clear();
       for (std::uint32_t c : group) {
         const Collapse& col = collapses_[c];
-        removed.push_back(col.removed);
+        if (col.kept == kNone) {
+          removed.insert(removed.end(), col.spawn_vertices.begin(), col.spawn_vertices.end());
+          current[nt + spawn_slot[c]] = 0;  // the component is back: its absence costs nothing
+        } else {
+          removed.push_back(col.removed);
+        }
         for (std::uint32_t k = col.old_begin; k < col.old_end; ++k) {
           const std::uint32_t id = old_tris_[k];
           if (tris_[id].creator == kNone || !in_group[tris_[id].creator]) frag.push_back(id);
@@ -734,6 +845,7 @@ class Builder {
 
   QemPmOptions options_;
   QemPmStats stats_;
+  bool exhausted_ = false;  // simplification went as far as the rules allow
   double cos_max_turn_ = 0.0;
   std::vector<Vec3> pos_;
   std::vector<Tri> tris_;

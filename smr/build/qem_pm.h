@@ -4,10 +4,11 @@
 // Simplification runs half-edge collapses v' -> v (v' disappears, v keeps its source position),
 // cheapest quadric cost first, under the link condition, with no normal flip, boundaries kept
 // (a boundary vertex only moves along its boundary, boundary edges carry constraint quadrics) and
-// no component shrunk below a tetrahedron (closed) or a triangle (open). Reversed, every collapse
-// is a vertex split op: F = the triangles around v' before the collapse, PreF = the triangles
-// that replaced them; the op introduces one vertex, v'. Because a half-edge collapse keeps
-// source positions, the fully refined mesh is the source mesh exactly.
+// no component shrunk below a tetrahedron (closed) or a triangle (open); at the end all
+// components but one are removed whole, so refinement spawns them (Brown 4.4.1, Fig. 4.9d).
+// Reversed, every collapse is a vertex split op: F = the triangles around v' before the collapse,
+// PreF = the triangles that replaced them; the op introduces one vertex, v'. Because a half-edge
+// collapse keeps source positions, the fully refined mesh is the source mesh exactly.
 //
 // Error: each triangle carries a guaranteed two-sided Hausdorff bound e(T) to the source surface
 // (every source point is within e(T) of the triangle it is assigned to, every point of T within
@@ -45,12 +46,17 @@ struct QemPmOptions {
   /// coalesce_error_ratio of that op's first split. 0 = one op per vertex split.
   std::uint32_t max_fragment_triangles = 32;
   double coalesce_error_ratio = 0.7;
+  /// Once simplification has run to its end, remove every component but one (the one whose
+  /// removal would cost most): refinement then spawns them (Brown Fig. 4.9d), each inside the op
+  /// that follows it in the split order, at the error its absence costs.
+  bool spawn_components = true;
   /// Progress in [0, 1]; called at most a few hundred times.
   std::function<void(double)> progress;
 };
 
 struct QemPmStats {
-  std::uint64_t collapses = 0;
+  std::uint64_t collapses = 0;  // edge collapses (vertex splits)
+  std::uint64_t spawned_components = 0;
   std::uint64_t base_vertices = 0, base_triangles = 0;
   std::uint64_t rejected_link = 0, rejected_flip = 0, rejected_boundary = 0;
 };

@@ -274,9 +274,10 @@ void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
 }
 
 // The 3-D counterpart of check_op_local: vertices, in-fragment neighbours, coarser links naming
-// the same edge in a coarser op, PreF triangles as their creators hold them, and completeness as
-// equal directed boundaries of F and PreF (no area or domain in 3-D). Minimality: F is one
-// edge-connected piece (a vertex split's star; two disjoint pieces could be two ops).
+// the same edge in a coarser op, PreF triangles as their creators hold them, completeness (every
+// F boundary edge with a coarser version is a PreF boundary edge; no area or domain in 3-D) and
+// minimality: one piece of F is glued to the mesh (a vertex split's star; two glued pieces could
+// be two ops), any other piece being a spawned component.
 void check_mesh_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
                          std::unordered_map<std::uint64_t, std::pair<OpId, Vec3>>& vertex_owner) {
   const std::string name = op_name(op.id);
@@ -299,7 +300,8 @@ void check_mesh_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
     }
   }
   std::unordered_set<DirectedEdge, EdgeHash> f_edges, pre_edges;
-  std::vector<DirectedEdge> linked;  // F boundary edges with a coarser version
+  std::vector<DirectedEdge> linked;          // F boundary edges with a coarser version
+  std::vector<std::size_t> linked_triangle;  // the F triangle of each
   std::vector<std::size_t> parent(op.fragment.size());
   std::iota(parent.begin(), parent.end(), 0);
   auto find = [&](std::size_t x) {
@@ -334,6 +336,7 @@ void check_mesh_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
           op.coarser_link(static_cast<std::uint32_t>(i), static_cast<std::uint8_t>(k));
       if (link == nullptr) continue;  // model boundary (checked through extraction outputs)
       linked.push_back({a.value, b.value});
+      linked_triangle.push_back(i);
       if (op.id == kBaseOp || link->coarser.tri.op >= op.id) {
         r.fail(name + ": coarser link points to a finer op");
         continue;
@@ -374,9 +377,14 @@ void check_mesh_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
       break;
     }
   }
-  std::size_t pieces = 0;
-  for (std::size_t i = 0; i < parent.size(); ++i) pieces += find(i) == i;
-  if (pieces != 1) r.fail(name + " is not minimal: F has " + std::to_string(pieces) + " pieces");
+  // One piece of F is glued to the mesh around PreF; any other piece has no coarser version
+  // anywhere: a component the op spawns (Brown Fig. 4.9d).
+  std::unordered_set<std::size_t> glued;
+  for (std::size_t t : linked_triangle) glued.insert(find(t));
+  if (glued.size() > 1) {
+    r.fail(name + " is not minimal: " + std::to_string(glued.size()) +
+           " separate pieces of F replace parts of PreF");
+  }
 }
 
 void check_geometry(const Crmr& crmr, const Op& op, InvariantReport& r) {

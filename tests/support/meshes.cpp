@@ -4,6 +4,7 @@
 #include <map>
 #include <mutex>
 
+#include <gtest/gtest.h>
 #include <glm/geometric.hpp>
 
 #include "smr/io/mesh_reader.h"
@@ -21,6 +22,15 @@ const BuiltMesh& built_mesh(const std::string& name) {
   b.source = read_mesh(data_path("meshes/" + name));
   b.crmr = build_qem_pm(b.source, name, {}, &b.stats);
   return cache.emplace(name, std::move(b)).first->second;
+}
+
+void expect_same_topology_or_unspawned(const SurfaceReport& cut, const SurfaceReport& source) {
+  EXPECT_LE(cut.components, source.components);
+  EXPECT_LE(cut.boundary_loops, source.boundary_loops);
+  if (cut.components == source.components) {
+    EXPECT_EQ(cut.boundary_loops, source.boundary_loops);
+    EXPECT_EQ(cut.euler, source.euler);
+  }
 }
 
 std::vector<NamedSpec> mesh_rcf_spread(const CrmrInfo& info) {

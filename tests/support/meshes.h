@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "smr/build/qem_pm.h"
+#include "smr/core/invariants.h"
 #include "smr/core/mesh.h"
 #include "tests/support/rcf_spread.h"
 
@@ -20,6 +21,11 @@ struct BuiltMesh {
 
 /// `name` is a file of <data>/meshes (e.g. "bunny00.off").
 const BuiltMesh& built_mesh(const std::string& name);
+
+/// A cut of a 3-D CRMR has the source's topology, except for components not spawned yet: at most
+/// the source's components and boundary loops, and exactly its components, loops and Euler
+/// characteristic when every component is there.
+void expect_same_topology_or_unspawned(const SurfaceReport& cut, const SurfaceReport& source);
 
 /// Object-space levels 0..1, volumes of significance (Gaussian, ball, Gaussian over a floor) and
 /// cameras from three directions at 3 and 1.2 model radii with 0.5, 2 and 8 px tolerances
