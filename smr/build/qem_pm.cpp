@@ -767,8 +767,7 @@ class Builder {
       const auto op_id = static_cast<std::uint32_t>(i + 1);
       Op& op = crmr.ops[op_id];
       op.id = OpId(op_id);
-      op.error = mesh_error();
-      op.birth_res = resolution_of(h, op.error);
+      double local = 0.0;  // the op's own bound: its PreF triangles', and spawned components'
       // F: the members' stars, PreF: their replacements, less the triangles one member makes
       // and another removes (inside the group they never appear).
       for (std::uint32_t c : group) in_group[c] = 1;
@@ -780,6 +779,7 @@ class Builder {
         if (col.kept == kNone) {
           removed.insert(removed.end(), col.spawn_vertices.begin(), col.spawn_vertices.end());
           current[nt + spawn_slot[c]] = 0;  // the component is back: its absence costs nothing
+          local = std::max(local, col.error);
         } else {
           removed.push_back(col.removed);
         }
@@ -789,10 +789,14 @@ class Builder {
         }
         for (std::uint32_t k = col.new_begin; k < col.new_end; ++k) {
           const std::uint32_t id = new_tris_[k];
-          if (tris_[id].destroyer == kNone || !in_group[tris_[id].destroyer]) pre.push_back(id);
+          if (tris_[id].destroyer == kNone || !in_group[tris_[id].destroyer]) {
+            pre.push_back(id);
+            local = std::max(local, tris_[id].e);
+          }
         }
       }
       for (std::uint32_t c : group) in_group[c] = 0;
+      op.error = local;
       std::sort(frag.begin(), frag.end());
       fill_fragment(op, frag, removed);
       for (std::uint32_t k = 0; k < frag.size(); ++k) {
@@ -839,6 +843,20 @@ class Builder {
       }
     }
     link_dag(crmr);
+    // An op's error: its own bound, or a descendant's when larger (children first: they have
+    // larger ids), so resolutions never fall from parent to child and a triangle's death_res
+    // stands for at least its own bound. Much tighter than the mesh-wide error before each op,
+    // which let one rough region refine every op that came after it in the order.
+    for (std::size_t i = crmr.ops.size(); i-- > 1;) {
+      Op& op = crmr.ops[i];
+      for (OpId c : op.children) op.error = std::max(op.error, crmr.ops[c.value].error);
+      op.birth_res = resolution_of(h, op.error);
+    }
+    for (Op& op : crmr.ops) {
+      for (FragmentTriangle& t : op.fragment) {
+        if (t.killer.valid()) t.death_res = crmr.ops[t.killer.value].birth_res;
+      }
+    }
     if (options_.progress) options_.progress(1.0);
     return crmr;
   }

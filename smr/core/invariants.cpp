@@ -438,7 +438,16 @@ InvariantReport check_crmr(const Crmr& crmr) {
       r.fail("op at position " + std::to_string(i) + " has id " + std::to_string(op.id.value));
     if (!(op.birth_res >= 0.0 && op.birth_res <= 1.0))
       r.fail(op_name(op.id) + ": birth_res outside [0,1]");
-    if (i > 0 && op.birth_res < crmr.ops[i - 1].birth_res) {
+    // Terrain: the whole sequence is monotone (each op is the mesh-wide next step). 3-D: along the
+    // DAG (an op is never coarser than a parent; each op's error is its own bound or a
+    // descendant's), checked below.
+    for (OpId p : op.parents) {
+      if (p.value < i && op.birth_res < crmr.ops[p.value].birth_res) {
+        r.fail(op_name(op.id) + ": coarser than its parent " + op_name(p));
+      }
+    }
+    if (crmr.header.kind == ModelKind::kTerrain && i > 0 &&
+        op.birth_res < crmr.ops[i - 1].birth_res) {
       r.fail(op_name(op.id) + ": birth_res decreases (" + std::to_string(op.birth_res) + " after " +
              std::to_string(crmr.ops[i - 1].birth_res) + ")");
     }
