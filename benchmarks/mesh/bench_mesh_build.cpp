@@ -1,0 +1,610 @@
+// bench_mesh_build: build time of our QEM progressive-mesh CRMR builder (smr::build_qem_pm, the
+// whole hierarchy down to a tiny base mesh) against simplifiers that build no hierarchy, on the
+// same mesh in one process:
+//   - meshoptimizer's meshopt_simplify (0.18, Debian libmeshoptimizer-dev) to 10 % and 1 % of the
+//     index count with no error limit (target_error 1.0 = the whole extent), with and without
+//     meshopt_SimplifyLockBorder;
+//   - CGAL's Surface_mesh_simplification::edge_collapse on a Surface_mesh<Simple_cartesian<double>>
+//     with Count_ratio_stop_predicate 0.1 and 0.01 (ratio of edges), default Lindstrom-Turk cost
+//     and placement, and Garland-Heckbert plane policies (CGAL 5.5, needs Eigen).
+// Rounds are interleaved (each round runs every contender once, starting with a different one),
+// and medians are reported. Only the simplification is timed: the float copy meshoptimizer needs
+// and the Surface_mesh construction CGAL needs are reported separately.
+//
+// After the rounds the last CRMR is written to a database (write_database, zstd) for bytes per
+// vertex (against Hoppe's 24.9 B/vertex), pages and DAG depth, and Brown Table 7.7-style rows
+// are measured for a few RCFs: |X|, output |F|, triangles per fan, extraction and expansion time,
+// both on the in-memory (quantized) CRMR and on the database.
+//
+//   bench_mesh_build MESH [--repeat 3] [--only ours,meshopt,meshopt-lockborder,cgal-lt,cgal-gh]
+//                         [--skip-db] [--db PATH] [--repair]
+//   bench_mesh_build MESH --subdivide K -o OUT.ply      midpoint (1-to-4) subdivision, K levels
+//
+// `--only` lets a script measure one contender's peak RSS per process (/usr/bin/time -v). Prints
+// one JSON object on stdout.
+#include <malloc.h>
+
+#include <unistd.h>
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <ctime>
+#include <filesystem>
+#include <iostream>
+#include <map>
+#include <optional>
+#include <set>
+#include <sstream>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+// Eigen (inside CGAL's Garland-Heckbert policies) trips GCC 12's -Wmaybe-uninitialized after
+// inlining, which system-header suppression does not catch.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include <CGAL/Simple_cartesian.h>
+#include <CGAL/Surface_mesh.h>
+#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Count_ratio_stop_predicate.h>
+#include <CGAL/Surface_mesh_simplification/edge_collapse.h>
+#if SMRDB_HAVE_EIGEN
+#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/GarlandHeckbert_plane_policies.h>
+#endif
+#pragma GCC diagnostic pop
+#if SMRDB_HAVE_MESHOPTIMIZER
+#include <meshoptimizer.h>
+#endif
+
+#include <CLI/CLI.hpp>
+#include <glm/geometric.hpp>
+#include <nlohmann/json.hpp>
+
+#include "benchmarks/bench_common.h"
+#include "smr/build/qem_pm.h"
+#include "smr/db/database.h"
+#include "smr/extract/extract.h"
+#include "smr/io/mesh_reader.h"
+#include "smr/io/mesh_writer.h"
+#include "smr/rcf/spec.h"
+
+namespace {
+
+using json = nlohmann::json;
+using smr::bench::now_ns;
+using smr::bench::seconds_since;
+
+constexpr double kHoppeBytesPerVertex = 24.9;
+const std::vector<double> kRatios{0.1, 0.01};
+
+// Process CPU time: every contender is single-threaded, so on a shared VM (other engineers' builds
+// on the same two cores) CPU seconds are the steadier measure; wall seconds are the headline.
+double cpu_seconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
+double median_of(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// A wall + CPU stopwatch.
+struct Stopwatch {
+  std::uint64_t wall0 = now_ns();
+  double cpu0 = cpu_seconds();
+};
+
+struct Times {
+  std::vector<double> all, cpu_all;
+  void add(const Stopwatch& w) {
+    all.push_back(seconds_since(w.wall0));
+    cpu_all.push_back(cpu_seconds() - w.cpu0);
+  }
+  double median() const { return median_of(all); }
+  double cpu_median() const { return median_of(cpu_all); }
+  double min() const { return all.empty() ? 0.0 : *std::min_element(all.begin(), all.end()); }
+  json to_json() const {
+    return {{"seconds", median()},
+            {"seconds_min", min()},
+            {"seconds_all", all},
+            {"cpu_seconds", cpu_median()},
+            {"cpu_seconds_all", cpu_all}};
+  }
+};
+
+std::string ratio_key(double ratio) {
+  return ratio == 0.1 ? "10pct" : ratio == 0.01 ? "1pct" : std::to_string(ratio);
+}
+
+// ---- midpoint subdivision -------------------------------------------------------------------
+
+// One level of 1-to-4 midpoint subdivision: every edge gets its midpoint (shared by both faces;
+// numbered in order of first appearance in face order, so the output is deterministic), and each
+// triangle (a, b, c) becomes (a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca): same surface,
+// same orientation.
+smr::TriangleMesh subdivide(const smr::TriangleMesh& in) {
+  smr::TriangleMesh out;
+  out.positions = in.positions;
+  out.positions.reserve(in.positions.size() + in.triangles.size() * 3 / 2 + 16);
+  out.triangles.reserve(in.triangles.size() * 4);
+  std::unordered_map<std::uint64_t, std::uint32_t> mid;
+  mid.reserve(in.triangles.size() * 2);
+  auto midpoint = [&](std::uint32_t a, std::uint32_t b) {
+    const std::uint64_t key = (std::uint64_t(std::min(a, b)) << 32) | std::uint64_t(std::max(a, b));
+    auto [it, inserted] = mid.try_emplace(key, std::uint32_t(out.positions.size()));
+    if (inserted) out.positions.push_back(0.5 * (in.positions[a] + in.positions[b]));
+    return it->second;
+  };
+  for (const auto& t : in.triangles) {
+    const std::uint32_t ab = midpoint(t[0], t[1]), bc = midpoint(t[1], t[2]),
+                        ca = midpoint(t[2], t[0]);
+    out.triangles.push_back({t[0], ab, ca});
+    out.triangles.push_back({ab, t[1], bc});
+    out.triangles.push_back({ca, bc, t[2]});
+    out.triangles.push_back({ab, bc, ca});
+  }
+  return out;
+}
+
+// ---- ours -----------------------------------------------------------------------------------
+
+// Longest chain of parents from any op down to R^0 (parents have smaller ids than their
+// children), in ops; R^0 has depth 0.
+std::pair<std::uint64_t, double> dag_depth(const smr::Crmr& crmr) {
+  std::vector<std::uint32_t> depth(crmr.ops.size(), 0);
+  std::uint64_t max_depth = 0;
+  double sum = 0.0;
+  for (std::size_t i = 1; i < crmr.ops.size(); ++i) {
+    std::uint32_t d = 0;
+    for (const smr::OpId p : crmr.ops[i].parents) d = std::max(d, depth[p.value]);
+    depth[i] = d + 1;
+    max_depth = std::max<std::uint64_t>(max_depth, depth[i]);
+    sum += depth[i];
+  }
+  return {max_depth, crmr.ops.size() > 1 ? sum / double(crmr.ops.size() - 1) : 0.0};
+}
+
+json ours_json(const smr::Crmr& crmr, const smr::QemPmStats& stats) {
+  std::uint64_t finest = 0, max_fragment = 0;
+  for (const smr::Op& op : crmr.ops) {
+    max_fragment = std::max<std::uint64_t>(max_fragment, op.fragment.size());
+    for (const auto& t : op.fragment) finest += !t.killer.valid() && !t.is_void();
+  }
+  const auto [depth, mean_depth] = dag_depth(crmr);
+  return {{"vertices", crmr.header.vertex_count},
+          {"ops", crmr.ops.size()},
+          {"fragment_triangles", crmr.triangle_count()},
+          {"max_fragment_triangles", max_fragment},
+          {"finest_triangles", finest},
+          {"base_vertices", stats.base_vertices},
+          {"base_triangles", stats.base_triangles},
+          {"collapses", stats.collapses},
+          {"rejected_link", stats.rejected_link},
+          {"rejected_flip", stats.rejected_flip},
+          {"rejected_boundary", stats.rejected_boundary},
+          {"err0", crmr.header.err0},
+          {"err_final", crmr.header.err_final},
+          {"dag_depth", depth},
+          {"dag_mean_depth", mean_depth}};
+}
+
+// ---- CGAL -----------------------------------------------------------------------------------
+
+using Kernel = CGAL::Simple_cartesian<double>;
+using SurfaceMesh = CGAL::Surface_mesh<Kernel::Point_3>;
+namespace SMS = CGAL::Surface_mesh_simplification;
+
+SurfaceMesh to_surface_mesh(const smr::TriangleMesh& mesh) {
+  SurfaceMesh sm;
+  sm.reserve(SurfaceMesh::size_type(mesh.positions.size()),
+             SurfaceMesh::size_type(mesh.positions.size() + mesh.triangles.size()),
+             SurfaceMesh::size_type(mesh.triangles.size()));
+  std::vector<SurfaceMesh::Vertex_index> v;
+  v.reserve(mesh.positions.size());
+  for (const smr::Vec3& p : mesh.positions) v.push_back(sm.add_vertex({p.x, p.y, p.z}));
+  for (std::size_t i = 0; i < mesh.triangles.size(); ++i) {
+    const auto& t = mesh.triangles[i];
+    if (sm.add_face(v[t[0]], v[t[1]], v[t[2]]) == SurfaceMesh::null_face()) {
+      throw std::runtime_error("CGAL Surface_mesh rejected face " + std::to_string(i));
+    }
+  }
+  return sm;
+}
+
+struct CgalRun {
+  std::size_t removed_edges = 0, vertices = 0, faces = 0;
+};
+
+enum class CgalPolicy { kLindstromTurk, kGarlandHeckbert };
+
+CgalRun run_cgal(SurfaceMesh& sm, double ratio, CgalPolicy policy) {
+  CgalRun r;
+  SMS::Count_ratio_stop_predicate<SurfaceMesh> stop(ratio);
+  if (policy == CgalPolicy::kLindstromTurk) {
+    r.removed_edges = std::size_t(SMS::edge_collapse(sm, stop));
+  } else {
+#if SMRDB_HAVE_EIGEN
+    SMS::GarlandHeckbert_plane_policies<SurfaceMesh, Kernel> gh(sm);
+    r.removed_edges = std::size_t(SMS::edge_collapse(
+        sm, stop, CGAL::parameters::get_cost(gh.get_cost()).get_placement(gh.get_placement())));
+#endif
+  }
+  r.vertices = sm.number_of_vertices();
+  r.faces = sm.number_of_faces();
+  return r;
+}
+
+// ---- extraction (Brown Table 7.7) -----------------------------------------------------------
+
+struct NamedRcf {
+  std::string name;
+  smr::RcfSpec spec;
+};
+
+std::vector<NamedRcf> table_rcfs(const smr::CrmrInfo& info) {
+  std::vector<NamedRcf> out;
+  for (double g : {0.5, 0.9, 1.0}) {
+    smr::RcfSpec s;
+    s.floor = g;
+    std::ostringstream name;
+    name << "object floor " << g;
+    out.push_back({name.str(), s});
+  }
+  // As tests/support/meshes.cpp's spread: direction (1, 0.3, 0.2), 3 model radii, 1 px, 60 deg,
+  // 1024x768, frustum and back-face culling on.
+  const smr::Vec3 c = 0.5 * (info.bounds.lo + info.bounds.hi);
+  const double radius = 0.5 * glm::length(info.bounds.hi - info.bounds.lo);
+  const smr::Vec3 dir{1, 0.3, 0.2};
+  smr::RcfSpec s;
+  smr::Camera cam;
+  cam.eye = c + glm::normalize(dir) * (3.0 * radius);
+  cam.target = c;
+  cam.up = smr::Vec3{0, 0, 1};
+  s.camera = cam;
+  s.pixel_error = 1.0;
+  out.push_back({"camera at 3 radii, 1 px", s});
+  return out;
+}
+
+json table_rows(const smr::OpSource& source, const std::vector<NamedRcf>& rcfs, int repeat) {
+  json rows = json::array();
+  for (const NamedRcf& r : rcfs) {
+    const smr::Rcf rcf = smr::make_rcf(r.spec, smr::ModelKind::kMesh3d, nullptr);
+    std::vector<double> extract, expand;
+    Times total;
+    smr::ExtractStats s;
+    for (int i = 0; i < std::max(1, repeat); ++i) {
+      const Stopwatch w;
+      const smr::Extraction e = smr::extract_minimal_surface(source, rcf);
+      total.add(w);
+      extract.push_back(e.stats.extract_seconds);
+      expand.push_back(e.stats.expand_seconds);
+      s = e.stats;
+    }
+    rows.push_back({{"rcf", r.name},
+                    {"x", s.x},
+                    {"triangles", s.triangles - s.void_triangles},
+                    {"fans", s.fans},
+                    {"triangles_per_fan", s.triangles_per_fan()},
+                    {"ops_visited", s.ops_visited},
+                    {"extract_seconds", median_of(extract)},
+                    {"expand_seconds", median_of(expand)},
+                    {"total_seconds", total.median()},
+                    {"total_seconds_all", total.all}});
+  }
+  return rows;
+}
+
+void trim() {
+  malloc_trim(0);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"bench_mesh_build: QEM PM CRMR build vs meshopt_simplify and CGAL edge collapse"};
+  std::string path, output, db_path, only_list;
+  int repeat = 3, subdivide_levels = 0, extract_repeat = 5;
+  bool skip_db = false, repair = false, keep_db = false, list_contenders = false;
+  app.add_option("mesh", path, "Mesh file (.ply .obj .off .stl)");
+  app.add_option("--repeat", repeat, "Interleaved rounds (median reported)")->capture_default_str();
+  app.add_option("--only", only_list,
+                 "Comma-separated contenders: ours, meshopt, meshopt-lockborder, cgal-lt, cgal-gh "
+                 "(default: all available)");
+  app.add_flag("--skip-db", skip_db, "Do not write the database or extract (Table 7.7)");
+  app.add_option("--db", db_path, "Database path (default: a temporary file, removed)");
+  app.add_flag("--keep-db", keep_db, "Keep the database file");
+  app.add_option("--extract-repeat", extract_repeat, "Runs per RCF (median)")
+      ->capture_default_str();
+  app.add_flag("--repair", repair, "Read with every repair (smrdb ingest --repair)");
+  app.add_flag("--list-contenders", list_contenders,
+               "Print the contenders this build has (space-separated) and exit");
+  app.add_option("--subdivide", subdivide_levels,
+                 "Write MESH after K levels of midpoint 1-to-4 subdivision to -o and exit");
+  app.add_option("-o,--output", output, "Output mesh of --subdivide (.ply: binary)");
+  CLI11_PARSE(app, argc, argv);
+  if (repeat < 1) {
+    std::cerr << "bench_mesh_build: --repeat must be at least 1\n";
+    return 1;
+  }
+
+  std::set<std::string> available{"ours", "cgal-lt"};
+#if SMRDB_HAVE_MESHOPTIMIZER
+  available.insert("meshopt");
+  available.insert("meshopt-lockborder");
+#endif
+#if SMRDB_HAVE_EIGEN
+  available.insert("cgal-gh");
+#endif
+  if (list_contenders) {
+    std::string line;
+    for (const char* c : {"ours", "meshopt", "meshopt-lockborder", "cgal-lt", "cgal-gh"}) {
+      if (available.count(c)) line += (line.empty() ? "" : " ") + std::string(c);
+    }
+    std::cout << line << "\n";
+    return 0;
+  }
+  if (path.empty()) {
+    std::cerr << "bench_mesh_build: a mesh file is required\n";
+    return 1;
+  }
+
+  try {
+    json report;
+    report["benchmark"] = "mesh_build";
+    report["machine"] = smr::bench::machine_json();
+    smr::MeshReport mr;
+    std::uint64_t t0 = now_ns();
+    smr::TriangleMesh mesh =
+        smr::read_mesh(path, repair ? smr::MeshRepair::all() : smr::MeshRepair{}, &mr);
+    const double read_seconds = seconds_since(t0);
+    report["input"] = {{"path", path},
+                       {"name", std::filesystem::path(path).filename().string()},
+                       {"vertices", mr.vertices},
+                       {"triangles", mr.faces},
+                       {"components", mr.components},
+                       {"boundary_edges", mr.boundary_edges},
+                       {"closed", mr.closed},
+                       {"repairs", mr.repairs()},
+                       {"summary", mr.summary()},
+                       {"read_seconds", read_seconds}};
+
+    if (subdivide_levels > 0) {
+      if (output.empty()) throw std::runtime_error("--subdivide needs -o OUT");
+      t0 = now_ns();
+      for (int i = 0; i < subdivide_levels; ++i) mesh = subdivide(mesh);
+      const double sub_seconds = seconds_since(t0);
+      smr::write_mesh(output, mesh);
+      report["benchmark"] = "mesh_subdivide";
+      report["subdivision"] = {{"levels", subdivide_levels},
+                               {"scheme", "midpoint 1-to-4 (flat: the surface is unchanged)"},
+                               {"output", output},
+                               {"vertices", mesh.positions.size()},
+                               {"triangles", mesh.triangles.size()},
+                               {"seconds", sub_seconds}};
+      std::cout << report.dump(2) << "\n";
+      return 0;
+    }
+    report["rss_after_input_mb"] = smr::bench::peak_rss_mb();
+
+    std::vector<std::string> order{"ours", "meshopt", "meshopt-lockborder", "cgal-lt", "cgal-gh"};
+    std::set<std::string> chosen;
+    if (only_list.empty()) {
+      chosen = available;
+    } else {
+      std::stringstream ss(only_list);
+      for (std::string item; std::getline(ss, item, ',');) {
+        if (!available.count(item)) {
+          std::cerr << "bench_mesh_build: contender '" << item
+                    << "' unknown or not built (meshoptimizer/Eigen missing?)\n";
+          return 1;
+        }
+        chosen.insert(item);
+      }
+    }
+    std::erase_if(order, [&](const std::string& c) { return !chosen.count(c); });
+    report["contenders"] = order;
+    report["repeats"] = repeat;
+
+    const std::size_t tri_count = mesh.triangles.size();
+    // Inputs of the peers, prepared once, outside the timings.
+    std::vector<float> positions_f;
+    std::vector<unsigned> indices;
+    std::vector<unsigned> destination;
+    json meshopt_prep;
+#if SMRDB_HAVE_MESHOPTIMIZER
+    float meshopt_scale = 0.0f;
+    if (chosen.count("meshopt") || chosen.count("meshopt-lockborder")) {
+      t0 = now_ns();
+      positions_f.reserve(mesh.positions.size() * 3);
+      for (const smr::Vec3& p : mesh.positions) {
+        positions_f.push_back(float(p.x));
+        positions_f.push_back(float(p.y));
+        positions_f.push_back(float(p.z));
+      }
+      indices.reserve(tri_count * 3);
+      for (const auto& t : mesh.triangles) indices.insert(indices.end(), t.begin(), t.end());
+      destination.resize(indices.size());
+      meshopt_prep["prepare_seconds"] = seconds_since(t0);
+      meshopt_scale =
+          meshopt_simplifyScale(positions_f.data(), mesh.positions.size(), 3 * sizeof(float));
+      meshopt_prep["error_scale"] = meshopt_scale;
+    }
+#endif
+
+    // Results per contender and target ratio.
+    Times ours_times;
+    std::optional<smr::Crmr> crmr;
+    smr::QemPmStats ours_stats;
+    struct PeerResult {
+      Times times;
+      json last;
+    };
+    std::map<std::string, std::map<double, PeerResult>> peers;
+    Times cgal_construct;
+
+    auto run_contender = [&](const std::string& c) {
+      if (c == "ours") {
+        crmr.reset();
+        trim();
+        smr::QemPmStats stats;
+        const Stopwatch w;
+        smr::Crmr built =
+            smr::build_qem_pm(mesh, std::filesystem::path(path).filename().string(), {}, &stats);
+        ours_times.add(w);
+        crmr.emplace(std::move(built));
+        ours_stats = stats;
+        return;
+      }
+#if SMRDB_HAVE_MESHOPTIMIZER
+      if (c == "meshopt" || c == "meshopt-lockborder") {
+        const unsigned options = c == "meshopt" ? 0u : unsigned(meshopt_SimplifyLockBorder);
+        for (double ratio : kRatios) {
+          const std::size_t target = std::size_t(std::llround(ratio * double(tri_count))) * 3;
+          float result_error = 0.0f;
+          const Stopwatch w;
+          const std::size_t n = meshopt_simplify(
+              destination.data(), indices.data(), indices.size(), positions_f.data(),
+              mesh.positions.size(), 3 * sizeof(float), target, 1.0f, options, &result_error);
+          PeerResult& r = peers[c][ratio];
+          r.times.add(w);
+          r.last = {{"target_triangles", target / 3},
+                    {"triangles", n / 3},
+                    {"result_error_relative", result_error},
+                    {"result_error", double(result_error) * double(meshopt_scale)}};
+        }
+        return;
+      }
+#endif
+      if (c == "cgal-lt" || c == "cgal-gh") {
+        const CgalPolicy policy =
+            c == "cgal-lt" ? CgalPolicy::kLindstromTurk : CgalPolicy::kGarlandHeckbert;
+        for (double ratio : kRatios) {
+          trim();
+          const Stopwatch construct;
+          SurfaceMesh sm = to_surface_mesh(mesh);
+          if (c == "cgal-lt" && ratio == kRatios.front()) cgal_construct.add(construct);
+          const Stopwatch w;
+          const CgalRun run = run_cgal(sm, ratio, policy);
+          PeerResult& r = peers[c][ratio];
+          r.times.add(w);
+          r.last = {{"target_edge_ratio", ratio},
+                    {"target_triangles", std::llround(ratio * double(tri_count))},
+                    {"triangles", run.faces},
+                    {"vertices", run.vertices},
+                    {"removed_edges", run.removed_edges}};
+        }
+        return;
+      }
+    };
+
+    // Interleaved rounds; round i starts with contender i mod n.
+    for (int round = 0; round < repeat; ++round) {
+      for (std::size_t k = 0; k < order.size(); ++k) {
+        const std::string& c = order[(std::size_t(round) + k) % order.size()];
+        std::cerr << "[bench_mesh_build] " << report["input"]["name"].get<std::string>()
+                  << " round " << round + 1 << "/" << repeat << ": " << c << "\n";
+        run_contender(c);
+      }
+    }
+
+    json results;
+    if (chosen.count("ours")) {
+      results["ours"] = ours_times.to_json();
+      results["ours"].update(ours_json(*crmr, ours_stats));
+      results["ours"]["triangles_per_second"] = double(tri_count) / ours_times.median();
+    }
+    for (const auto& [c, by_ratio] : peers) {
+      json pj;
+      for (const auto& [ratio, r] : by_ratio) {
+        json row = r.times.to_json();
+        row.update(r.last);
+        pj[ratio_key(ratio)] = row;
+      }
+      if (c.rfind("meshopt", 0) == 0) {
+        pj["version"] = "0.18 (Debian libmeshoptimizer-dev)";
+        pj["target_error"] = 1.0;
+        pj["options"] = c == "meshopt" ? "0" : "meshopt_SimplifyLockBorder";
+        pj.update(meshopt_prep);
+      } else {
+        pj["version"] = std::string("CGAL ") + CGAL_VERSION_STR;
+        pj["policy"] = c == "cgal-lt" ? "Lindstrom-Turk cost and placement (default)"
+                                      : "GarlandHeckbert_plane_policies";
+        pj["stop"] = "Count_ratio_stop_predicate (ratio of edges)";
+        if (c == "cgal-lt") pj["surface_mesh_construction"] = cgal_construct.to_json();
+      }
+      results[c] = pj;
+    }
+    report["results"] = results;
+
+    // Ratios: our full build against each peer's time to each target.
+    if (chosen.count("ours")) {
+      json ratios;
+      const double ours_s = ours_times.median();
+      for (const auto& [c, by_ratio] : peers) {
+        for (const auto& [ratio, r] : by_ratio) {
+          ratios["ours_over_" + c + "_" + ratio_key(ratio)] = ours_s / r.times.median();
+          ratios["cpu_ours_over_" + c + "_" + ratio_key(ratio)] =
+              ours_times.cpu_median() / r.times.cpu_median();
+        }
+      }
+      report["ratios"] = ratios;
+    }
+    if (crmr) report["results"]["ours"]["builder"] = crmr->header.builder;
+    report["rss_peak_after_builds_mb"] = smr::bench::peak_rss_mb();
+
+    // Database and Table 7.7.
+    if (chosen.count("ours") && !skip_db) {
+      const bool temp_db = db_path.empty();
+      if (temp_db) {
+        db_path = (std::filesystem::temp_directory_path() /
+                   ("bench_mesh_build_" + std::to_string(::getpid()) + ".smrdb"))
+                      .string();
+      }
+      smr::WriteOptions wo;
+      wo.force = true;
+      wo.parameters = "bench_mesh_build";
+      const smr::WriteReport w = smr::write_database(*crmr, db_path, wo);
+      const double bpv =
+          double(w.file_bytes) / double(std::max<std::uint64_t>(1, crmr->header.vertex_count));
+      report["database"] = {
+          {"codec", "zstd"},
+          {"ops", w.ops},
+          {"pages", w.pages},
+          {"rtree_nodes", w.rtree_nodes},
+          {"page_bytes", w.page_bytes},
+          {"locator_bytes", w.node_bytes},
+          {"rtree_bytes", w.rtree_bytes},
+          {"file_bytes", w.file_bytes},
+          {"bytes_per_vertex", bpv},
+          {"page_bytes_per_vertex", double(w.page_bytes) / double(crmr->header.vertex_count)},
+          {"hoppe_bytes_per_vertex", kHoppeBytesPerVertex},
+          {"bytes_per_vertex_over_hoppe", bpv / kHoppeBytesPerVertex},
+          {"z_shift", w.z_shift},
+          {"write_seconds", w.seconds}};
+      const std::vector<NamedRcf> rcfs = table_rcfs(crmr->header);
+      json table;
+      table["memory"] = table_rows(*crmr, rcfs, extract_repeat);
+      {
+        const auto db = smr::Database::open(db_path, {});
+        // One warm-up pass fills the page cache; the rows are then warm-cache figures.
+        (void)table_rows(*db, rcfs, 1);
+        table["database_warm"] = table_rows(*db, rcfs, extract_repeat);
+      }
+      report["table_7_7"] = table;
+      if (temp_db && !keep_db)
+        std::filesystem::remove(db_path);
+      else
+        report["database"]["path"] = db_path;
+    }
+    report["rss_peak_mb"] = smr::bench::peak_rss_mb();
+    std::cout << report.dump(2) << "\n";
+    return 0;
+  } catch (const std::exception& e) {
+    std::cerr << "bench_mesh_build: error: " << e.what() << "\n";
+    return 1;
+  }
+}
