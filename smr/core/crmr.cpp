@@ -107,7 +107,13 @@ void compute_rois(Crmr& crmr) {
   for (std::uint64_t i = crmr.ops.size(); i-- > 0;) {
     Op& op = crmr.ops[i];
     op.roi = op.box;
-    for (OpId c : op.children) op.roi.add(crmr.ops.at(c.value).roi);
+    NormalCone cone = op.cone;
+    for (OpId c : op.children) {
+      const Op& child = crmr.ops.at(c.value);
+      op.roi.add(child.roi);
+      cone = cone_union(cone, child.subtree_cone);
+    }
+    op.subtree_cone = canonical_cone(cone);
   }
 }
 

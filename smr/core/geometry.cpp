@@ -91,6 +91,73 @@ NormalCone normal_cone(std::span<const Vec3> unit_normals) {
   return cone;
 }
 
+NormalCone cone_union(const NormalCone& a, const NormalCone& b) {
+  if (a.half_angle >= M_PI || b.half_angle >= M_PI) return NormalCone{a.axis, M_PI};
+  const double between = std::acos(std::clamp(glm::dot(a.axis, b.axis), -1.0, 1.0));
+  if (between + b.half_angle <= a.half_angle) return a;
+  if (between + a.half_angle <= b.half_angle) return b;
+  const double half = 0.5 * (between + a.half_angle + b.half_angle);
+  if (half >= M_PI) return NormalCone{a.axis, M_PI};
+  // Rotate a's axis towards b's by (half - a.half_angle) in their common plane.
+  const Vec3 ortho = b.axis - glm::dot(a.axis, b.axis) * a.axis;
+  const double len = glm::length(ortho);
+  if (!(len > 1e-12)) return NormalCone{a.axis, M_PI};  // opposite axes
+  const double t = half - a.half_angle;
+  const Vec3 axis = glm::normalize(std::cos(t) * a.axis + std::sin(t) * (ortho / len));
+  return NormalCone{axis, std::min(M_PI, half + 1e-9)};
+}
+
+bool cone_contains(const NormalCone& outer, const NormalCone& inner) {
+  if (outer.half_angle >= M_PI) return true;
+  if (inner.half_angle >= M_PI) return false;
+  // between + inner <= outer, compared by cosines (acos loses ~1e-8 rad near 0).
+  const double spare = outer.half_angle - inner.half_angle + 1e-9;
+  if (spare < 0.0) return false;
+  return spare >= M_PI || glm::dot(outer.axis, inner.axis) >= std::cos(spare) - 1e-12;
+}
+
+namespace {
+std::array<std::int16_t, 3> axis_codes(const Vec3& axis) {
+  const double m = std::max({std::abs(axis.x), std::abs(axis.y), std::abs(axis.z)});
+  std::array<std::int16_t, 3> code{};
+  for (int k = 0; k < 3; ++k)
+    code[k] = static_cast<std::int16_t>(std::lround(axis[k] / m * 32767.0));
+  return code;
+}
+}  // namespace
+
+NormalCone decode_cone(const ConeCode& code) {
+  if (code.full) return NormalCone{Vec3{0.0, 0.0, 1.0}, M_PI};
+  const Vec3 a{double(code.axis[0]), double(code.axis[1]), double(code.axis[2])};
+  return NormalCone{a / glm::length(a), code.half * kConeStep};
+}
+
+ConeCode cone_code(const NormalCone& c) {
+  ConeCode code;
+  if (c.half_angle >= M_PI / 2) return code;
+  code.full = false;
+  code.axis = axis_codes(c.axis);
+  code.half = static_cast<std::uint16_t>(std::lround(c.half_angle / kConeStep));
+  return code;
+}
+
+NormalCone canonical_cone(const NormalCone& c) {
+  ConeCode code;
+  if (c.half_angle < M_PI / 2) {
+    code.axis = axis_codes(c.axis);
+    code.full = code.axis == std::array<std::int16_t, 3>{};
+    const NormalCone rounded = decode_cone(code);
+    const double shift = std::acos(std::clamp(glm::dot(rounded.axis, c.axis), -1.0, 1.0));
+    const double steps = std::ceil((c.half_angle + shift + 1e-9) / kConeStep);
+    if (steps < 65535.0) {
+      code.half = static_cast<std::uint16_t>(steps);
+    } else {
+      code.full = true;
+    }
+  }
+  return decode_cone(code);
+}
+
 Vec3 triangle_normal(const Vec3& a, const Vec3& b, const Vec3& c) {
   const Vec3 n = glm::cross(b - a, c - a);
   const double len = glm::length(n);

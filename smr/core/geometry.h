@@ -81,6 +81,27 @@ inline double point_rect_distance2d(const Vec2& p, const Vec2& lo, const Vec2& h
 Sphere bounding_sphere(std::span<const Vec3> points);
 /// Smallest cone (approximately: axis = normalised mean) containing the given unit normals.
 NormalCone normal_cone(std::span<const Vec3> unit_normals);
+/// The smallest cone around an axis on the great circle through a's and b's axes that holds
+/// both cones (half angle pi: every direction).
+NormalCone cone_union(const NormalCone& a, const NormalCone& b);
+
+/// Every direction of `inner` lies in `outer` (to ~1e-9 rad).
+bool cone_contains(const NormalCone& outer, const NormalCone& inner);
+
+/// A normal cone as a page stores it: the axis scaled so that its largest component is +-32767,
+/// the half angle in steps of (pi/2)/65535. A cone of pi/2 or more (which never culls) is stored
+/// as the full cone.
+struct ConeCode {
+  bool full = true;
+  std::array<std::int16_t, 3> axis{};
+  std::uint16_t half = 0;
+};
+inline constexpr double kConeStep = (M_PI / 2) / 65535.0;
+NormalCone decode_cone(const ConeCode& code);
+/// The codes of a cone already in canonical form (decode_cone(cone_code(c)) == c).
+ConeCode cone_code(const NormalCone& canonical);
+/// The smallest canonical cone that holds `c` (axis rounded, angle widened by the rounding).
+NormalCone canonical_cone(const NormalCone& c);
 /// Unit normal of triangle (a, b, c), counter-clockwise front; zero vector when degenerate.
 Vec3 triangle_normal(const Vec3& a, const Vec3& b, const Vec3& c);
 

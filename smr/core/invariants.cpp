@@ -412,9 +412,14 @@ void check_geometry(const Crmr& crmr, const Op& op, InvariantReport& r) {
   for (const TriRef& t : op.pre)
     check_tri(crmr.ops[t.op.value], crmr.ops[t.op.value].fragment[t.index]);
   if (!op.roi.contains(op.box)) r.fail(name + ": ROI does not contain its own box");
+  // The subtree cone holds the op's cone and every child's subtree cone (so every descendant's
+  // normals: induction from the leaves).
+  if (!cone_contains(op.subtree_cone, op.cone)) r.fail(name + ": subtree cone misses its own cone");
   for (OpId c : op.children) {
     if (!op.roi.contains(crmr.ops[c.value].roi))
       r.fail(name + ": ROI does not contain a child's ROI");
+    if (!cone_contains(op.subtree_cone, crmr.ops[c.value].subtree_cone))
+      r.fail(name + ": subtree cone misses a child's");
   }
 }
 

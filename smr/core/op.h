@@ -82,10 +82,14 @@ struct Op {
   // Geometry for the RCF and the index. `box`, `sphere` and `cone` cover F(R^i) AND PreF(R^i), so
   // one culling verdict serves both IsFiner and IsCompletelyFiner. `sphere` is centred at
   // box.center(). `roi` = box united with the children's ROIs: it contains every descendant.
+  // `subtree_cone` holds `cone` and the children's subtree cones, in the stored (canonical_cone)
+  // form: every normal of every descendant, which back-face culling needs (Hoppe 1997 section
+  // 4.2: a coarse triangle facing away can refine into triangles that face the eye).
   Box3 box;
   Sphere sphere;
   NormalCone cone;
   Box3 roi;
+  NormalCone subtree_cone;
 
   const Vec3& position(const FragmentTriangle& t, int k) const { return vertices[t.v[k]].p; }
   const Vec3& position(const PreTriangle& t, int k) const { return vertices[t.v[k]].p; }

@@ -175,6 +175,13 @@ Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid, storage
     const auto rlo = grid.quantize(op.roi.lo), rhi = grid.quantize(op.roi.hi);
     for (int k = 0; k < 3; ++k) w.varint(std::uint64_t(std::int64_t(blo[k]) - rlo[k]));
     for (int k = 0; k < 3; ++k) w.varint(std::uint64_t(std::int64_t(rhi[k]) - bhi[k]));
+    // Subtree normal cone (canonical: exact in its codes).
+    const ConeCode cone = cone_code(op.subtree_cone);
+    w.u8(cone.full ? 0 : 1);
+    if (!cone.full) {
+      for (std::int16_t a : cone.axis) w.svarint(a);
+      w.u16(cone.half);
+    }
   }
 
   Bytes out;
@@ -318,6 +325,21 @@ std::vector<Op> decode_page(ByteView page, const QuantGrid& grid, const std::str
     for (int k = 0; k < 3; ++k)
       hi[k] = std::int32_t(std::int64_t(hi[k]) + std::int64_t(r.varint()));
     op.roi = Box3{grid.dequantize(lo), grid.dequantize(hi)};
+    ConeCode cone;
+    const std::uint8_t cone_flag = r.u8();
+    if (cone_flag > 1) r.fail("bad subtree cone flag");
+    cone.full = cone_flag == 0;
+    if (!cone.full) {
+      for (std::int16_t& a : cone.axis) {
+        const std::int64_t v = r.svarint();
+        if (v < -32767 || v > 32767) r.fail("subtree cone axis out of range");
+        a = static_cast<std::int16_t>(v);
+      }
+      if (cone.axis == std::array<std::int16_t, 3>{}) r.fail("subtree cone without an axis");
+      cone.half = r.u16();
+      if (cone.half == 0xffff) r.fail("subtree cone angle out of range");
+    }
+    op.subtree_cone = decode_cone(cone);
   }
   r.expect_end();
   if (face != geometry.faces.size()) pr.fail("geometry has triangles no op claims");

@@ -1,10 +1,10 @@
 // Data pages (DESIGN.md section 3): the ops of one R-tree leaf, stored together. A page holds
 // their geometry — the page's distinct vertices on the global quantization grid and every
 // fragment triangle, in op order — through a storage codec (Draco, zstd or raw), and their
-// compact records (ids, resolutions, PreF, DAG and Hypermesh links, ROI) as zstd-compressed
-// varints. What an op's record can derive is not stored: box, sphere and normal cone are
-// recomputed from the corners (compute_op_bounds), in-fragment neighbours from shared edges, and
-// a triangle's death_res is its killer's birth_res (every killer is a child).
+// compact records (ids, resolutions, PreF, DAG and Hypermesh links, ROI, subtree normal cone)
+// as zstd-compressed varints. What an op's record can derive is not stored: box, sphere and normal
+// cone are recomputed from the corners (compute_op_bounds), in-fragment neighbours from shared
+// edges, and a triangle's death_res is its killer's birth_res (every killer is a child).
 //
 // Layout of the (unsealed) value: u8 format, u8 codec, varint op count, blob records
 // (zstd), blob geometry (codec).
@@ -21,7 +21,7 @@
 
 namespace smr {
 
-inline constexpr std::uint8_t kPageFormat = 1;
+inline constexpr std::uint8_t kPageFormat = 2;  // 2: subtree normal cones
 
 /// Encodes `ops` (in the given order; the decoder returns them in it). The ops' positions must
 /// lie on `grid` (quantize() the model first); throws kInternal otherwise.

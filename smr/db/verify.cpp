@@ -21,6 +21,7 @@ struct OpFacts {
   std::uint32_t slot = 0;
   double birth_res = 0.0;
   Box3 box, roi;
+  NormalCone subtree_cone;
   std::vector<OpId> killers;  // per fragment triangle
   std::uint32_t seen = 0;
 };
@@ -77,6 +78,7 @@ VerifyReport verify_database(const std::string& path, const std::function<void(d
       f.birth_res = op.birth_res;
       f.box = op.box;
       f.roi = op.roi;
+      f.subtree_cone = op.subtree_cone;
       f.killers.clear();
       for (const FragmentTriangle& t : op.fragment) f.killers.push_back(t.killer);
       ++rep.ops;
@@ -86,6 +88,8 @@ VerifyReport verify_database(const std::string& path, const std::function<void(d
       for (const TriRef& t : op.pre) pre.push_back({t, op.id});
       for (const CoarserLink& l : op.coarser) links.push_back({op.id, l.coarser});
       if (!contains(op.roi, op.box)) fault(name + ": its ROI does not contain its box");
+      if (!cone_contains(op.subtree_cone, op.cone))
+        fault(name + ": its subtree normal cone does not hold its own");
     }
   }
   // Ops missing because their page could not be read were reported with the page: the checks
@@ -141,6 +145,9 @@ VerifyReport verify_database(const std::string& path, const std::function<void(d
       ordered = false;
       break;
     }
+    if (!cone_contains(facts[parent].subtree_cone, facts[child].subtree_cone))
+      fault("DAG: the subtree normal cone of op " + std::to_string(parent) +
+            " does not hold its child " + std::to_string(child) + "'s");
   }
   // The DAG depth meta records (the longest parent chain), from the edges just checked.
   if (every_page && ordered) {

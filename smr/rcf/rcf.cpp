@@ -40,12 +40,10 @@ bool FrustumCulling::culls_triangle(const Triangle3& v) const {
   return false;
 }
 
-bool BackfaceCulling::culls_triangle(const Triangle3& v) const {
-  // The eye is strictly behind the triangle's plane as seen from each corner; implied by a
-  // backfacing normal cone around a sphere holding the corners.
-  const Vec3 n = triangle_normal(v[0], v[1], v[2]);
-  return glm::dot(n, v[0] - cam_.eye) > 0 && glm::dot(n, v[1] - cam_.eye) > 0 &&
-         glm::dot(n, v[2] - cam_.eye) > 0;
+bool BackfaceCulling::culls(const Op& op) const {
+  if (op.subtree_cone.half_angle >= M_PI / 2) return false;
+  const Vec3 centre = op.roi.center();
+  return backfacing(cam_, Sphere{centre, glm::length(op.roi.hi - centre)}, op.subtree_cone);
 }
 
 // ---- object space ----

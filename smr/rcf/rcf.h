@@ -28,12 +28,12 @@ class CullingComponent {
  public:
   virtual ~CullingComponent() = default;
   virtual std::string describe() const = 0;
-  /// True when F(op) and PreF(op) are invisible.
+  /// True when F(op) and PreF(op) are invisible (and, for back faces, all that refines them).
   virtual bool culls(const Op& op) const = 0;
   /// Conservative: true only if every op whose box lies inside `box` is culled.
   virtual bool culls_region(const Box3& box) const = 0;
-  /// The triangle with these corners is invisible. Implied by culls(op) for every triangle of
-  /// F(op) and PreF(op).
+  /// The triangle with these corners is invisible, so it may stand at any resolution. Never true
+  /// unless culls(op) would be for an op holding only that triangle.
   virtual bool culls_triangle(const Triangle3& v) const = 0;
 };
 
@@ -71,9 +71,13 @@ class BackfaceCulling final : public CullingComponent {
  public:
   explicit BackfaceCulling(Camera cam) : cam_(std::move(cam)) {}
   std::string describe() const override { return "backface-culling"; }
-  bool culls(const Op& op) const override { return backfacing(cam_, op.sphere, op.cone); }
+  /// Every normal of the op and of all its descendants (subtree_cone, around the ROI) faces away:
+  /// refining it can never show anything (Hoppe 1997 section 4.2). The op's own cone is not
+  /// enough: at a silhouette a coarse back-facing fragment refines into visible detail.
+  bool culls(const Op& op) const override;
   bool culls_region(const Box3&) const override { return false; }  // no normals for a region
-  bool culls_triangle(const Triangle3& v) const override;
+  /// Never: a triangle's corners say nothing about the refinements that replace it.
+  bool culls_triangle(const Triangle3&) const override { return false; }
 
  private:
   Camera cam_;

@@ -61,5 +61,51 @@ TEST(Geometry, PointTriangleDistanceMatchesTheOracles) {
   EXPECT_NEAR(point_triangle_distance3d({1, 1, 1}, a, a, a), std::sqrt(3.0), 1e-15);
 }
 
+// Normal cones: the union holds both cones and every direction sampled in them; the stored
+// (canonical) form holds the cone it was made from and encodes exactly.
+TEST(Geometry, ConeUnionAndCanonicalFormHoldTheirCones) {
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> g;
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const auto random_axis = [&] { return glm::normalize(Vec3{g(rng), g(rng), g(rng)}); };
+  // A direction inside `c` (on its rim when t = 1).
+  const auto inside = [&](const NormalCone& c, double t) {
+    Vec3 o = glm::cross(c.axis, random_axis());
+    o = glm::normalize(o);
+    const double a = t * c.half_angle;
+    return std::cos(a) * c.axis + std::sin(a) * o;
+  };
+  const auto holds = [](const NormalCone& c, const Vec3& d) {
+    return c.half_angle >= M_PI ||
+           std::acos(std::clamp(glm::dot(c.axis, d), -1.0, 1.0)) <= c.half_angle + 1e-9;
+  };
+  int partial = 0;
+  for (int i = 0; i < 2000; ++i) {
+    const NormalCone a{random_axis(), u(rng) * 0.8}, b{random_axis(), u(rng) * 0.8};
+    const NormalCone ab = cone_union(a, b);
+    EXPECT_TRUE(cone_contains(ab, a) && cone_contains(ab, b));
+    for (int k = 0; k < 8; ++k) {
+      EXPECT_TRUE(holds(ab, inside(a, k == 0 ? 1.0 : u(rng))));
+      EXPECT_TRUE(holds(ab, inside(b, k == 0 ? 1.0 : u(rng))));
+    }
+    // Never wider than the two cones side by side.
+    const double between = std::acos(std::clamp(glm::dot(a.axis, b.axis), -1.0, 1.0));
+    EXPECT_LE(ab.half_angle, std::max({a.half_angle, b.half_angle,
+                                       0.5 * (between + a.half_angle + b.half_angle) + 1e-8}));
+    const NormalCone c = canonical_cone(ab);
+    EXPECT_TRUE(cone_contains(c, ab));
+    EXPECT_EQ(decode_cone(cone_code(c)), c);
+    EXPECT_EQ(canonical_cone(c).half_angle >= c.half_angle, true);
+    if (c.half_angle < M_PI) {
+      ++partial;
+      EXPECT_LE(c.half_angle, ab.half_angle + 1e-3);  // rounding costs little
+    }
+  }
+  EXPECT_GT(partial, 500);
+  // Cones of pi/2 or more never cull: stored as the full cone.
+  EXPECT_EQ(canonical_cone(NormalCone{Vec3{0, 0, 1}, M_PI / 2}).half_angle, M_PI);
+  EXPECT_FALSE(cone_contains(NormalCone{Vec3{0, 0, 1}, 0.5}, NormalCone{Vec3{0, 0, 1}, M_PI}));
+}
+
 }  // namespace
 }  // namespace smr

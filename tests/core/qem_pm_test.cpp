@@ -46,6 +46,27 @@ std::array<std::uint64_t, 3> canonical(std::array<std::uint64_t, 3> t) {
 
 class QemPm : public ::testing::TestWithParam<std::string> {};
 
+// Brute force over the DAG: whether some triangle of op `id` or of any descendant (F or PreF)
+// has a corner from which the eye is not strictly behind its plane. Memoized in `front`
+// (0 unknown, 1 no, 2 yes).
+bool any_front_facing(const Crmr& crmr, std::uint64_t id, const Vec3& eye,
+                      std::vector<std::uint8_t>& front) {
+  if (front[id] != 0) return front[id] == 2;
+  const Op& op = crmr.ops[id];
+  bool any = false;
+  const auto faces = [&](const Vec3& a, const Vec3& b, const Vec3& c) {
+    const Vec3 n = glm::cross(b - a, c - a);
+    return glm::dot(n, a - eye) <= 0 || glm::dot(n, b - eye) <= 0 || glm::dot(n, c - eye) <= 0;
+  };
+  for (const FragmentTriangle& t : op.fragment)
+    any = any || faces(op.position(t, 0), op.position(t, 1), op.position(t, 2));
+  for (const PreTriangle& t : op.pre_tris)
+    any = any || faces(op.position(t, 0), op.position(t, 1), op.position(t, 2));
+  for (OpId c : op.children) any = any || any_front_facing(crmr, c.value, eye, front);
+  front[id] = any ? 2 : 1;
+  return any;
+}
+
 TEST_P(QemPm, CrmrInvariantsHoldAndTheFinestMeshIsTheSource) {
   const Built& b = built(GetParam());
   const InvariantReport r = check_crmr(b.crmr);
@@ -153,6 +174,29 @@ TEST_P(QemPm, ExtractionsAreManifoldSatisfyTheRcfAndHoldTheErrorBound) {
       }
     }
     EXPECT_EQ(volume_failures, 0u);
+
+    // Back-face culling never hides detail: an output triangle that is coarser than the
+    // similarity criteria ask is outside the frustum (itself or its killer), or its killer's
+    // whole subtree faces away from the eye (brute force over the descendants, not the cones).
+    if (c.spec.camera && c.spec.cull && !rcf.similarity().empty()) {
+      std::vector<std::uint8_t> facing(crmr.ops.size(), 0);
+      const FrustumCulling frustum(*c.spec.camera);
+      std::uint64_t hidden = 0;
+      for (const TriRef& ref : e.triangles) {
+        const Op& op = crmr.ops[ref.op.value];
+        const FragmentTriangle& t = op.fragment[ref.index];
+        if (!t.killer.valid()) continue;
+        const Triangle3 v = corners(op, t);
+        bool similar = true;
+        for (const auto& criterion : rcf.similarity())
+          similar = similar && criterion->triangle_satisfies(v, t.death_res, crmr.header);
+        if (similar) continue;
+        const Op& killer = crmr.ops[t.killer.value];
+        if (frustum.culls(killer) || frustum.culls_triangle(v)) continue;
+        if (any_front_facing(crmr, killer.id.value, c.spec.camera->eye, facing)) ++hidden;
+      }
+      EXPECT_EQ(hidden, 0u) << "coarse output triangles whose refinements face the eye";
+    }
 
     // Error bound, output -> source: points of each (sampled) output triangle lie within the
     // triangle's stored error of the source surface.
