@@ -86,26 +86,38 @@ class StarDistance {
   struct Target {
     Vec3 a, b, c;
     double offset;
+    TriangleDistance distance;
+    Target(const Vec3& pa, const Vec3& pb, const Vec3& pc, double off)
+        : a(pa), b(pb), c(pc), offset(off), distance(pa, pb, pc) {}
   };
   explicit StarDistance(const std::vector<Target>& targets) : targets_(targets) {}
 
-  double bound(const Vec3& a, const Vec3& b, const Vec3& c, double floor, int depth) const {
+  // `first`: the target likeliest to be nearest (the piece's image under the collapse), tried
+  // before the others so that most pieces stop at their first target.
+  double bound(const Vec3& a, const Vec3& b, const Vec3& c, double floor, int depth,
+               std::size_t first) const {
     double ub = std::numeric_limits<double>::infinity();
-    for (const Target& t : targets_) {
-      const double d = std::max({point_triangle_distance3d(a, t.a, t.b, t.c),
-                                 point_triangle_distance3d(b, t.a, t.b, t.c),
-                                 point_triangle_distance3d(c, t.a, t.b, t.c)}) +
-                       t.offset;
-      ub = std::min(ub, d);
+    const std::size_t n = targets_.size();
+    for (std::size_t k = 0; k < n; ++k) {
+      const Target& t = targets_[k == 0 ? first : (k == first ? 0 : k)];
+      // Squared distances to the corners; stop once no better than a target already seen.
+      const double room = ub - t.offset;
+      const double room2 = room > 0.0 ? room * room : 0.0;
+      double d2 = 0.0;
+      for (const Vec3* q : {&a, &b, &c}) {
+        d2 = std::max(d2, t.distance.squared(*q));
+        if (d2 >= room2 && room < std::numeric_limits<double>::infinity()) break;
+      }
+      ub = std::min(ub, t.offset + std::sqrt(d2));
       if (ub <= floor) return ub;
     }
     if (depth == 0) return ub;
     const Vec3 ab = 0.5 * (a + b), bc = 0.5 * (b + c), ca = 0.5 * (c + a);
     double m = floor;
-    m = std::max(m, bound(a, ab, ca, m, depth - 1));
-    m = std::max(m, bound(ab, b, bc, m, depth - 1));
-    m = std::max(m, bound(ca, bc, c, m, depth - 1));
-    m = std::max(m, bound(ab, bc, ca, m, depth - 1));
+    m = std::max(m, bound(a, ab, ca, m, depth - 1, first));
+    m = std::max(m, bound(ab, b, bc, m, depth - 1, first));
+    m = std::max(m, bound(ca, bc, c, m, depth - 1, first));
+    m = std::max(m, bound(ab, bc, ca, m, depth - 1, first));
     return std::min(m, ub);
   }
 
@@ -259,6 +271,11 @@ class Builder {
   // Whether collapsing from -> to keeps the mesh a manifold of the same topology with no
   // flipped or degenerate triangle (counts the reason when not).
   bool valid(std::uint32_t from, std::uint32_t to) {
+    neighbours(from, nf_);
+    return valid(from, to, nf_);
+  }
+  // With nf = neighbours(from).
+  bool valid(std::uint32_t from, std::uint32_t to, const std::vector<std::uint32_t>& nf) {
     std::uint32_t shared = 0;
     std::array<std::uint32_t, 2> opposite{kNone, kNone};
     std::uint32_t replaced = 0;
@@ -285,16 +302,15 @@ class Builder {
     if (comp_vertices_[comp] <= (comp_open_[comp] ? 3u : 4u)) return false;
     // Link condition: the common neighbours of from and to are exactly the edge's opposite
     // vertices (with a virtual vertex joined to the boundary, Dey et al.).
-    neighbours(from, nf_);
     neighbours(to, nt_);
     std::uint32_t common = 0;
-    for (std::size_t i = 0, j = 0; i < nf_.size() && j < nt_.size();) {
-      if (nf_[i] < nt_[j]) {
+    for (std::size_t i = 0, j = 0; i < nf.size() && j < nt_.size();) {
+      if (nf[i] < nt_[j]) {
         ++i;
-      } else if (nt_[j] < nf_[i]) {
+      } else if (nt_[j] < nf[i]) {
         ++j;
       } else {
-        if (nf_[i] != opposite[0] && nf_[i] != opposite[1]) {
+        if (nf[i] != opposite[0] && nf[i] != opposite[1]) {
           ++stats_.rejected_link;
           return false;
         }
@@ -338,17 +354,16 @@ class Builder {
     ++stamp_[from];
     if (removed_[from]) return;
     neighbours(from, cand_);
-    const std::vector<std::uint32_t> around = cand_;
-    double best = std::numeric_limits<double>::infinity();
-    std::uint32_t best_to = kNone;
-    for (std::uint32_t to : around) {
-      const double c = cost(from, to);
-      if (c >= best) continue;  // ties: the smaller id (iterated first) wins
-      if (!valid(from, to)) continue;
-      best = c;
-      best_to = to;
+    // The cheapest valid target (ties: the smaller id): validity, the costly test, is checked in
+    // order of cost until one passes.
+    ranked_.clear();
+    for (std::uint32_t to : cand_) ranked_.push_back({cost(from, to), to});
+    std::sort(ranked_.begin(), ranked_.end());
+    for (const auto& [c, to] : ranked_) {
+      if (!valid(from, to, cand_)) continue;
+      heap_.push({c, from, to, stamp_[from]});
+      return;
     }
-    if (best_to != kNone) heap_.push({best, from, best_to, stamp_[from]});
   }
 
   // ---- error bound --------------------------------------------------------------------------
@@ -356,11 +371,14 @@ class Builder {
   double collapse_error(std::uint32_t from, std::uint32_t to) {
     old_targets_.clear();
     new_targets_.clear();
+    image_.clear();
     double floor = 0.0;
     for (std::uint32_t id : star_[from]) {
       const Tri& t = tris_[id];
       old_targets_.push_back({pos_[t.v[0]], pos_[t.v[1]], pos_[t.v[2]], t.e});
       floor = std::max(floor, t.e);
+      // The two triangles on the edge vanish; their nearest new one is a guess (the first).
+      image_.push_back(has(t, to) ? 0u : static_cast<std::uint32_t>(new_targets_.size()));
       if (has(t, to)) continue;
       std::array<std::uint32_t, 3> nv = t.v;
       for (std::uint32_t& w : nv) {
@@ -371,13 +389,16 @@ class Builder {
     // Forward: source points assigned to an old triangle (within its e) to the new star.
     const StarDistance to_new(new_targets_);
     double e = floor;
-    for (const StarDistance::Target& t : old_targets_) {
-      e = std::max(e, t.offset + to_new.bound(t.a, t.b, t.c, e - t.offset, kBoundDepth));
+    for (std::size_t i = 0; i < old_targets_.size(); ++i) {
+      const StarDistance::Target& t = old_targets_[i];
+      e = std::max(e, t.offset + to_new.bound(t.a, t.b, t.c, e - t.offset, kBoundDepth, image_[i]));
     }
     // Backward: points of the new star to the old one, plus the old bounds.
     const StarDistance to_old(old_targets_);
-    for (const StarDistance::Target& t : new_targets_) {
-      e = std::max(e, to_old.bound(t.a, t.b, t.c, e, kBoundDepth));
+    for (std::size_t j = 0, i = 0; j < new_targets_.size(); ++j, ++i) {
+      while (has(tris_[star_[from][i]], to)) ++i;  // the preimage of new triangle j
+      const StarDistance::Target& t = new_targets_[j];
+      e = std::max(e, to_old.bound(t.a, t.b, t.c, e, kBoundDepth, i));
     }
     return e;
   }
@@ -876,7 +897,9 @@ class Builder {
   std::vector<Collapse> collapses_;
   std::vector<std::uint32_t> old_tris_, new_tris_;
   std::vector<StarDistance::Target> old_targets_, new_targets_;
+  std::vector<std::uint32_t> image_;  // old star index -> its new triangle (collapse_error)
   std::vector<std::uint32_t> nf_, nt_, cand_, ring_, local_;
+  std::vector<std::pair<double, std::uint32_t>> ranked_;
   std::unordered_map<std::uint64_t, std::uint32_t> frag_edges_;
   std::vector<std::uint32_t> tri_op_, tri_local_;
 };

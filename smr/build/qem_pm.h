@@ -14,8 +14,10 @@
 // (every source point is within e(T) of the triangle it is assigned to, every point of T within
 // e(T) of the source). A collapse maps its old star onto the new one; e of the new triangles is
 // the old bound plus an upper bound of the distance between the two stars, computed from the
-// convexity of the distance to one triangle over subdivided pieces (branch and bound). An op's
-// error is the largest bound of the mesh just before it, so birth_res never decreases.
+// convexity of the distance to one triangle over subdivided pieces (branch and bound, the
+// piece's image under the collapse tried first). An op's error is its own bound (the largest e of
+// its PreF triangles, or what a spawned component's absence costs), raised to its children's
+// errors, so birth_res never falls from parent to child.
 //
 // Order (Brown 4.4.3.3 reordering): splits are emitted in a topological order of their
 // dependencies (a split needs the splits that created its PreF), largest bound first, so the

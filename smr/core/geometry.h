@@ -67,6 +67,20 @@ inline Vec2 xy(const Vec3& p) {
 double point_triangle_distance2d(const Vec2& p, const Vec2& a, const Vec2& b, const Vec2& c);
 /// Distance from p to the closed triangle (a, b, c) in space.
 double point_triangle_distance3d(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
+
+/// One triangle prepared for many distance queries (the same Voronoi-region method as
+/// point_triangle_distance3d, with the triangle's own dot products computed once).
+class TriangleDistance {
+ public:
+  TriangleDistance() = default;
+  TriangleDistance(const Vec3& a, const Vec3& b, const Vec3& c);
+  double squared(const Vec3& p) const;
+
+ private:
+  Vec3 a_{0.0}, b_{0.0}, c_{0.0}, ab_{0.0}, ac_{0.0};
+  double abab_ = 0.0, abac_ = 0.0, acac_ = 0.0;
+  bool degenerate_ = true;
+};
 /// Distance from p to segment ab in the plane.
 double point_segment_distance2d(const Vec2& p, const Vec2& a, const Vec2& b);
 /// Distance from p to the closed axis-aligned rectangle [lo, hi] in the plane.
