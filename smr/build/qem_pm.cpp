@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <numeric>
 #include <queue>
@@ -389,7 +390,15 @@ class Builder {
     // Forward: source points assigned to an old triangle (within its e) to the new star.
     const StarDistance to_new(new_targets_);
     double e = floor;
+    // Largest first by an unrefined (depth 0) bound, so the floor rises early and prunes more.
+    order_.clear();
     for (std::size_t i = 0; i < old_targets_.size(); ++i) {
+      const StarDistance::Target& t = old_targets_[i];
+      order_.push_back({t.offset + to_new.bound(t.a, t.b, t.c, 0.0, 0, image_[i]), i});
+    }
+    std::sort(order_.begin(), order_.end(), std::greater<>());
+    for (const auto& [estimate, i] : order_) {
+      if (estimate <= e) break;  // this bound and the ones after it cannot raise e
       const StarDistance::Target& t = old_targets_[i];
       e = std::max(e, t.offset + to_new.bound(t.a, t.b, t.c, e - t.offset, kBoundDepth, image_[i]));
     }
@@ -898,6 +907,7 @@ class Builder {
   std::vector<std::uint32_t> old_tris_, new_tris_;
   std::vector<StarDistance::Target> old_targets_, new_targets_;
   std::vector<std::uint32_t> image_;  // old star index -> its new triangle (collapse_error)
+  std::vector<std::pair<double, std::size_t>> order_;
   std::vector<std::uint32_t> nf_, nt_, cand_, ring_, local_;
   std::vector<std::pair<double, std::uint32_t>> ranked_;
   std::unordered_map<std::uint64_t, std::uint32_t> frag_edges_;
