@@ -32,6 +32,13 @@ std::uint64_t now_ns() {
                                         .count());
 }
 
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
 double seconds_since(std::uint64_t start_ns) {
   return double(now_ns() - start_ns) * 1e-9;
 }

@@ -58,6 +58,8 @@ double peak_rss_mb();
 /// Current resident set size (/proc/self/statm), in MiB; 0 when unavailable.
 double current_rss_mb();
 
+/// The median of `v` (0 when empty).
+double median(std::vector<double> v);
 double seconds_since(std::uint64_t start_ns);
 std::uint64_t now_ns();
 

@@ -33,6 +33,7 @@
 namespace {
 
 using nlohmann::json;
+using smr::bench::median;
 
 struct DatasetSpec {
   std::string name;
@@ -44,12 +45,6 @@ struct RcfCase {
   std::string label;
   smr::RcfSpec spec;
 };
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n == 0 ? 0.0 : (n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]));
-}
 
 // The camera and RCFs for one terrain (world coordinates of the local-metre DEM).
 std::vector<RcfCase> rcf_cases(const smr::Heightfield& dem, double z_min, double z_max) {

@@ -84,13 +84,6 @@ double cpu_seconds() {
   return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
 }
 
-double median_of(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
 // A wall + CPU stopwatch.
 struct Stopwatch {
   std::uint64_t wall0 = now_ns();
@@ -103,8 +96,8 @@ struct Times {
     all.push_back(seconds_since(w.wall0));
     cpu_all.push_back(cpu_seconds() - w.cpu0);
   }
-  double median() const { return median_of(all); }
-  double cpu_median() const { return median_of(cpu_all); }
+  double median() const { return smr::bench::median(all); }
+  double cpu_median() const { return smr::bench::median(cpu_all); }
   double min() const { return all.empty() ? 0.0 : *std::min_element(all.begin(), all.end()); }
   json to_json() const {
     return {{"seconds", median()},
@@ -290,8 +283,8 @@ json table_rows(const smr::OpSource& source, const std::vector<NamedRcf>& rcfs, 
                     {"fans", s.fans},
                     {"triangles_per_fan", s.triangles_per_fan()},
                     {"ops_visited", s.ops_visited},
-                    {"extract_seconds", median_of(extract)},
-                    {"expand_seconds", median_of(expand)},
+                    {"extract_seconds", smr::bench::median(extract)},
+                    {"expand_seconds", smr::bench::median(expand)},
                     {"total_seconds", total.median()},
                     {"total_seconds_all", total.all}});
   }

@@ -64,14 +64,9 @@ namespace {
 using nlohmann::json;
 using smr::Triangle3;
 using smr::Vec3;
+using smr::bench::median;
 using smr::bench::now_ns;
 using smr::bench::seconds_since;
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n == 0 ? 0.0 : (n % 2 == 1 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]));
-}
 
 // ---- exact point-to-triangle-soup distance ------------------------------------------------------
 
