@@ -95,10 +95,12 @@ class StarDistance {
 
   // `first`: the target likeliest to be nearest (the piece's image under the collapse), tried
   // before the others so that most pieces stop at their first target.
+  // `known`: this piece's depth-0 bound when the caller already has it.
   double bound(const Vec3& a, const Vec3& b, const Vec3& c, double floor, int depth,
-               std::size_t first) const {
-    double ub = std::numeric_limits<double>::infinity();
-    const std::size_t n = targets_.size();
+               std::size_t first, double known = std::numeric_limits<double>::infinity()) const {
+    double ub = known;
+    if (ub <= floor) return ub;
+    const std::size_t n = known < std::numeric_limits<double>::infinity() ? 0 : targets_.size();
     for (std::size_t k = 0; k < n; ++k) {
       const Target& t = targets_[k == 0 ? first : (k == first ? 0 : k)];
       // Squared distances to the corners; stop once no better than a target already seen.
@@ -327,6 +329,7 @@ class Builder {
     for (std::uint32_t id : star_[from]) {
       const Tri& t = tris_[id];
       if (has(t, to)) continue;
+      preimage_.push_back(static_cast<std::uint32_t>(old_targets_.size() - 1));
       std::array<std::uint32_t, 3> nv = t.v;
       for (std::uint32_t& w : nv) {
         if (w == from) w = to;
@@ -373,6 +376,7 @@ class Builder {
     old_targets_.clear();
     new_targets_.clear();
     image_.clear();
+    preimage_.clear();
     double floor = 0.0;
     for (std::uint32_t id : star_[from]) {
       const Tri& t = tris_[id];
@@ -381,6 +385,7 @@ class Builder {
       // The two triangles on the edge vanish; their nearest new one is a guess (the first).
       image_.push_back(has(t, to) ? 0u : static_cast<std::uint32_t>(new_targets_.size()));
       if (has(t, to)) continue;
+      preimage_.push_back(static_cast<std::uint32_t>(old_targets_.size() - 1));
       std::array<std::uint32_t, 3> nv = t.v;
       for (std::uint32_t& w : nv) {
         if (w == from) w = to;
@@ -392,22 +397,24 @@ class Builder {
     double e = floor;
     // Largest first by an unrefined (depth 0) bound, so the floor rises early and prunes more.
     order_.clear();
+    depth0_.resize(old_targets_.size());
     for (std::size_t i = 0; i < old_targets_.size(); ++i) {
       const StarDistance::Target& t = old_targets_[i];
-      order_.push_back({t.offset + to_new.bound(t.a, t.b, t.c, 0.0, 0, image_[i]), i});
+      depth0_[i] = to_new.bound(t.a, t.b, t.c, 0.0, 0, image_[i]);
+      order_.push_back({t.offset + depth0_[i], i});
     }
     std::sort(order_.begin(), order_.end(), std::greater<>());
     for (const auto& [estimate, i] : order_) {
       if (estimate <= e) break;  // this bound and the ones after it cannot raise e
       const StarDistance::Target& t = old_targets_[i];
-      e = std::max(e, t.offset + to_new.bound(t.a, t.b, t.c, e - t.offset, kBoundDepth, image_[i]));
+      e = std::max(e, t.offset + to_new.bound(t.a, t.b, t.c, e - t.offset, kBoundDepth, image_[i],
+                                              depth0_[i]));
     }
     // Backward: points of the new star to the old one, plus the old bounds.
     const StarDistance to_old(old_targets_);
-    for (std::size_t j = 0, i = 0; j < new_targets_.size(); ++j, ++i) {
-      while (has(tris_[star_[from][i]], to)) ++i;  // the preimage of new triangle j
+    for (std::size_t j = 0; j < new_targets_.size(); ++j) {
       const StarDistance::Target& t = new_targets_[j];
-      e = std::max(e, to_old.bound(t.a, t.b, t.c, e, kBoundDepth, i));
+      e = std::max(e, to_old.bound(t.a, t.b, t.c, e, kBoundDepth, preimage_[j]));
     }
     return e;
   }
@@ -906,8 +913,10 @@ class Builder {
   std::vector<Collapse> collapses_;
   std::vector<std::uint32_t> old_tris_, new_tris_;
   std::vector<StarDistance::Target> old_targets_, new_targets_;
-  std::vector<std::uint32_t> image_;  // old star index -> its new triangle (collapse_error)
+  std::vector<std::uint32_t> image_;     // old star index -> its new triangle (collapse_error)
+  std::vector<std::uint32_t> preimage_;  // new triangle -> its old star index
   std::vector<std::pair<double, std::size_t>> order_;
+  std::vector<double> depth0_;  // old star index -> its unrefined forward bound
   std::vector<std::uint32_t> nf_, nt_, cand_, ring_, local_;
   std::vector<std::pair<double, std::uint32_t>> ranked_;
   std::unordered_map<std::uint64_t, std::uint32_t> frag_edges_;

@@ -41,7 +41,6 @@ bool FrustumCulling::culls_triangle(const Triangle3& v) const {
 }
 
 bool BackfaceCulling::culls(const Op& op) const {
-  if (op.subtree_cone.half_angle >= M_PI / 2) return false;
   const Vec3 centre = op.roi.center();
   return backfacing(cam_, Sphere{centre, glm::length(op.roi.hi - centre)}, op.subtree_cone);
 }
