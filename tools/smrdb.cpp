@@ -16,6 +16,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "smr/build/block_tin.h"
 #include "smr/build/greedy_tin.h"
 #include "smr/build/qem_pm.h"
 #include "smr/core/invariants.h"
@@ -185,6 +186,8 @@ struct IngestArgs {
   bool repair = false;
   std::uint32_t coalesce = 32;
   double coalesce_ratio = 0.7;
+  std::string builder = "greedy";
+  int block_cells = 256;
 
   bool is_mesh() const { return smr::is_mesh_path(dem); }
 
@@ -212,6 +215,13 @@ struct IngestArgs {
                    "Vertices of the base mesh (terrain: 4 = the corners; meshes: simplify down to "
                    "this many where the collapse rules allow)")
         ->capture_default_str();
+    app.add_option("--builder", builder,
+                   "DEMs: greedy (Delaunay insertion, the DEM read whole) or blocks "
+                   "(hierarchical block decimation, the DEM read one block at a time)")
+        ->capture_default_str();
+    app.add_option("--block-cells", block_cells,
+                   "DEMs, --builder blocks: side of a leaf block in grid cells (a power of two)")
+        ->capture_default_str();
     app.add_option("--codec", codec, "Geometry codec of the pages: draco, zstd or raw")
         ->capture_default_str();
     app.add_option("--z-quantum", z_quantum,
@@ -238,6 +248,18 @@ struct IngestArgs {
     if (!is_mesh() && repair) throw_input("--repair applies to meshes (.ply, .obj, .off, .stl)");
     if (!(coalesce_ratio >= 0.0 && coalesce_ratio <= 1.0))
       throw_input("--coalesce-ratio must be in [0, 1]");
+    if (builder != "greedy" && builder != "blocks")
+      throw_input("--builder must be greedy or blocks, got '" + builder + "'");
+    if (is_mesh() && builder != "greedy")
+      throw_input("--builder applies to DEMs; meshes are built by quadric edge collapse");
+    if (builder == "blocks" && (max_vertices != 0 || base_vertices != 4)) {
+      throw_input(
+          "--max-vertices and --base-vertices apply to --builder greedy; the block "
+          "builder refines to --max-error and decimates down to the corners");
+    }
+    if (block_cells < 8 || (block_cells & (block_cells - 1)) != 0)
+      throw_input("--block-cells must be a power of two, at least 8, got " +
+                  std::to_string(block_cells));
   }
   // What the database records of how it was built: the input's file name and every build
   // parameter, in a fixed order. Not the command line: output path, flag order, -q or --json
@@ -253,7 +275,9 @@ struct IngestArgs {
            " z-quantum=" + number(z_quantum) + " page-kb=" + std::to_string(page_kb) +
            (is_mesh() ? std::string(" repair=") + (repair ? "yes" : "no") + " coalesce=" +
                             std::to_string(coalesce) + " coalesce-ratio=" + number(coalesce_ratio)
-                      : std::string());
+                      : std::string(" builder=") + builder +
+                            (builder == "blocks" ? " block-cells=" + std::to_string(block_cells)
+                                                 : std::string()));
   }
 };
 
@@ -283,6 +307,30 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
     opt.progress = [&](double f) { progress.update(0.8 * f); };
     t0 = Clock::now();
     crmr = smr::build_qem_pm(mesh, a.dem, opt);
+  } else if (a.builder == "blocks") {
+    const std::unique_ptr<smr::RasterWindows> dem = smr::open_dem(a.dem);
+    smr::BlockTinOptions opt;
+    opt.max_error = a.max_error;
+    opt.block_cells = a.block_cells;
+    opt.progress = [&](double f) { progress.update(0.8 * f); };
+    smr::BlockTinStats st;
+    crmr = smr::build_block_tin(*dem, opt, &st);
+    report["input"] = {{"path", a.dem},
+                       {"kind", "terrain"},
+                       {"width", dem->width()},
+                       {"height", dem->height()},
+                       {"samples", st.samples},
+                       {"geographic", dem->georef().geographic},
+                       {"largest_window_samples", st.max_block_samples}};
+    report["blocks"] = {{"block_cells", a.block_cells},
+                        {"leaf_blocks", st.leaf_blocks},
+                        {"levels", st.levels},
+                        {"rounds", st.rounds},
+                        {"dag_height", st.dag_height},
+                        {"removals", st.removals},
+                        {"finest_vertices", st.finest_vertices},
+                        {"base_vertices", st.base_vertices},
+                        {"non_delaunay_holes", st.non_delaunay_holes}};
   } else {
     const smr::Heightfield dem = smr::read_dem(a.dem);
     report["input"] = {{"path", a.dem},

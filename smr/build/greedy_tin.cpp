@@ -211,7 +211,9 @@ class OpStore {
 class Builder {
  public:
   Builder(const Heightfield& dem, const GreedyTinOptions& options)
-      : dem_(dem), opt_(options), tol_(exact_tolerance(dem)) {
+      : dem_(dem),
+        opt_(options),
+        tol_(options.tolerance >= 0.0 ? options.tolerance : exact_tolerance(dem)) {
     if (dem.width < 2 || dem.height < 2) {
       throw_input(dem.source + ": a DEM needs at least 2x2 samples, got " +
                   std::to_string(dem.width) + "x" + std::to_string(dem.height));
@@ -232,7 +234,9 @@ class Builder {
         ++valid;
       }
     }
-    if (valid == 0) throw_input(dem.source + ": every sample is no data");
+    if (valid == 0 && !opt_.allow_no_data_only)
+      throw_input(dem.source + ": every sample is no data");
+    if (valid == 0) fill_z_ = 0.0f;
     valid_samples_ = valid;
     stop_error_ = std::max(opt_.max_error, tol_);
   }
@@ -242,7 +246,17 @@ class Builder {
     // R^0: the corner triangulation, refined until holes are exact (and to base_vertices).
     begin_op(kMixed);
     for (auto [c, r] : {std::pair{0u, 0u}, {w, 0u}, {w, h}, {0u, h}}) add_vertex(c, r);
-    for (std::uint32_t i = 0; i < 4; ++i) {
+    auto initial = opt_.initial_vertices;
+    std::sort(initial.begin(), initial.end());
+    initial.erase(std::unique(initial.begin(), initial.end()), initial.end());
+    for (auto [c, r] : initial) {
+      if (c > w || r > h) {
+        throw_internal(dem_.source + ": an initial vertex lies outside the grid");
+      }
+      if ((c == 0 || c == w) && (r == 0 || r == h)) continue;  // a corner
+      add_vertex(c, r);
+    }
+    for (std::uint32_t i = 0; i < verts_.size(); ++i) {
       Dt::Vertex_handle vh = dt_.insert(Point(verts_[i].col, verts_[i].row));
       vh->info() = i;
     }

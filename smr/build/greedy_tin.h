@@ -7,6 +7,8 @@
 
 #include <cstdint>
 #include <functional>
+#include <utility>
+#include <vector>
 
 #include "smr/core/crmr.h"
 #include "smr/core/heightfield.h"
@@ -21,6 +23,13 @@ struct GreedyTinOptions {
   std::uint64_t max_vertices = 0;
   /// Vertices of the base mesh R^0: 4 = the corner triangulation; more = a coarse greedy TIN.
   std::uint64_t base_vertices = 4;
+  /// Grid samples (col, row) put into R^0 besides the corners (smr/build/block_tin.cpp: a block's
+  /// border vertices, which its neighbour shares).
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> initial_vertices;
+  /// The error below which a sample counts as exact; negative = exact_tolerance(dem).
+  double tolerance = -1.0;
+  /// Accept a DEM without a single valid sample (a block of a larger one): its mesh is void.
+  bool allow_no_data_only = false;
   /// Progress in [0, 1]; called at most a few hundred times.
   std::function<void(double)> progress;
 };

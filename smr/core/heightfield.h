@@ -54,4 +54,56 @@ struct Heightfield {
   }
 };
 
+/// Read access to a DEM one window at a time, so that a builder never needs the whole grid in
+/// memory (smr/build/block_tin.h). Windows follow the Heightfield conventions: row 0 is the south.
+class RasterWindows {
+ public:
+  virtual ~RasterWindows() = default;
+  virtual int width() const = 0;
+  virtual int height() const = 0;
+  virtual const Georef& georef() const = 0;
+  virtual const std::string& source() const = 0;
+  /// Samples [col0, col0 + w) x [row0, row0 + h) as a Heightfield whose georef is the window's
+  /// (x0, y0 at sample (col0, row0)) and whose `valid` is empty when every sample has data.
+  /// Throws smr::Error naming the source when they cannot be read.
+  virtual Heightfield read(int col0, int row0, int w, int h) const = 0;
+};
+
+/// Windows of a Heightfield already in memory (tests, small inputs).
+class HeightfieldWindows final : public RasterWindows {
+ public:
+  explicit HeightfieldWindows(const Heightfield& h) : h_(h) {}
+  int width() const override { return h_.width; }
+  int height() const override { return h_.height; }
+  const Georef& georef() const override { return h_.georef; }
+  const std::string& source() const override { return h_.source; }
+  Heightfield read(int col0, int row0, int w, int h) const override {
+    Heightfield out;
+    out.width = w;
+    out.height = h;
+    out.source = h_.source;
+    out.georef = h_.georef;
+    out.georef.x0 += col0 * h_.georef.dx;
+    out.georef.y0 += row0 * h_.georef.dy;
+    out.z.resize(static_cast<std::size_t>(w) * static_cast<std::size_t>(h));
+    bool any_invalid = false;
+    if (h_.has_nodata()) out.valid.resize(out.z.size());
+    for (int r = 0; r < h; ++r) {
+      for (int c = 0; c < w; ++c) {
+        const std::size_t i = out.index(c, r), j = h_.index(col0 + c, row0 + r);
+        out.z[i] = h_.z[j];
+        if (h_.has_nodata()) {
+          out.valid[i] = h_.valid[j];
+          any_invalid |= h_.valid[j] == 0;
+        }
+      }
+    }
+    if (!any_invalid) out.valid.clear();
+    return out;
+  }
+
+ private:
+  const Heightfield& h_;
+};
+
 }  // namespace smr

@@ -7,6 +7,7 @@
 // z = 0 (finite, so that code that forgets `valid` cannot be poisoned by NaN).
 #pragma once
 
+#include <memory>
 #include <string>
 
 #include "smr/core/heightfield.h"
@@ -29,6 +30,15 @@ Heightfield read_dem(const std::string& path);
 ///    every sample is no data is an error; a NaN or infinite sample that is not masked is an
 ///    error naming its pixel (col, line) as GDAL counts them (line 0 = first line in the file).
 Heightfield read_gdal_raster(const std::string& path);
+
+/// The same raster opened for reading by windows (RasterWindows): only the header is read here,
+/// and each window is checked as read_gdal_raster checks the whole raster (a raster whose every
+/// sample is no data is found only by the reader of the last window).
+std::unique_ptr<RasterWindows> open_gdal_raster(const std::string& path);
+
+/// read_dem's choice of reader, by windows: GDAL rasters are read window by window; .npy and
+/// .npz files are read whole (NumPy arrays are small) and served from memory.
+std::unique_ptr<RasterWindows> open_dem(const std::string& path);
 
 /// A NumPy .npy file holding one 2-D array (shape (rows, cols)); see smr/io/npy.h for the dtypes.
 /// A plain .npy has no georeferencing: x0 = y0 = 0, dx = dy = 1, and rows are taken as stored

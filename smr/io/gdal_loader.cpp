@@ -55,7 +55,7 @@ const Api* load() {
     auto entry = reinterpret_cast<Entry>(::dlsym(handle, kSymbol));
     const Api* api = entry != nullptr ? entry() : nullptr;
     if (api == nullptr || api->abi != kAbi || api->read_raster == nullptr ||
-        api->write_geotiff == nullptr) {
+        api->write_geotiff == nullptr || api->open_raster == nullptr) {
       tried += "\n  " + path + ": not a GDAL module of this smrdb build";
       ::dlclose(handle);
       continue;
@@ -91,6 +91,10 @@ Heightfield read_gdal_raster(const std::string& path) {
 
 void write_geotiff(const std::string& path, const Heightfield& h) {
   gdal_module::api().write_geotiff(path, h);
+}
+
+std::unique_ptr<RasterWindows> open_gdal_raster(const std::string& path) {
+  return gdal_module::api().open_raster(path);
 }
 
 }  // namespace smr

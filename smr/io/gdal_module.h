@@ -10,13 +10,14 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 
 #include "smr/core/heightfield.h"
 
 namespace smr::gdal_module {
 
-inline constexpr std::uint32_t kAbi = 1;
+inline constexpr std::uint32_t kAbi = 2;
 inline constexpr const char* kSymbol = "smrdb_gdal_module";
 inline constexpr const char* kFileName = "libsmrdb_gdal.so";
 
@@ -24,6 +25,7 @@ struct Api {
   std::uint32_t abi = kAbi;
   Heightfield (*read_raster)(const std::string& path) = nullptr;
   void (*write_geotiff)(const std::string& path, const Heightfield& h) = nullptr;
+  std::unique_ptr<RasterWindows> (*open_raster)(const std::string& path) = nullptr;
 };
 
 /// The loaded module (loaded on first call; thread-safe). Looks, in order, at $SMRDB_GDAL_MODULE,

@@ -15,6 +15,7 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <memory>
 #include <mutex>
 #include <new>
 
@@ -82,122 +83,161 @@ void check_readable_file(const std::string& path) {
 
 constexpr double kNoData = -3.4028234663852886e+38;  // lowest float32
 
+// A raster opened once and read by windows (RasterWindows); read_raster reads one window, the
+// whole raster.
+class GdalWindows final : public RasterWindows {
+ public:
+  explicit GdalWindows(const std::string& path) : path_(path) {
+    check_readable_file(path);
+    ensure_registered();
+    GdalErrors errors;
+    ds_.reset(
+        GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR));
+    if (!ds_) {
+      throw_input("'" + path + "' is not a raster GDAL can read; expected a single-band DEM" +
+                  errors.suffix());
+    }
+    width_ = ds_->GetRasterXSize();
+    height_ = ds_->GetRasterYSize();
+    const int bands = ds_->GetRasterCount();
+    if (bands != 1) {
+      throw_input("'" + path + "' has " + std::to_string(bands) +
+                  " bands; expected exactly one elevation band");
+    }
+    if (width_ <= 0 || height_ <= 0) {
+      throw_input("'" + path + "' is empty (" + std::to_string(width_) + " x " +
+                  std::to_string(height_) + " pixels); expected at least one pixel");
+    }
+    band_ = ds_->GetRasterBand(1);
+    if (band_ == nullptr)
+      throw_input("'" + path + "': GDAL cannot access band 1" + errors.suffix());
+    if (GDALDataTypeIsComplex(band_->GetRasterDataType())) {
+      throw_input("'" + path + "' band 1 has the complex type " +
+                  GDALGetDataTypeName(band_->GetRasterDataType()) + "; expected real elevations");
+    }
+    // Georeferencing.
+    double gt[6] = {0, 1, 0, 0, 0, -1};
+    if (ds_->GetGeoTransform(gt) == CE_None) {
+      for (double v : gt) {
+        if (!std::isfinite(v)) throw_input("'" + path + "' has a non-finite geotransform");
+      }
+      if (gt[2] != 0.0 || gt[4] != 0.0) {
+        throw_input("'" + path + "' has a rotated or sheared geotransform (row rotation " +
+                    std::to_string(gt[2]) + ", column rotation " + std::to_string(gt[4]) +
+                    "); expected a north-up grid (warp it first, e.g. with gdalwarp)");
+      }
+      if (!(gt[1] > 0.0)) {
+        throw_input("'" + path + "' has pixel width " + std::to_string(gt[1]) +
+                    "; expected columns running west to east (a positive pixel width)");
+      }
+      if (gt[5] == 0.0) throw_input("'" + path + "' has a zero pixel height in its geotransform");
+      north_up_ = gt[5] < 0.0;
+      georef_.dx = gt[1];
+      georef_.x0 = gt[0] + 0.5 * gt[1];
+      georef_.dy = std::fabs(gt[5]);
+      // Centre of the southern line: the last line when north-up, the first otherwise.
+      georef_.y0 =
+          north_up_ ? gt[3] + (static_cast<double>(height_) - 0.5) * gt[5] : gt[3] + 0.5 * gt[5];
+    } else {
+      CPLErrorReset();  // a missing geotransform is not an error: unit pixels, north-up image
+    }
+    if (const char* wkt = ds_->GetProjectionRef(); wkt != nullptr && *wkt != '\0') {
+      georef_.crs_wkt = wkt;
+    }
+    if (const OGRSpatialReference* srs = ds_->GetSpatialRef(); srs != nullptr) {
+      georef_.geographic = srs->IsGeographic() != 0;
+    }
+    masked_ = (band_->GetMaskFlags() & GMF_ALL_VALID) == 0;
+    int has_scale = 0, has_offset = 0;
+    scale_ = band_->GetScale(&has_scale);
+    offset_ = band_->GetOffset(&has_offset);
+    if (!has_scale) scale_ = 1.0;
+    if (!has_offset) offset_ = 0.0;
+  }
+
+  int width() const override { return width_; }
+  int height() const override { return height_; }
+  const Georef& georef() const override { return georef_; }
+  const std::string& source() const override { return path_; }
+
+  Heightfield read(int col0, int row0, int w, int h) const override {
+    if (col0 < 0 || row0 < 0 || w <= 0 || h <= 0 || col0 + w > width_ || row0 + h > height_) {
+      throw_internal("'" + path_ + "': window outside the raster");
+    }
+    GdalErrors errors;
+    Heightfield out;
+    out.width = w;
+    out.height = h;
+    out.source = path_;
+    out.georef = georef_;
+    out.georef.x0 += col0 * georef_.dx;
+    out.georef.y0 += row0 * georef_.dy;
+    // File lines of the window, the first one first.
+    const int line0 = north_up_ ? height_ - row0 - h : row0;
+    const std::size_t n = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
+    try {
+      out.z.resize(n);
+      if (masked_) out.valid.resize(n);
+    } catch (const std::bad_alloc&) {
+      throw_input("'" + path_ + "' is too large to read into memory (" + std::to_string(w) + " x " +
+                  std::to_string(h) + " samples)");
+    }
+    if (band_->RasterIO(GF_Read, col0, line0, w, h, out.z.data(), w, h, GDT_Float32, 0, 0,
+                        nullptr) != CE_None) {
+      throw_input("cannot read band 1 of '" + path_ + "'" + errors.suffix());
+    }
+    if (masked_) {
+      GDALRasterBand* mask = band_->GetMaskBand();
+      if (mask == nullptr || mask->RasterIO(GF_Read, col0, line0, w, h, out.valid.data(), w, h,
+                                            GDT_Byte, 0, 0, nullptr) != CE_None) {
+        throw_input("cannot read the no-data mask of band 1 of '" + path_ + "'" + errors.suffix());
+      }
+    }
+    const bool rescale = scale_ != 1.0 || offset_ != 0.0;
+    std::size_t valid_count = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (masked_ && out.valid[i] == 0) {
+        out.z[i] = 0.0f;  // no data: a finite placeholder
+        continue;
+      }
+      if (masked_) out.valid[i] = 1;  // GDAL masks use 255
+      ++valid_count;
+      if (rescale) out.z[i] = static_cast<float>(out.z[i] * scale_ + offset_);
+      if (!std::isfinite(out.z[i])) {
+        throw_input("'" + path_ + "' band 1 has " +
+                    (std::isnan(out.z[i]) ? "NaN" : "an infinite value") + " at pixel (col " +
+                    std::to_string(col0 + int(i % static_cast<std::size_t>(w))) + ", line " +
+                    std::to_string(line0 + int(i / static_cast<std::size_t>(w))) +
+                    ") that is not marked as no data; expected finite elevations (set a nodata "
+                    "value, e.g. gdal_edit.py -a_nodata nan)");
+      }
+    }
+    if (valid_count == n) out.valid.clear();
+    if (north_up_) flip_rows(out.z, out.valid, w, h);
+    return out;
+  }
+
+ private:
+  std::string path_;
+  GDALDatasetUniquePtr ds_;
+  GDALRasterBand* band_ = nullptr;
+  int width_ = 0, height_ = 0;
+  Georef georef_;
+  bool north_up_ = true, masked_ = false;
+  double scale_ = 1.0, offset_ = 0.0;
+};
+
+std::unique_ptr<RasterWindows> open_raster(const std::string& path) {
+  return std::make_unique<GdalWindows>(path);
+}
+
 Heightfield read_raster(const std::string& path) {
-  check_readable_file(path);
-  ensure_registered();
-  GdalErrors errors;
-  GDALDatasetUniquePtr ds(
-      GDALDataset::Open(path.c_str(), GDAL_OF_RASTER | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR));
-  if (!ds) {
-    throw_input("'" + path + "' is not a raster GDAL can read; expected a single-band DEM" +
-                errors.suffix());
-  }
-  const int width = ds->GetRasterXSize(), height = ds->GetRasterYSize();
-  const int bands = ds->GetRasterCount();
-  if (bands != 1) {
-    throw_input("'" + path + "' has " + std::to_string(bands) +
-                " bands; expected exactly one elevation band");
-  }
-  if (width <= 0 || height <= 0) {
-    throw_input("'" + path + "' is empty (" + std::to_string(width) + " x " +
-                std::to_string(height) + " pixels); expected at least one pixel");
-  }
-  GDALRasterBand* band = ds->GetRasterBand(1);
-  if (band == nullptr) throw_input("'" + path + "': GDAL cannot access band 1" + errors.suffix());
-  if (GDALDataTypeIsComplex(band->GetRasterDataType())) {
-    throw_input("'" + path + "' band 1 has the complex type " +
-                GDALGetDataTypeName(band->GetRasterDataType()) + "; expected real elevations");
-  }
-
-  Heightfield h;
-  h.width = width;
-  h.height = height;
-  h.source = path;
-
-  // Georeferencing.
-  double gt[6] = {0, 1, 0, 0, 0, -1};
-  bool north_up = true;
-  if (ds->GetGeoTransform(gt) == CE_None) {
-    for (double v : gt) {
-      if (!std::isfinite(v)) throw_input("'" + path + "' has a non-finite geotransform");
-    }
-    if (gt[2] != 0.0 || gt[4] != 0.0) {
-      throw_input("'" + path + "' has a rotated or sheared geotransform (row rotation " +
-                  std::to_string(gt[2]) + ", column rotation " + std::to_string(gt[4]) +
-                  "); expected a north-up grid (warp it first, e.g. with gdalwarp)");
-    }
-    if (!(gt[1] > 0.0)) {
-      throw_input("'" + path + "' has pixel width " + std::to_string(gt[1]) +
-                  "; expected columns running west to east (a positive pixel width)");
-    }
-    if (gt[5] == 0.0) throw_input("'" + path + "' has a zero pixel height in its geotransform");
-    north_up = gt[5] < 0.0;
-    h.georef.dx = gt[1];
-    h.georef.x0 = gt[0] + 0.5 * gt[1];
-    h.georef.dy = std::fabs(gt[5]);
-    // Centre of the southern line: the last line when north-up, the first otherwise.
-    h.georef.y0 =
-        north_up ? gt[3] + (static_cast<double>(height) - 0.5) * gt[5] : gt[3] + 0.5 * gt[5];
-  } else {
-    CPLErrorReset();  // a missing geotransform is not an error: unit pixels, north-up image
-  }
-  if (const char* wkt = ds->GetProjectionRef(); wkt != nullptr && *wkt != '\0') {
-    h.georef.crs_wkt = wkt;
-  }
-  if (const OGRSpatialReference* srs = ds->GetSpatialRef(); srs != nullptr) {
-    h.georef.geographic = srs->IsGeographic() != 0;
-  }
-
-  // Samples and mask, in file order (line 0 first).
-  const std::size_t n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
-  try {
-    h.z.resize(n);
-  } catch (const std::bad_alloc&) {
-    throw_input("'" + path + "' is too large to read into memory (" + std::to_string(width) +
-                " x " + std::to_string(height) + " samples)");
-  }
-  if (band->RasterIO(GF_Read, 0, 0, width, height, h.z.data(), width, height, GDT_Float32, 0, 0,
-                     nullptr) != CE_None) {
-    throw_input("cannot read band 1 of '" + path + "'" + errors.suffix());
-  }
-  const int mask_flags = band->GetMaskFlags();
-  if ((mask_flags & GMF_ALL_VALID) == 0) {
-    GDALRasterBand* mask = band->GetMaskBand();
-    h.valid.resize(n);
-    if (mask == nullptr || mask->RasterIO(GF_Read, 0, 0, width, height, h.valid.data(), width,
-                                          height, GDT_Byte, 0, 0, nullptr) != CE_None) {
-      throw_input("cannot read the no-data mask of band 1 of '" + path + "'" + errors.suffix());
-    }
-  }
-  int has_scale = 0, has_offset = 0;
-  double scale = band->GetScale(&has_scale), offset = band->GetOffset(&has_offset);
-  if (!has_scale) scale = 1.0;
-  if (!has_offset) offset = 0.0;
-  const bool rescale = scale != 1.0 || offset != 0.0;
-
-  std::size_t valid_count = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!h.valid.empty() && h.valid[i] == 0) {
-      h.z[i] = 0.0f;  // no data: a finite placeholder
-      continue;
-    }
-    if (!h.valid.empty()) h.valid[i] = 1;  // GDAL masks use 255
-    ++valid_count;
-    if (rescale) h.z[i] = static_cast<float>(h.z[i] * scale + offset);
-    if (!std::isfinite(h.z[i])) {
-      throw_input("'" + path + "' band 1 has " +
-                  (std::isnan(h.z[i]) ? "NaN" : "an infinite value") + " at pixel (col " +
-                  std::to_string(i % static_cast<std::size_t>(width)) + ", line " +
-                  std::to_string(i / static_cast<std::size_t>(width)) +
-                  ") that is not marked as no data; expected finite elevations (set a nodata "
-                  "value, e.g. gdal_edit.py -a_nodata nan)");
-    }
-  }
-  if (valid_count == 0) {
+  const GdalWindows r(path);
+  Heightfield h = r.read(0, 0, r.width(), r.height());
+  if (h.has_nodata() &&
+      std::none_of(h.valid.begin(), h.valid.end(), [](std::uint8_t v) { return v != 0; })) {
     throw_input("'" + path + "' band 1 has no data at all: every sample is masked as no data");
   }
-  if (valid_count == n) h.valid.clear();
-  if (north_up) flip_rows(h.z, h.valid, width, height);
   return h;
 }
 
@@ -290,6 +330,6 @@ void write_tiff(const std::string& path, const Heightfield& h) {
 
 extern "C" __attribute__((visibility("default"))) const smr::gdal_module::Api* smrdb_gdal_module() {
   static const smr::gdal_module::Api api{smr::gdal_module::kAbi, &smr::read_raster,
-                                         &smr::write_tiff};
+                                         &smr::write_tiff, &smr::open_raster};
   return &api;
 }

@@ -1,0 +1,962 @@
+// Hierarchical block decimation into a CRMR; block_tin.h describes the method.
+//
+// Geometry is exact where it decides topology: vertices sit on integer grid positions, so the
+// orientation and in-circle tests of the hole re-triangulation are evaluated exactly in 64- and
+// 128-bit integers. Errors are doubles, rounded outward by the DEM's exact tolerance.
+#include "smr/build/block_tin.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include "smr/build/greedy_tin.h"
+#include "storage/error.h"
+
+namespace smr {
+namespace {
+
+constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
+constexpr double kInfeasible = std::numeric_limits<double>::infinity();
+
+struct MVert {
+  std::int32_t col = 0, row = 0;
+  float z = 0.0f;
+  std::uint32_t tri = kNone;  // a live triangle having this vertex
+  bool sticky = false;        // a corner of a void triangle: never removed
+};
+
+/// One-sided bounds of the source against a triangle's plane: source - plane <= up and
+/// plane - source <= down over the triangle; zlo <= source <= zhi there. Signed bounds combine
+/// across an overlay much more tightly than |source - plane|: the largest plane difference in
+/// one direction adds to one side only.
+struct TriBound {
+  double up = 0.0, down = 0.0;
+  float zlo = 0.0f, zhi = 0.0f;
+  double err() const { return std::max(up, down); }
+};
+
+struct MTri {
+  std::array<std::uint32_t, 3> v{};                       // counter-clockwise in grid space
+  std::array<std::uint32_t, 3> nbr{kNone, kNone, kNone};  // across edge k = (v[k], v[k+1])
+  TriBound bound;                   // of the source against the triangle's plane
+  std::uint32_t creator = kNone;    // removal whose hole it fills; kNone = M^m
+  std::uint32_t destroyer = kNone;  // removal whose star it is in; kNone = alive
+  bool is_void = false;
+};
+
+struct Removal {
+  std::uint32_t vertex = 0;
+  std::uint32_t star_begin = 0, star_end = 0;  // into Builder::star_ids_, counter-clockwise
+  std::uint32_t new_begin = 0, new_end = 0;    // triangle ids (consecutive)
+  double err = 0.0;                            // the largest error of the hole's triangles
+};
+
+std::int64_t orient(const MVert& a, const MVert& b, const MVert& c) {
+  return std::int64_t(b.col - a.col) * (c.row - a.row) -
+         std::int64_t(b.row - a.row) * (c.col - a.col);
+}
+
+__extension__ using Int128 = __int128;  // exact in-circle on grid coordinates up to 2^30
+
+/// > 0 iff d lies strictly inside the circle through the counter-clockwise a, b, c.
+bool in_circle(const MVert& a, const MVert& b, const MVert& c, const MVert& d) {
+  const Int128 adx = a.col - d.col, ady = a.row - d.row, bdx = b.col - d.col, bdy = b.row - d.row,
+               cdx = c.col - d.col, cdy = c.row - d.row;
+  const Int128 det = (adx * adx + ady * ady) * (bdx * cdy - cdx * bdy) +
+                     (bdx * bdx + bdy * bdy) * (cdx * ady - adx * cdy) +
+                     (cdx * cdx + cdy * cdy) * (adx * bdy - bdx * ady);
+  return det > 0;
+}
+
+/// z = a * col + b * row + c through three grid points.
+struct Plane {
+  double a = 0.0, b = 0.0, c = 0.0;
+  Plane(const MVert& p, const MVert& q, const MVert& r) {
+    const double x1 = q.col - p.col, y1 = q.row - p.row, x2 = r.col - p.col, y2 = r.row - p.row;
+    const double z1 = double(q.z) - p.z, z2 = double(r.z) - p.z;
+    const double det = x1 * y2 - x2 * y1;
+    a = (z1 * y2 - z2 * y1) / det;
+    b = (z2 * x1 - z1 * x2) / det;
+    c = double(p.z) - a * p.col - b * p.row;
+  }
+  double at(double col, double row) const { return a * col + b * row + c; }
+};
+
+/// The vertices of 1-D line samples z[0..n) kept so that linear interpolation between kept
+/// neighbours is within `tol` of every sample (Douglas-Peucker with vertical error), plus every
+/// no-data sample and its neighbours. Deterministic in the samples alone, so the two blocks that
+/// share a border line keep the same vertices.
+std::vector<int> simplify_line(const std::vector<float>& z, const std::vector<std::uint8_t>& valid,
+                               double tol) {
+  const int n = static_cast<int>(z.size());
+  std::vector<std::uint8_t> keep(n, 0);
+  keep[0] = keep[n - 1] = 1;
+  if (!valid.empty()) {
+    for (int i = 0; i < n; ++i) {
+      if (valid[i] != 0) continue;
+      for (int j = std::max(0, i - 1); j <= std::min(n - 1, i + 1); ++j) keep[j] = 1;
+    }
+  }
+  std::vector<std::pair<int, int>> todo;
+  int prev = 0;
+  for (int i = 1; i < n; ++i) {
+    if (keep[i]) {
+      if (i - prev > 1) todo.push_back({prev, i});
+      prev = i;
+    }
+  }
+  while (!todo.empty()) {
+    auto [lo, hi] = todo.back();
+    todo.pop_back();
+    double worst = tol;
+    int at = -1;
+    for (int i = lo + 1; i < hi; ++i) {
+      const double t = double(i - lo) / double(hi - lo);
+      const double e = std::abs(double(z[i]) - (double(z[lo]) + t * (double(z[hi]) - z[lo])));
+      if (e > worst) {
+        worst = e;
+        at = i;
+      }
+    }
+    if (at < 0) continue;
+    keep[at] = 1;
+    if (at - lo > 1) todo.push_back({lo, at});
+    if (hi - at > 1) todo.push_back({at, hi});
+  }
+  std::vector<int> out;
+  for (int i = 0; i < n; ++i) {
+    if (keep[i]) out.push_back(i);
+  }
+  return out;
+}
+
+class Builder {
+ public:
+  Builder(const RasterWindows& dem, const BlockTinOptions& opt, BlockTinStats& stats)
+      : dem_(dem), opt_(opt), stats_(stats), W_(dem.width()), H_(dem.height()) {
+    if (W_ < 2 || H_ < 2) {
+      throw_input(dem.source() + ": a DEM needs at least 2x2 samples, got " + std::to_string(W_) +
+                  "x" + std::to_string(H_));
+    }
+    if (opt.block_cells < 8 || (opt.block_cells & (opt.block_cells - 1)) != 0) {
+      throw_input("block size " + std::to_string(opt.block_cells) +
+                  " cells: expected a power of two, at least 8");
+    }
+    if (opt.max_degree < 3) throw_input("max_degree must be at least 3");
+    if (!(opt.max_error >= 0.0) || !std::isfinite(opt.max_error)) {
+      throw_input("max_error must be a finite number >= 0");
+    }
+    B_ = opt.block_cells;
+    bw_ = (W_ - 2) / B_ + 1;
+    bh_ = (H_ - 2) / B_ + 1;
+    int span = 1;
+    levels_ = 0;
+    while (span < std::max(bw_, bh_)) {
+      span *= 2;
+      ++levels_;
+    }
+  }
+
+  Crmr run() {
+    survey();
+    for (int by = 0; by < bh_; ++by) {
+      for (int bx = 0; bx < bw_; ++bx) {
+        leaf_block(bx, by);
+        report(0.7 * double(by * bw_ + bx + 1) / double(bw_ * bh_));
+      }
+    }
+    finest_vertices_ = verts_.size();
+    for (int level = 1; level <= levels_; ++level) {
+      upper_level(level);
+      report(0.7 + 0.2 * double(level) / double(std::max(1, levels_)));
+    }
+    return assemble();
+  }
+
+ private:
+  // ---- the survey: global tolerance and range, read one block at a time ----
+  void survey() {
+    float zmin = std::numeric_limits<float>::infinity(), zmax = -zmin, zabs = 0.0f;
+    std::uint64_t valid = 0;
+    for (int by = 0; by < bh_; ++by) {
+      for (int bx = 0; bx < bw_; ++bx) {
+        const Heightfield w = window(bx, by);
+        for (std::size_t i = 0; i < w.z.size(); ++i) {
+          if (!w.valid.empty() && w.valid[i] == 0) continue;
+          zmin = std::min(zmin, w.z[i]);
+          zmax = std::max(zmax, w.z[i]);
+          zabs = std::max(zabs, std::abs(w.z[i]));
+          ++valid;
+        }
+      }
+    }
+    if (valid == 0) throw_input(dem_.source() + ": every sample is no data");
+    tol_ = 1e-9 * std::max(1.0, double(zabs));  // exact_tolerance of the whole DEM
+    range_ = double(zmax) - double(zmin);
+    stop_error_ = std::max(opt_.max_error, tol_);
+    // Levels' tolerances grow 4x per level from here (a block's mesh keeps its size as blocks
+    // merge 2x2 when the vertex density falls with the error); one stage per factor sqrt(2).
+    eps0_ = std::max({stop_error_, range_ * std::ldexp(1.0, -14), tol_});
+  }
+
+  int block_col0(int bx) const { return bx * B_; }
+  int block_col1(int bx) const { return std::min(bx * B_ + B_, W_ - 1); }
+  int block_row0(int by) const { return by * B_; }
+  int block_row1(int by) const { return std::min(by * B_ + B_, H_ - 1); }
+  Heightfield window(int bx, int by) const {
+    const int c0 = block_col0(bx), r0 = block_row0(by);
+    Heightfield w = dem_.read(c0, r0, block_col1(bx) - c0 + 1, block_row1(by) - r0 + 1);
+    stats_.max_block_samples = std::max<std::uint64_t>(stats_.max_block_samples, w.z.size());
+    return w;
+  }
+
+  // ---- phase 1: a leaf block's greedy TIN, then its level-0 decimation with exact errors ----
+  void leaf_block(int bx, int by) {
+    const Heightfield w = window(bx, by);
+    ++stats_.leaf_blocks;
+    stats_.samples += w.z.size();
+    const int c0 = block_col0(bx), r0 = block_row0(by);
+    const int ww = w.width, wh = w.height;
+    const double line_tol = stop_error_ * 0.999;  // below the 2-D test, whatever its rounding
+    GreedyTinOptions g;
+    g.max_error = opt_.max_error;
+    g.tolerance = tol_;
+    g.allow_no_data_only = true;
+    auto border = [&](bool horizontal, int fixed) {
+      const int n = horizontal ? ww : wh;
+      std::vector<float> z(n);
+      std::vector<std::uint8_t> valid;
+      if (w.has_nodata()) valid.resize(n);
+      for (int i = 0; i < n; ++i) {
+        const int c = horizontal ? i : fixed, r = horizontal ? fixed : i;
+        z[i] = w.at(c, r);
+        if (w.has_nodata()) valid[i] = w.has_data(c, r) ? 1 : 0;
+      }
+      for (int i : simplify_line(z, valid, line_tol)) {
+        g.initial_vertices.push_back(horizontal
+                                         ? std::pair(std::uint32_t(i), std::uint32_t(fixed))
+                                         : std::pair(std::uint32_t(fixed), std::uint32_t(i)));
+      }
+    };
+    border(true, 0);
+    border(true, wh - 1);
+    border(false, 0);
+    border(false, ww - 1);
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> prescribed = g.initial_vertices;
+    std::sort(prescribed.begin(), prescribed.end());
+    prescribed.erase(std::unique(prescribed.begin(), prescribed.end()), prescribed.end());
+
+    const Crmr tin = build_greedy_tin(w, g);
+
+    // The final triangles, into the global mesh.
+    const std::uint32_t first_tri = static_cast<std::uint32_t>(tris_.size());
+    std::vector<std::uint32_t> block_verts;
+    std::unordered_map<std::uint64_t, std::uint32_t> local;  // greedy vertex id -> ours
+    for (const Op& op : tin.ops) {
+      for (const FragmentTriangle& t : op.fragment) {
+        if (t.killer.valid()) continue;
+        MTri m;
+        for (int k = 0; k < 3; ++k) {
+          const Vertex& gv = op.vertices[t.v[k]];
+          auto [it, fresh] = local.try_emplace(gv.id.value, kNone);
+          if (fresh) {
+            const int col = static_cast<int>(std::lround((gv.p.x - w.georef.x0) / w.georef.dx));
+            const int row = static_cast<int>(std::lround((gv.p.y - w.georef.y0) / w.georef.dy));
+            const bool on_border = col == 0 || row == 0 || col == ww - 1 || row == wh - 1;
+            if (on_border &&
+                !std::binary_search(prescribed.begin(), prescribed.end(),
+                                    std::pair(std::uint32_t(col), std::uint32_t(row)))) {
+              throw_internal(dem_.source() + ": block (" + std::to_string(bx) + ", " +
+                             std::to_string(by) + ") put a vertex on its border at (" +
+                             std::to_string(c0 + col) + ", " + std::to_string(r0 + row) +
+                             ") that its neighbour does not have");
+            }
+            it->second = global_vertex(c0 + col, r0 + row, static_cast<float>(gv.p.z));
+            block_verts.push_back(it->second);
+          }
+          m.v[k] = it->second;
+        }
+        m.is_void = t.is_void();
+        tris_.push_back(m);
+      }
+    }
+    // Adjacency: within the block, and across its borders to earlier blocks.
+    for (std::uint32_t t = first_tri; t < tris_.size(); ++t) {
+      MTri& m = tris_[t];
+      for (int k = 0; k < 3; ++k) {
+        verts_[m.v[k]].tri = t;
+        if (m.is_void) verts_[m.v[k]].sticky = true;
+        const std::uint64_t back = edge_key(m.v[(k + 1) % 3], m.v[k]);
+        auto it = open_edges_.find(back);
+        if (it != open_edges_.end()) {
+          const std::uint32_t other = it->second >> 2, oe = it->second & 3;
+          m.nbr[k] = other;
+          tris_[other].nbr[oe] = t;
+          open_edges_.erase(it);
+        } else if (!boundary_edge(verts_[m.v[k]], verts_[m.v[(k + 1) % 3]])) {
+          open_edges_.emplace(edge_key(m.v[k], m.v[(k + 1) % 3]), (t << 2) | std::uint32_t(k));
+        }
+      }
+    }
+    // Exact errors of M^m from the window's samples; then level 0 inside the block.
+    for (std::uint32_t t = first_tri; t < tris_.size(); ++t) {
+      if (tris_[t].is_void) continue;
+      TriBound& b = tris_[t].bound;
+      b = exact_bound(tris_[t].v, w, c0, r0, false);
+      if (b.err() > stop_error_ + tol_) {
+        throw_internal(dem_.source() + ": a greedy TIN triangle exceeds the error it was built to");
+      }
+      b.up = std::min(b.up, stop_error_);  // within float rounding of the greedy's own test
+      b.down = std::min(b.down, stop_error_);
+      err_final_ = std::max(err_final_, b.err());
+    }
+    finest_triangles_ += tris_.size() - first_tri;
+    decimate_level(0, &w, c0, r0, &block_verts);
+    // Edges on the block's outer border wait for the neighbour; edges that became internal
+    // in the decimation were removed from open_edges_ as their triangles died.
+  }
+
+  std::uint32_t global_vertex(int col, int row, float z) {
+    const std::uint64_t key = std::uint64_t(row) * std::uint64_t(W_) + std::uint64_t(col);
+    const bool on_block_border =
+        (col % B_ == 0) || (row % B_ == 0) || col == W_ - 1 || row == H_ - 1;
+    if (on_block_border) {
+      auto [it, fresh] = shared_.try_emplace(key, static_cast<std::uint32_t>(verts_.size()));
+      if (!fresh) return it->second;
+    }
+    MVert v;
+    v.col = col;
+    v.row = row;
+    v.z = z;
+    verts_.push_back(v);
+    return static_cast<std::uint32_t>(verts_.size() - 1);
+  }
+
+  static std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
+    return (std::uint64_t(a) << 32) | b;
+  }
+
+  /// The bound of the samples in the closed triangle (window coordinates) against its plane;
+  /// up = kInfeasible when it covers a no-data sample. With `outward`, rounded up by the exact
+  /// tolerance (a bound on new triangles).
+  TriBound exact_bound(const std::array<std::uint32_t, 3>& v, const Heightfield& w, int c0, int r0,
+                       bool outward) const {
+    const MVert &a = verts_[v[0]], &b = verts_[v[1]], &c = verts_[v[2]];
+    const Plane pl(a, b, c);
+    const int xmin = std::min({a.col, b.col, c.col}), xmax = std::max({a.col, b.col, c.col});
+    const int ymin = std::min({a.row, b.row, c.row}), ymax = std::max({a.row, b.row, c.row});
+    TriBound tb;
+    tb.zlo = std::min({a.z, b.z, c.z});
+    tb.zhi = std::max({a.z, b.z, c.z});
+    for (int row = ymin; row <= ymax; ++row) {
+      for (int col = xmin; col <= xmax; ++col) {
+        MVert p;
+        p.col = col;
+        p.row = row;
+        if (orient(a, b, p) < 0 || orient(b, c, p) < 0 || orient(c, a, p) < 0) continue;
+        const int wc = col - c0, wr = row - r0;
+        if (!w.has_data(wc, wr)) {
+          tb.up = kInfeasible;
+          return tb;
+        }
+        const float z = w.at(wc, wr);
+        tb.zlo = std::min(tb.zlo, z);
+        tb.zhi = std::max(tb.zhi, z);
+        const double d = double(z) - pl.at(col, row);
+        tb.up = std::max(tb.up, d);
+        tb.down = std::max(tb.down, -d);
+      }
+    }
+    if (outward) {
+      tb.up = tb.up <= tol_ ? 0.0 : tb.up + tol_;
+      tb.down = tb.down <= tol_ ? 0.0 : tb.down + tol_;
+    }
+    return tb;
+  }
+
+  // ---- locks ----
+  bool is_corner(const MVert& v) const {
+    return (v.col == 0 || v.col == W_ - 1) && (v.row == 0 || v.row == H_ - 1);
+  }
+  /// Locked at `level`: on the border line of a level-`level` block (the domain's own boundary
+  /// is not a block border: its vertices are removed along it).
+  bool locked(const MVert& v, int level) const {
+    if (v.sticky || is_corner(v)) return true;
+    if (level >= levels_) return false;
+    const int span = B_ << level;
+    return (v.col % span == 0 && v.col > 0 && v.col < W_ - 1) ||
+           (v.row % span == 0 && v.row > 0 && v.row < H_ - 1);
+  }
+  bool on_domain_boundary(const MVert& v) const {
+    return v.col == 0 || v.row == 0 || v.col == W_ - 1 || v.row == H_ - 1;
+  }
+
+  // ---- one removal ----
+  struct Plan {
+    std::vector<std::uint32_t> star;  // triangles, counter-clockwise around the vertex
+    std::vector<std::uint32_t> poly;  // the hole's boundary, counter-clockwise
+    bool open = false;                // the vertex is on the domain boundary
+    std::vector<std::array<std::uint32_t, 3>> tris;  // the hole's new triangles (vertex ids)
+    std::vector<TriBound> bounds;                    // of each new triangle
+    double err = kInfeasible;
+    bool delaunay = true;
+  };
+
+  static int index_of(const MTri& t, std::uint32_t v) {
+    for (int k = 0; k < 3; ++k) {
+      if (t.v[k] == v) return k;
+    }
+    return -1;
+  }
+
+  /// The star and hole polygon of `v`; false if it cannot be removed (degree too high).
+  bool gather(std::uint32_t v, Plan& p) const {
+    p.star.clear();
+    p.poly.clear();
+    std::uint32_t t = verts_[v].tri, start = t;
+    // Clockwise to the first triangle of an open fan (or all the way round).
+    std::uint32_t steps = 0;
+    for (;;) {
+      const int i = index_of(tris_[t], v);
+      const std::uint32_t prev = tris_[t].nbr[i];  // across (v, a): the triangle before
+      if (prev == kNone) {
+        start = t;
+        p.open = true;
+        break;
+      }
+      t = prev;
+      if (t == start) {
+        p.open = false;
+        break;
+      }
+      if (++steps > opt_.max_degree + 1) return false;
+    }
+    t = start;
+    for (;;) {
+      const MTri& m = tris_[t];
+      const int i = index_of(m, v);
+      p.star.push_back(t);
+      p.poly.push_back(m.v[(i + 1) % 3]);
+      if (p.star.size() > opt_.max_degree) return false;
+      const std::uint32_t next = m.nbr[(i + 2) % 3];  // across (b, v)
+      if (next == kNone) {
+        p.poly.push_back(m.v[(i + 2) % 3]);
+        break;
+      }
+      if (next == start) break;
+      t = next;
+    }
+    return p.poly.size() <= opt_.max_degree && p.poly.size() >= 3;
+  }
+
+  /// Delaunay ears over the hole polygon; false if no triangulation was found.
+  bool triangulate(Plan& p) const {
+    p.tris.clear();
+    p.delaunay = true;
+    std::vector<std::uint32_t> poly = p.poly;
+    while (poly.size() > 3) {
+      const std::size_t n = poly.size();
+      std::size_t ear = n, plain = n;
+      for (std::size_t i = 0; i < n && ear == n; ++i) {
+        const MVert &a = verts_[poly[(i + n - 1) % n]], &b = verts_[poly[i]],
+                    &c = verts_[poly[(i + 1) % n]];
+        if (orient(a, b, c) <= 0) continue;
+        bool empty = true, circle = true;
+        for (std::size_t j = 0; j < n && empty; ++j) {
+          if (j == i || j == (i + 1) % n || j == (i + n - 1) % n) continue;
+          const MVert& d = verts_[poly[j]];
+          if (orient(a, b, d) >= 0 && orient(b, c, d) >= 0 && orient(c, a, d) >= 0) empty = false;
+          if (circle && in_circle(a, b, c, d)) circle = false;
+        }
+        if (!empty) continue;
+        if (circle) ear = i;
+        if (plain == n) plain = i;
+      }
+      if (ear == n) {
+        if (plain == n) return false;
+        ear = plain;
+        p.delaunay = false;
+      }
+      p.tris.push_back({poly[(ear + n - 1) % n], poly[ear], poly[(ear + 1) % n]});
+      poly.erase(poly.begin() + static_cast<std::ptrdiff_t>(ear));
+    }
+    if (orient(verts_[poly[0]], verts_[poly[1]], verts_[poly[2]]) <= 0) return false;
+    p.tris.push_back({poly[0], poly[1], poly[2]});
+    return true;
+  }
+
+  /// Conservative bound of new triangle `nt` over the old star: for every old triangle o it
+  /// overlaps, source - new = (source - o) + (o - new), so up <= o.up + the largest o - new over
+  /// the overlap (at its corners: both planes are linear there), and likewise down; and never
+  /// more than the source's range allows: the plane lies between its corners' heights and the
+  /// source between the overlapped triangles' zlo and zhi.
+  TriBound overlay_bound(const std::array<std::uint32_t, 3>& nt, const Plan& p) const {
+    const MVert &a = verts_[nt[0]], &b = verts_[nt[1]], &c = verts_[nt[2]];
+    const Plane pn(a, b, c);
+    TriBound tb;
+    const float vlo = std::min({a.z, b.z, c.z}), vhi = std::max({a.z, b.z, c.z});
+    tb.zlo = vlo;
+    tb.zhi = vhi;
+    std::vector<std::array<double, 2>>& poly = clip_a_;
+    std::vector<std::array<double, 2>>& next = clip_b_;
+    for (std::uint32_t ot : p.star) {
+      const MTri& o = tris_[ot];
+      poly = {{double(a.col), double(a.row)},
+              {double(b.col), double(b.row)},
+              {double(c.col), double(c.row)}};
+      for (int k = 0; k < 3 && !poly.empty(); ++k) {  // clip by o's edge k (keep its left side)
+        const MVert &e0 = verts_[o.v[k]], &e1 = verts_[o.v[(k + 1) % 3]];
+        const double ex = e1.col - e0.col, ey = e1.row - e0.row;
+        auto side = [&](const std::array<double, 2>& q) {
+          return ex * (q[1] - e0.row) - ey * (q[0] - e0.col);
+        };
+        next.clear();
+        for (std::size_t i = 0; i < poly.size(); ++i) {
+          const auto& q0 = poly[i];
+          const auto& q1 = poly[(i + 1) % poly.size()];
+          const double s0 = side(q0), s1 = side(q1);
+          if (s0 >= 0) next.push_back(q0);
+          if ((s0 > 0 && s1 < 0) || (s0 < 0 && s1 > 0)) {
+            const double t = s0 / (s0 - s1);
+            next.push_back({q0[0] + t * (q1[0] - q0[0]), q0[1] + t * (q1[1] - q0[1])});
+          }
+        }
+        poly.swap(next);
+      }
+      if (poly.size() < 3) continue;
+      const Plane po(verts_[o.v[0]], verts_[o.v[1]], verts_[o.v[2]]);
+      double above = 0.0, below = 0.0;  // largest o - new and new - o over the overlap
+      for (const auto& q : poly) {
+        const double d = po.at(q[0], q[1]) - pn.at(q[0], q[1]);
+        above = std::max(above, d);
+        below = std::max(below, -d);
+      }
+      tb.up = std::max(tb.up, o.bound.up + above);
+      tb.down = std::max(tb.down, o.bound.down + below);
+      tb.zlo = std::min(tb.zlo, o.bound.zlo);
+      tb.zhi = std::max(tb.zhi, o.bound.zhi);
+    }
+    tb.up = std::min(tb.up, double(tb.zhi) - double(vlo)) + tol_;
+    tb.down = std::min(tb.down, double(vhi) - double(tb.zlo)) + tol_;
+    return tb;
+  }
+
+  /// Plans the removal of `v`: its hole's triangulation and error (kInfeasible if impossible).
+  void plan(std::uint32_t v, Plan& p, const Heightfield* w, int c0, int r0) const {
+    p.err = kInfeasible;
+    if (!gather(v, p)) return;
+    for (std::uint32_t t : p.star) {
+      if (tris_[t].is_void) return;
+    }
+    if (p.open && !on_domain_boundary(verts_[v])) return;
+    if (!triangulate(p)) return;
+    p.bounds.clear();
+    double err = 0.0;
+    for (const auto& nt : p.tris) {
+      p.bounds.push_back(w != nullptr ? exact_bound(nt, *w, c0, r0, true) : overlay_bound(nt, p));
+      err = std::max(err, p.bounds.back().err());
+    }
+    p.err = err;
+  }
+
+  void apply(std::uint32_t v, const Plan& p) {
+    const auto rid = static_cast<std::uint32_t>(removals_.size());
+    Removal r;
+    r.vertex = v;
+    r.star_begin = static_cast<std::uint32_t>(star_ids_.size());
+    star_ids_.insert(star_ids_.end(), p.star.begin(), p.star.end());
+    r.star_end = static_cast<std::uint32_t>(star_ids_.size());
+    r.new_begin = static_cast<std::uint32_t>(tris_.size());
+    r.err = p.err;
+    // The outer neighbour of each hole edge (poly[j], poly[j+1]): across star triangle j's edge
+    // opposite v; the closing edge of an open fan has none.
+    std::unordered_map<std::uint64_t, std::uint32_t>& outer = scratch_outer_;
+    outer.clear();
+    for (std::uint32_t t : p.star) {
+      const MTri& m = tris_[t];
+      const int i = index_of(m, v);
+      const std::uint32_t a = m.v[(i + 1) % 3], b = m.v[(i + 2) % 3];
+      outer[edge_key(a, b)] = m.nbr[(i + 1) % 3];
+      if (m.nbr[(i + 1) % 3] == kNone) {
+        open_edges_.erase(edge_key(a, b));  // a block border edge waiting for its neighbour
+      }
+    }
+    for (std::uint32_t t : p.star) tris_[t].destroyer = rid;
+    for (std::size_t j = 0; j < p.tris.size(); ++j) {
+      MTri m;
+      m.v = p.tris[j];
+      m.bound = p.bounds[j];
+      m.creator = rid;
+      tris_.push_back(m);
+    }
+    r.new_end = static_cast<std::uint32_t>(tris_.size());
+    for (std::uint32_t t = r.new_begin; t < r.new_end; ++t) {
+      for (int k = 0; k < 3; ++k) {
+        const std::uint32_t a = tris_[t].v[k], b = tris_[t].v[(k + 1) % 3];
+        verts_[a].tri = t;
+        auto it = outer.find(edge_key(a, b));
+        if (it != outer.end()) {  // a hole edge: glue to the outside
+          const std::uint32_t o = it->second;
+          tris_[t].nbr[k] = o;
+          if (o != kNone) {
+            MTri& om = tris_[o];
+            for (int j = 0; j < 3; ++j) {
+              if (om.v[j] == b && om.v[(j + 1) % 3] == a) om.nbr[j] = t;
+            }
+          } else if (!boundary_edge(verts_[a], verts_[b])) {
+            open_edges_[edge_key(a, b)] = (t << 2) | std::uint32_t(k);
+          }
+          continue;
+        }
+        for (std::uint32_t u = r.new_begin; u < r.new_end; ++u) {  // an inner edge
+          if (u == t) continue;
+          const int j = index_of(tris_[u], b);
+          if (j >= 0 && tris_[u].v[(j + 1) % 3] == a) tris_[t].nbr[k] = u;
+        }
+      }
+    }
+    verts_[v].tri = kNone;
+    removals_.push_back(r);
+    if (!p.delaunay) ++stats_.non_delaunay_holes;
+  }
+
+  /// Both ends on the same side of the domain: an edge of the domain's boundary.
+  bool boundary_edge(const MVert& a, const MVert& b) const {
+    return (a.col == 0 && b.col == 0) || (a.row == 0 && b.row == 0) ||
+           (a.col == W_ - 1 && b.col == W_ - 1) || (a.row == H_ - 1 && b.row == H_ - 1);
+  }
+
+  // ---- decimation of one level: stages of growing tolerance, independent-set rounds ----
+  /// Level >= 1: block by block with exact bounds from each block's window while a window fits
+  /// options.exact_window_samples, else over the whole mesh with overlay bounds.
+  void upper_level(int level) {
+    const int span = B_ << level;
+    const int nx = (W_ - 2) / span + 1, ny = (H_ - 2) / span + 1;
+    const std::uint64_t window =
+        std::uint64_t(std::min(span, W_ - 1) + 1) * std::uint64_t(std::min(span, H_ - 1) + 1);
+    if (window > opt_.exact_window_samples) {
+      decimate_level(level, nullptr, 0, 0, nullptr);
+      return;
+    }
+    ++stats_.exact_levels;
+    std::vector<std::vector<std::uint32_t>> in_block(std::size_t(nx) * std::size_t(ny));
+    for (std::uint32_t v = 0; v < verts_.size(); ++v) {
+      const MVert& m = verts_[v];
+      if (m.tri == kNone || locked(m, level)) continue;
+      const int bx = std::min(m.col / span, nx - 1), by = std::min(m.row / span, ny - 1);
+      in_block[std::size_t(by) * std::size_t(nx) + std::size_t(bx)].push_back(v);
+    }
+    for (int by = 0; by < ny; ++by) {
+      for (int bx = 0; bx < nx; ++bx) {
+        const auto& vs = in_block[std::size_t(by) * std::size_t(nx) + std::size_t(bx)];
+        if (vs.empty()) continue;
+        const int c0 = bx * span, r0 = by * span;
+        const int c1 = std::min(c0 + span, W_ - 1), r1 = std::min(r0 + span, H_ - 1);
+        const Heightfield w = dem_.read(c0, r0, c1 - c0 + 1, r1 - r0 + 1);
+        stats_.max_block_samples = std::max<std::uint64_t>(stats_.max_block_samples, w.z.size());
+        stats_.samples_rescanned += w.z.size();
+        decimate_level(level, &w, c0, r0, &vs);
+      }
+    }
+  }
+
+  // With a window w (level 0, or an exact upper level) errors are exact from the block's window w,
+  // whose sample (0, 0) is grid (c0, r0), and the candidates are `only`, the block's vertices.
+  void decimate_level(int level, const Heightfield* w, int c0, int r0,
+                      const std::vector<std::uint32_t>* only) {
+    std::vector<std::uint32_t> cand;
+    if (only != nullptr) {
+      for (std::uint32_t v : *only) {
+        if (verts_[v].tri != kNone && !locked(verts_[v], level)) cand.push_back(v);
+      }
+    } else {
+      for (std::uint32_t v = 0; v < verts_.size(); ++v) {
+        if (verts_[v].tri != kNone && !locked(verts_[v], level)) cand.push_back(v);
+      }
+    }
+    std::sort(cand.begin(), cand.end());
+    cost_.resize(verts_.size());
+    dirty_.resize(verts_.size());
+    stamp_.resize(verts_.size(), 0);
+    for (std::uint32_t v : cand) dirty_[v] = 1;
+    const bool root = level >= levels_;
+    const double top = eps0_ * std::ldexp(1.0, 2 * (level + 1));
+    double eps = level == 0 ? eps0_ : eps0_ * std::ldexp(1.0, 2 * level);
+    Plan p;
+    std::vector<std::pair<double, std::uint32_t>> order;
+    std::vector<std::pair<std::uint32_t, Plan>> chosen;
+    for (;;) {
+      eps = root ? eps * std::sqrt(2.0) : std::min(top, eps * std::sqrt(2.0));
+      std::uint64_t removed_in_stage = 0;
+      double cheapest_left = kInfeasible;
+      for (;;) {  // rounds
+        order.clear();
+        cheapest_left = kInfeasible;
+        for (std::uint32_t v : cand) {
+          if (verts_[v].tri == kNone) continue;
+          if (dirty_[v]) {
+            plan(v, p, w, c0, r0);
+            cost_[v] = p.err;
+            dirty_[v] = 0;
+          }
+          if (cost_[v] <= eps) {
+            order.push_back({cost_[v], v});
+          } else {
+            cheapest_left = std::min(cheapest_left, cost_[v]);
+          }
+        }
+        if (order.empty()) break;
+        std::sort(order.begin(), order.end());
+        ++round_stamp_;
+        // An independent set, cheapest first: no two removed vertices are adjacent, so each
+        // star is untouched by the others' removals and its plan stays valid.
+        std::size_t n = 0;
+        for (const auto& [c, v] : order) {
+          if (stamp_[v] == round_stamp_) continue;
+          if (n == chosen.size()) chosen.emplace_back();
+          gather(v, chosen[n].second);
+          chosen[n++].first = v;
+          stamp_[v] = round_stamp_;
+          for (std::uint32_t u : chosen[n - 1].second.poly) stamp_[u] = round_stamp_;
+        }
+        for (std::size_t i = 0; i < n; ++i) {
+          const std::uint32_t v = chosen[i].first;
+          plan(v, p, w, c0, r0);
+          apply(v, p);
+          for (std::uint32_t u : p.poly) dirty_[u] = 1;
+        }
+        removed_in_stage += n;
+        ++stats_.rounds;
+        cand.erase(std::remove_if(cand.begin(), cand.end(),
+                                  [&](std::uint32_t v) { return verts_[v].tri == kNone; }),
+                   cand.end());
+      }
+      if (!root && eps >= top) break;
+      if (root && removed_in_stage == 0) {
+        if (cheapest_left == kInfeasible) break;
+        eps = std::max(eps, cheapest_left / std::sqrt(2.0));
+      }
+    }
+  }
+
+  // ---- the CRMR: ops in falling error, replayed coarse to fine for the links ----
+  Crmr assemble() {
+    const std::size_t m = removals_.size();
+    // err' = max(own, children's err'): children (creators of star triangles) come first.
+    std::vector<double> err(m);
+    for (std::size_t k = 0; k < m; ++k) {
+      double e = removals_[k].err;
+      for (std::uint32_t i = removals_[k].star_begin; i < removals_[k].star_end; ++i) {
+        const std::uint32_t c = tris_[star_ids_[i]].creator;
+        if (c != kNone) e = std::max(e, err[c]);
+      }
+      err[k] = e;
+    }
+    std::vector<std::uint32_t> order(m);
+    for (std::uint32_t k = 0; k < m; ++k) order[k] = k;
+    std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
+      return err[a] > err[b] || (err[a] == err[b] && a > b);
+    });
+    std::vector<std::uint32_t> op_of(m);
+    for (std::uint32_t i = 0; i < m; ++i) op_of[order[i]] = i + 1;
+
+    Crmr crmr;
+    CrmrInfo& info = crmr.header;
+    info.kind = ModelKind::kTerrain;
+    info.georef = dem_.georef();
+    info.grid_width = W_;
+    info.grid_height = H_;
+    info.source = dem_.source();
+    info.builder = "block-decimation max_error=" + std::to_string(opt_.max_error) +
+                   " block_cells=" + std::to_string(B_) +
+                   " max_degree=" + std::to_string(opt_.max_degree);
+    info.vertex_count = verts_.size();
+    for (const MVert& v : verts_) info.bounds.add(world(v));
+
+    // Owner (op whose fragment holds it) and index of every triangle.
+    std::vector<std::uint32_t> owner(tris_.size()), local(tris_.size());
+    std::vector<std::uint32_t> base;
+    for (std::uint32_t t = 0; t < tris_.size(); ++t) {
+      if (tris_[t].destroyer == kNone) {
+        owner[t] = 0;
+        local[t] = static_cast<std::uint32_t>(base.size());
+        base.push_back(t);
+      }
+    }
+    for (std::size_t k = 0; k < m; ++k) {
+      const Removal& r = removals_[k];
+      for (std::uint32_t i = r.star_begin; i < r.star_end; ++i) {
+        owner[star_ids_[i]] = op_of[k];
+        local[star_ids_[i]] = i - r.star_begin;
+      }
+    }
+    double err0 = 0.0;
+    for (std::uint32_t t : base) err0 = std::max(err0, tris_[t].bound.err());
+    for (double e : err) err0 = std::max(err0, e);
+    info.err0 = err0;
+    info.err_final = std::min(err_final_, err0);
+
+    crmr.ops.resize(m + 1);
+    std::unordered_map<std::uint64_t, std::uint32_t> current;  // directed edge -> triangle
+    current.reserve(base.size() * 3);
+    auto enter = [&](std::uint32_t t) {
+      for (int k = 0; k < 3; ++k) current[edge_key(tris_[t].v[k], tris_[t].v[(k + 1) % 3])] = t;
+    };
+    auto leave = [&](std::uint32_t t) {
+      for (int k = 0; k < 3; ++k) current.erase(edge_key(tris_[t].v[k], tris_[t].v[(k + 1) % 3]));
+    };
+    fill_op(crmr.ops[0], 0, kNone, base, {}, owner, local, current);
+    crmr.ops[0].error = err0;
+    for (std::uint32_t t : base) enter(t);
+    std::vector<std::uint32_t> frag, pre;
+    for (std::uint32_t i = 0; i < m; ++i) {
+      const std::uint32_t k = order[i];
+      const Removal& r = removals_[k];
+      frag.assign(star_ids_.begin() + r.star_begin, star_ids_.begin() + r.star_end);
+      pre.clear();
+      for (std::uint32_t t = r.new_begin; t < r.new_end; ++t) pre.push_back(t);
+      Op& op = crmr.ops[i + 1];
+      fill_op(op, i + 1, r.vertex, frag, pre, owner, local, current);
+      op.error = err[k];
+      op.birth_res = resolution_of(info, err[k]);
+      for (std::uint32_t t : pre) leave(t);
+      for (std::uint32_t t : frag) enter(t);
+      if ((i & 0xffff) == 0) report(0.9 + 0.05 * double(i) / double(std::max<std::size_t>(1, m)));
+    }
+    stats_.finest_vertices = finest_vertices_;
+    stats_.finest_triangles = finest_triangles_;
+    stats_.base_triangles = base.size();
+    stats_.removals = m;
+    stats_.levels = levels_;
+    {
+      std::vector<std::uint8_t> seen(verts_.size(), 0);
+      for (std::uint32_t t : base) {
+        for (std::uint32_t v : tris_[t].v) seen[v] = 1;
+      }
+      stats_.base_vertices = static_cast<std::uint64_t>(std::count(seen.begin(), seen.end(), 1));
+    }
+    // Free the build state before link_dag allocates.
+    std::vector<MTri>().swap(tris_);
+    std::vector<std::uint32_t>().swap(star_ids_);
+    link_dag(crmr);
+    std::vector<std::uint64_t> depth(crmr.ops.size(), 0);
+    for (const Op& op : crmr.ops) {
+      for (OpId c : op.children) depth[c.value] = std::max(depth[c.value], depth[op.id.value] + 1);
+      stats_.dag_height = std::max(stats_.dag_height, depth[op.id.value]);
+    }
+    report(1.0);
+    return crmr;
+  }
+
+  Vec3 world(const MVert& v) const {
+    const Georef& g = dem_.georef();
+    return {g.x0 + v.col * g.dx, g.y0 + v.row * g.dy, double(v.z)};
+  }
+
+  void fill_op(Op& op, std::uint32_t id, std::uint32_t new_vertex,
+               const std::vector<std::uint32_t>& frag, const std::vector<std::uint32_t>& pre,
+               const std::vector<std::uint32_t>& owner, const std::vector<std::uint32_t>& local,
+               const std::unordered_map<std::uint64_t, std::uint32_t>& current) const {
+    op.id = OpId(id);
+    std::vector<std::uint32_t> vs;
+    for (std::uint32_t t : frag) vs.insert(vs.end(), tris_[t].v.begin(), tris_[t].v.end());
+    std::sort(vs.begin(), vs.end());
+    vs.erase(std::unique(vs.begin(), vs.end()), vs.end());
+    if (new_vertex != kNone) {
+      vs.erase(std::find(vs.begin(), vs.end(), new_vertex));
+      vs.insert(vs.begin(), new_vertex);
+      op.new_vertex_count = 1;
+    } else {
+      op.new_vertex_count = static_cast<std::uint32_t>(vs.size());
+    }
+    auto index = [&](std::uint32_t v) {
+      if (new_vertex != kNone && v == new_vertex) return std::uint32_t{0};
+      const auto b = vs.begin() + (new_vertex != kNone ? 1 : 0);
+      return static_cast<std::uint32_t>(std::lower_bound(b, vs.end(), v) - vs.begin());
+    };
+    op.vertices.reserve(vs.size());
+    for (std::uint32_t v : vs) op.vertices.push_back({VertexId(v), world(verts_[v])});
+    op.fragment.resize(frag.size());
+    for (std::size_t i = 0; i < frag.size(); ++i) {
+      const MTri& t = tris_[frag[i]];
+      FragmentTriangle& ft = op.fragment[i];
+      for (int k = 0; k < 3; ++k) ft.v[k] = index(t.v[k]);
+      if (t.is_void) ft.flags |= FragmentTriangle::kVoid;
+      for (std::uint8_t k = 0; k < 3; ++k) {
+        const std::uint32_t a = t.v[k], b = t.v[(k + 1) % 3];
+        const std::uint32_t n = t.nbr[k];
+        if (n != kNone && owner[n] == id && tris_[n].destroyer == t.destroyer) {
+          ft.nbr[k] = static_cast<std::int32_t>(local[n]);
+          continue;
+        }
+        // A fragment boundary edge: its closest coarser version is the newer of the replaced
+        // triangle inside (PreF) and the current triangle outside; none on the model boundary.
+        auto out = current.find(edge_key(b, a));
+        if (out == current.end()) continue;
+        std::uint32_t inside = kNone;
+        int inside_edge = -1;
+        for (std::uint32_t q : pre) {
+          const int j = index_of(tris_[q], a);
+          if (j >= 0 && tris_[q].v[(j + 1) % 3] == b) {
+            inside = q;
+            inside_edge = j;
+          }
+        }
+        if (inside == kNone)
+          throw_internal("block TIN: a fragment boundary edge has no PreF triangle");
+        const std::uint32_t o = out->second;
+        if (owner[o] > owner[inside]) {
+          const int j = index_of(tris_[o], b);
+          op.coarser.push_back(
+              {static_cast<std::uint32_t>(i), k,
+               EdgeRef{TriRef{OpId(owner[o]), local[o]}, static_cast<std::uint8_t>(j)}});
+        } else {
+          op.coarser.push_back({static_cast<std::uint32_t>(i), k,
+                                EdgeRef{TriRef{OpId(owner[inside]), local[inside]},
+                                        static_cast<std::uint8_t>(inside_edge)}});
+        }
+      }
+    }
+    op.pre.clear();
+    for (std::uint32_t t : pre) op.pre.push_back({OpId(owner[t]), local[t]});
+  }
+
+  void report(double f) const {
+    if (opt_.progress) opt_.progress(std::clamp(f, 0.0, 1.0));
+  }
+
+  const RasterWindows& dem_;
+  const BlockTinOptions& opt_;
+  BlockTinStats& stats_;
+  const int W_, H_;
+  int B_ = 256, bw_ = 1, bh_ = 1, levels_ = 0;
+  double tol_ = 0.0, range_ = 0.0, stop_error_ = 0.0, eps0_ = 0.0, err_final_ = 0.0;
+  std::uint64_t finest_vertices_ = 0, finest_triangles_ = 0;
+  std::vector<MVert> verts_;
+  std::vector<MTri> tris_;
+  std::vector<Removal> removals_;
+  std::vector<std::uint32_t> star_ids_;
+  std::unordered_map<std::uint64_t, std::uint32_t> shared_;      // grid index -> border vertex
+  std::unordered_map<std::uint64_t, std::uint32_t> open_edges_;  // edge -> (tri << 2 | edge)
+  std::unordered_map<std::uint64_t, std::uint32_t> scratch_outer_;
+  mutable std::vector<std::array<double, 2>> clip_a_, clip_b_;  // overlay_bound's scratch
+  std::vector<double> cost_;
+  std::vector<std::uint8_t> dirty_;
+  std::vector<std::uint32_t> stamp_;
+  std::uint32_t round_stamp_ = 0;
+};
+
+}  // namespace
+
+Crmr build_block_tin(const RasterWindows& dem, const BlockTinOptions& options,
+                     BlockTinStats* stats) {
+  BlockTinStats local;
+  return Builder(dem, options, stats != nullptr ? *stats : local).run();
+}
+
+}  // namespace smr

@@ -1,0 +1,75 @@
+// Terrain CRMR by hierarchical block decimation (DESIGN.md section 4; Hoppe 1998, "Smooth
+// view-dependent level-of-detail control and its application to terrain rendering", section 4;
+// De Floriani et al., LOD part two, "construction through simplification": independent-set
+// decimation).
+//
+// The DEM is read one leaf block at a time (RasterWindows), never whole:
+//  1. Each block border line is simplified on its own (1-D, within max_error), so the two blocks
+//     that share it agree on its vertices; each leaf block is then triangulated by greedy
+//     Delaunay insertion (build_greedy_tin) from those border vertices to max_error. The union of
+//     the blocks is the finest mesh M^m, with exact per-triangle errors.
+//  2. Decimation, finest to coarsest, in levels: at level l the blocks are 2^l leaf blocks wide
+//     and the vertices on their borders are locked. Error bounds are guaranteed either way:
+//     - exact: the samples under each new triangle are scanned, from the block's window (level
+//       0: the leaf window already in memory; above: re-read while a block's window holds at
+//       most exact_window_samples);
+//     - overlay (levels whose blocks are larger): one-sided bounds source - plane <= up and
+//       plane - source <= down, carried from the old triangles a new one overlaps plus the
+//       largest difference of the two planes over each overlap (both are linear on each piece
+//       of the overlay, so its corners suffice), capped by the source's range under it.
+//     Each level runs stages of growing error tolerance (x sqrt 2, x4 per level); each stage
+//     runs rounds, and a round removes an independent set (no two removed vertices adjacent) of
+//     vertices of degree at most max_degree, cheapest first, re-triangulating each hole by
+//     Delaunay ears. So the DAG height is at most the number of rounds.
+//  3. Each removal, reversed, is an op: PreF = the hole's triangles, F = the removed vertex's
+//     star. An op's error is its own bound or a child's, whichever is larger, so ordering the ops
+//     by falling error is a topological order and birth_res never decreases (Brown 4.4.3.3).
+//
+// No-data samples: a leaf block's greedy TIN marks void triangles exactly as build_greedy_tin
+// does; a vertex of a void triangle is never removed, so holes stay exact at every resolution.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+
+#include "smr/core/crmr.h"
+#include "smr/core/heightfield.h"
+
+namespace smr {
+
+struct BlockTinOptions {
+  /// Error of the finest mesh M^m (data units); 0 = lossless.
+  double max_error = 0.0;
+  /// Side of a leaf block in grid cells (a power of two, at least 8).
+  int block_cells = 256;
+  /// Only vertices with at most this many neighbours are removed (bounds the fragment size).
+  std::uint32_t max_degree = 12;
+  /// Levels above the leaves whose blocks hold at most this many samples are decimated block by
+  /// block with exact error bounds, re-reading each block's window; larger blocks use the
+  /// conservative overlay bound. Sizes the largest window held in memory (4 + 1 bytes a sample).
+  std::uint64_t exact_window_samples = std::uint64_t{16} << 20;
+  /// Progress in [0, 1].
+  std::function<void(double)> progress;
+};
+
+struct BlockTinStats {
+  int levels = 0;                 // block levels above the leaves (the root is the last)
+  std::uint64_t leaf_blocks = 0;  // blocks read
+  std::uint64_t samples = 0;      // samples read
+  std::uint64_t finest_vertices = 0, finest_triangles = 0;  // M^m
+  std::uint64_t base_vertices = 0, base_triangles = 0;      // R^0
+  std::uint64_t removals = 0;                               // ops other than R^0
+  std::uint64_t rounds = 0;              // independent-set rounds (bounds the DAG height)
+  std::uint64_t dag_height = 0;          // longest parent-to-child path from R^0
+  std::uint64_t non_delaunay_holes = 0;  // holes with no Delaunay ear (across old block borders)
+  std::uint64_t max_block_samples = 0;   // largest window held in memory
+  int exact_levels = 0;                  // upper levels decimated with exact bounds
+  std::uint64_t samples_rescanned = 0;   // samples re-read for them
+};
+
+/// Builds the CRMR. Throws smr::Error on unusable input (fewer than 2x2 samples, no valid sample)
+/// or options (block_cells not a power of two >= 8, max_degree < 3).
+Crmr build_block_tin(const RasterWindows& dem, const BlockTinOptions& options = {},
+                     BlockTinStats* stats = nullptr);
+
+}  // namespace smr
