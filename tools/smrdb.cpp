@@ -330,7 +330,18 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
                         {"removals", st.removals},
                         {"finest_vertices", st.finest_vertices},
                         {"base_vertices", st.base_vertices},
-                        {"non_delaunay_holes", st.non_delaunay_holes}};
+                        {"non_delaunay_holes", st.non_delaunay_holes},
+                        {"exact_levels", st.exact_levels},
+                        {"samples_rescanned", st.samples_rescanned},
+                        {"samples_scanned", st.samples_scanned},
+                        {"plans", st.plans},
+                        {"seconds",
+                         {{"survey", st.seconds_survey},
+                          {"read", st.seconds_read},
+                          {"greedy", st.seconds_greedy},
+                          {"level0", st.seconds_level0},
+                          {"upper", st.seconds_upper},
+                          {"assemble", st.seconds_assemble}}}};
   } else {
     const smr::Heightfield dem = smr::read_dem(a.dem);
     report["input"] = {{"path", a.dem},

@@ -7,14 +7,16 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <string>
-#include <unordered_map>
 #include <utility>
 #include <vector>
 
 #include "smr/build/greedy_tin.h"
+#include "smr/build/triangle_rows.h"
+#include "smr/core/id_map.h"
 #include "storage/error.h"
 
 namespace smr {
@@ -163,10 +165,17 @@ class Builder {
   }
 
   Crmr run() {
+    Clock::time_point t = Clock::now();
+    auto lap = [&](double& into) {
+      const Clock::time_point now = Clock::now();
+      into += std::chrono::duration<double>(now - t).count();
+      t = now;
+    };
     survey();
+    lap(stats_.seconds_survey);
     for (int by = 0; by < bh_; ++by) {
       for (int bx = 0; bx < bw_; ++bx) {
-        leaf_block(bx, by);
+        leaf_block(bx, by, t);
         report(0.7 * double(by * bw_ + bx + 1) / double(bw_ * bh_));
       }
     }
@@ -175,7 +184,10 @@ class Builder {
       upper_level(level);
       report(0.7 + 0.2 * double(level) / double(std::max(1, levels_)));
     }
-    return assemble();
+    lap(stats_.seconds_upper);
+    Crmr crmr = assemble();
+    lap(stats_.seconds_assemble);
+    return crmr;
   }
 
  private:
@@ -216,7 +228,15 @@ class Builder {
   }
 
   // ---- phase 1: a leaf block's greedy TIN, then its level-0 decimation with exact errors ----
-  void leaf_block(int bx, int by) {
+  using Clock = std::chrono::steady_clock;
+  static double since(Clock::time_point& t) {
+    const Clock::time_point now = Clock::now();
+    const double s = std::chrono::duration<double>(now - t).count();
+    t = now;
+    return s;
+  }
+
+  void leaf_block(int bx, int by, Clock::time_point& clock) {
     const Heightfield w = window(bx, by);
     ++stats_.leaf_blocks;
     stats_.samples += w.z.size();
@@ -251,20 +271,22 @@ class Builder {
     std::sort(prescribed.begin(), prescribed.end());
     prescribed.erase(std::unique(prescribed.begin(), prescribed.end()), prescribed.end());
 
+    stats_.seconds_read += since(clock);
     const Crmr tin = build_greedy_tin(w, g);
+    stats_.seconds_greedy += since(clock);
 
     // The final triangles, into the global mesh.
     const std::uint32_t first_tri = static_cast<std::uint32_t>(tris_.size());
     std::vector<std::uint32_t> block_verts;
-    std::unordered_map<std::uint64_t, std::uint32_t> local;  // greedy vertex id -> ours
+    std::vector<std::uint32_t> local(tin.header.vertex_count, kNone);  // greedy vertex id -> ours
     for (const Op& op : tin.ops) {
       for (const FragmentTriangle& t : op.fragment) {
         if (t.killer.valid()) continue;
         MTri m;
         for (int k = 0; k < 3; ++k) {
           const Vertex& gv = op.vertices[t.v[k]];
-          auto [it, fresh] = local.try_emplace(gv.id.value, kNone);
-          if (fresh) {
+          std::uint32_t& ours = local.at(gv.id.value);
+          if (ours == kNone) {
             const int col = static_cast<int>(std::lround((gv.p.x - w.georef.x0) / w.georef.dx));
             const int row = static_cast<int>(std::lround((gv.p.y - w.georef.y0) / w.georef.dy));
             const bool on_border = col == 0 || row == 0 || col == ww - 1 || row == wh - 1;
@@ -276,10 +298,10 @@ class Builder {
                              std::to_string(c0 + col) + ", " + std::to_string(r0 + row) +
                              ") that its neighbour does not have");
             }
-            it->second = global_vertex(c0 + col, r0 + row, static_cast<float>(gv.p.z));
-            block_verts.push_back(it->second);
+            ours = global_vertex(c0 + col, r0 + row, static_cast<float>(gv.p.z));
+            block_verts.push_back(ours);
           }
-          m.v[k] = it->second;
+          m.v[k] = ours;
         }
         m.is_void = t.is_void();
         tris_.push_back(m);
@@ -292,14 +314,13 @@ class Builder {
         verts_[m.v[k]].tri = t;
         if (m.is_void) verts_[m.v[k]].sticky = true;
         const std::uint64_t back = edge_key(m.v[(k + 1) % 3], m.v[k]);
-        auto it = open_edges_.find(back);
-        if (it != open_edges_.end()) {
-          const std::uint32_t other = it->second >> 2, oe = it->second & 3;
+        if (const std::uint32_t* o = open_edges_.find(back); o != nullptr) {
+          const std::uint32_t other = *o >> 2, oe = *o & 3;
           m.nbr[k] = other;
           tris_[other].nbr[oe] = t;
-          open_edges_.erase(it);
+          open_edges_.erase(back);
         } else if (!boundary_edge(verts_[m.v[k]], verts_[m.v[(k + 1) % 3]])) {
-          open_edges_.emplace(edge_key(m.v[k], m.v[(k + 1) % 3]), (t << 2) | std::uint32_t(k));
+          open_edges_[edge_key(m.v[k], m.v[(k + 1) % 3])] = (t << 2) | std::uint32_t(k);
         }
       }
     }
@@ -316,7 +337,9 @@ class Builder {
       err_final_ = std::max(err_final_, b.err());
     }
     finest_triangles_ += tris_.size() - first_tri;
+    stats_.seconds_greedy += since(clock);
     decimate_level(0, &w, c0, r0, &block_verts);
+    stats_.seconds_level0 += since(clock);
     // Edges on the block's outer border wait for the neighbour; edges that became internal
     // in the decimation were removed from open_edges_ as their triangles died.
   }
@@ -326,8 +349,9 @@ class Builder {
     const bool on_block_border =
         (col % B_ == 0) || (row % B_ == 0) || col == W_ - 1 || row == H_ - 1;
     if (on_block_border) {
-      auto [it, fresh] = shared_.try_emplace(key, static_cast<std::uint32_t>(verts_.size()));
-      if (!fresh) return it->second;
+      std::uint32_t& id = shared_[key];  // stored + 1: 0 = new
+      if (id != 0) return id - 1;
+      id = static_cast<std::uint32_t>(verts_.size()) + 1;
     }
     MVert v;
     v.col = col;
@@ -348,30 +372,43 @@ class Builder {
                        bool outward) const {
     const MVert &a = verts_[v[0]], &b = verts_[v[1]], &c = verts_[v[2]];
     const Plane pl(a, b, c);
-    const int xmin = std::min({a.col, b.col, c.col}), xmax = std::max({a.col, b.col, c.col});
-    const int ymin = std::min({a.row, b.row, c.row}), ymax = std::max({a.row, b.row, c.row});
     TriBound tb;
     tb.zlo = std::min({a.z, b.z, c.z});
     tb.zhi = std::max({a.z, b.z, c.z});
-    for (int row = ymin; row <= ymax; ++row) {
-      for (int col = xmin; col <= xmax; ++col) {
-        MVert p;
-        p.col = col;
-        p.row = row;
-        if (orient(a, b, p) < 0 || orient(b, c, p) < 0 || orient(c, a, p) < 0) continue;
-        const int wc = col - c0, wr = row - r0;
-        if (!w.has_data(wc, wr)) {
-          tb.up = kInfeasible;
-          return tb;
+    const std::int64_t x[3] = {a.col - c0, b.col - c0, c.col - c0};
+    const std::int64_t y[3] = {a.row - r0, b.row - r0, c.row - r0};
+    build::TriangleRows rows(x, y);
+    const double pa = pl.a, pc = pl.c + pl.a * c0 + pl.b * r0;  // the plane in window coordinates
+    double up = 0.0, down = 0.0;
+    float lo = tb.zlo, hi = tb.zhi;
+    for (std::int64_t row = rows.ymin(); row <= rows.ymax(); ++row) {
+      std::int64_t xl, xr;
+      rows.next(xl, xr);
+      if (xl > xr) continue;
+      const std::size_t base = static_cast<std::size_t>(row) * static_cast<std::size_t>(w.width);
+      if (w.has_nodata()) {
+        for (std::int64_t col = xl; col <= xr; ++col) {
+          if (w.valid[base + static_cast<std::size_t>(col)] == 0) {
+            tb.up = kInfeasible;
+            return tb;
+          }
         }
-        const float z = w.at(wc, wr);
-        tb.zlo = std::min(tb.zlo, z);
-        tb.zhi = std::max(tb.zhi, z);
-        const double d = double(z) - pl.at(col, row);
-        tb.up = std::max(tb.up, d);
-        tb.down = std::max(tb.down, -d);
+      }
+      scanned_ += static_cast<std::uint64_t>(xr - xl + 1);
+      const float* z = w.z.data() + base;
+      const double zrow = pl.b * double(row) + pc;
+      for (std::int64_t col = xl; col <= xr; ++col) {
+        const double d = double(z[col]) - (pa * double(col) + zrow);
+        up = std::max(up, d);
+        down = std::max(down, -d);
+        lo = std::min(lo, z[col]);
+        hi = std::max(hi, z[col]);
       }
     }
+    tb.up = up;
+    tb.down = down;
+    tb.zlo = lo;
+    tb.zhi = hi;
     if (outward) {
       tb.up = tb.up <= tol_ ? 0.0 : tb.up + tol_;
       tb.down = tb.down <= tol_ ? 0.0 : tb.down + tol_;
@@ -404,6 +441,7 @@ class Builder {
     std::vector<std::array<std::uint32_t, 3>> tris;  // the hole's new triangles (vertex ids)
     std::vector<TriBound> bounds;                    // of each new triangle
     double err = kInfeasible;
+    bool lower_bound = false;  // err is only a lower bound (plan's gate)
     bool delaunay = true;
   };
 
@@ -547,8 +585,12 @@ class Builder {
   }
 
   /// Plans the removal of `v`: its hole's triangulation and error (kInfeasible if impossible).
-  void plan(std::uint32_t v, Plan& p, const Heightfield* w, int c0, int r0) const {
+  /// With a window w and `estimate`, no sample is scanned: the error is the removed vertex's
+  /// own deviation from the new triangles, a lower bound of the exact one (p.lower_bound).
+  void plan(std::uint32_t v, Plan& p, const Heightfield* w, int c0, int r0, bool estimate) const {
     p.err = kInfeasible;
+    p.lower_bound = false;
+    ++plans_;
     if (!gather(v, p)) return;
     for (std::uint32_t t : p.star) {
       if (tris_[t].is_void) return;
@@ -557,6 +599,18 @@ class Builder {
     if (!triangulate(p)) return;
     p.bounds.clear();
     double err = 0.0;
+    if (w != nullptr && estimate) {
+      const MVert& m = verts_[v];
+      double lb = 0.0;
+      for (const auto& nt : p.tris) {
+        const MVert &a = verts_[nt[0]], &b = verts_[nt[1]], &c = verts_[nt[2]];
+        if (orient(a, b, m) < 0 || orient(b, c, m) < 0 || orient(c, a, m) < 0) continue;
+        lb = std::max(lb, std::abs(double(m.z) - Plane(a, b, c).at(m.col, m.row)));
+      }
+      p.err = lb;
+      p.lower_bound = true;
+      return;
+    }
     for (const auto& nt : p.tris) {
       p.bounds.push_back(w != nullptr ? exact_bound(nt, *w, c0, r0, true) : overlay_bound(nt, p));
       err = std::max(err, p.bounds.back().err());
@@ -575,13 +629,13 @@ class Builder {
     r.err = p.err;
     // The outer neighbour of each hole edge (poly[j], poly[j+1]): across star triangle j's edge
     // opposite v; the closing edge of an open fan has none.
-    std::unordered_map<std::uint64_t, std::uint32_t>& outer = scratch_outer_;
+    std::vector<std::pair<std::uint64_t, std::uint32_t>>& outer = scratch_outer_;
     outer.clear();
     for (std::uint32_t t : p.star) {
       const MTri& m = tris_[t];
       const int i = index_of(m, v);
       const std::uint32_t a = m.v[(i + 1) % 3], b = m.v[(i + 2) % 3];
-      outer[edge_key(a, b)] = m.nbr[(i + 1) % 3];
+      outer.push_back({edge_key(a, b), m.nbr[(i + 1) % 3]});
       if (m.nbr[(i + 1) % 3] == kNone) {
         open_edges_.erase(edge_key(a, b));  // a block border edge waiting for its neighbour
       }
@@ -599,7 +653,9 @@ class Builder {
       for (int k = 0; k < 3; ++k) {
         const std::uint32_t a = tris_[t].v[k], b = tris_[t].v[(k + 1) % 3];
         verts_[a].tri = t;
-        auto it = outer.find(edge_key(a, b));
+        const std::uint64_t key = edge_key(a, b);
+        auto it =
+            std::find_if(outer.begin(), outer.end(), [&](const auto& e) { return e.first == key; });
         if (it != outer.end()) {  // a hole edge: glue to the outside
           const std::uint32_t o = it->second;
           tris_[t].nbr[k] = o;
@@ -690,25 +746,32 @@ class Builder {
     Plan p;
     std::vector<std::pair<double, std::uint32_t>> order;
     std::vector<std::pair<std::uint32_t, Plan>> chosen;
+    std::vector<std::uint32_t> active, next;
+    ++cand_stamp_;
+    cand_mark_.resize(verts_.size(), 0);
+    seen_.resize(verts_.size(), 0);
+    for (std::uint32_t v : cand) cand_mark_[v] = cand_stamp_;
     for (;;) {
       eps = root ? eps * std::sqrt(2.0) : std::min(top, eps * std::sqrt(2.0));
       std::uint64_t removed_in_stage = 0;
-      double cheapest_left = kInfeasible;
+      // A round looks only at vertices that may be removed: those within eps or whose star
+      // changed in the last round; the others cannot change until a neighbour goes.
+      active.clear();
+      for (std::uint32_t v : cand) {
+        if (verts_[v].tri != kNone) active.push_back(v);
+      }
       for (;;) {  // rounds
         order.clear();
-        cheapest_left = kInfeasible;
-        for (std::uint32_t v : cand) {
+        for (std::uint32_t v : active) {
           if (verts_[v].tri == kNone) continue;
-          if (dirty_[v]) {
-            plan(v, p, w, c0, r0);
+          // dirty_: 1 = the star changed; 2 = cost_ is only a lower bound (an estimate: with
+          // exact bounds a removal's samples are scanned only when it is about to be chosen).
+          if (dirty_[v] == 1) {
+            plan(v, p, w, c0, r0, true);
             cost_[v] = p.err;
-            dirty_[v] = 0;
+            dirty_[v] = p.lower_bound ? 2 : 0;
           }
-          if (cost_[v] <= eps) {
-            order.push_back({cost_[v], v});
-          } else {
-            cheapest_left = std::min(cheapest_left, cost_[v]);
-          }
+          if (cost_[v] <= eps) order.push_back({cost_[v], v});
         }
         if (order.empty()) break;
         std::sort(order.begin(), order.end());
@@ -719,22 +782,53 @@ class Builder {
         for (const auto& [c, v] : order) {
           if (stamp_[v] == round_stamp_) continue;
           if (n == chosen.size()) chosen.emplace_back();
-          gather(v, chosen[n].second);
+          Plan& q = chosen[n].second;
+          plan(v, q, w, c0, r0, false);
+          cost_[v] = q.err;
+          dirty_[v] = 0;
+          if (q.err > eps) continue;
           chosen[n++].first = v;
           stamp_[v] = round_stamp_;
-          for (std::uint32_t u : chosen[n - 1].second.poly) stamp_[u] = round_stamp_;
+          for (std::uint32_t u : q.poly) stamp_[u] = round_stamp_;
         }
+        ++seen_stamp_;
+        next.clear();
         for (std::size_t i = 0; i < n; ++i) {
-          const std::uint32_t v = chosen[i].first;
-          plan(v, p, w, c0, r0);
-          apply(v, p);
-          for (std::uint32_t u : p.poly) dirty_[u] = 1;
+          const Plan& q = chosen[i].second;
+          apply(chosen[i].first, q);
+          for (std::uint32_t u : q.poly) {
+            dirty_[u] = 1;
+            if (cand_mark_[u] == cand_stamp_ && seen_[u] != seen_stamp_) {
+              seen_[u] = seen_stamp_;
+              next.push_back(u);
+            }
+          }
         }
+        for (const auto& [c, v] : order) {
+          if (verts_[v].tri != kNone && cost_[v] <= eps && seen_[v] != seen_stamp_) {
+            seen_[v] = seen_stamp_;
+            next.push_back(v);
+          }
+        }
+        std::sort(next.begin(), next.end());
+        active.swap(next);
+        if (n == 0) continue;
         removed_in_stage += n;
         ++stats_.rounds;
-        cand.erase(std::remove_if(cand.begin(), cand.end(),
-                                  [&](std::uint32_t v) { return verts_[v].tri == kNone; }),
-                   cand.end());
+      }
+      cand.erase(std::remove_if(cand.begin(), cand.end(),
+                                [&](std::uint32_t v) { return verts_[v].tri == kNone; }),
+                 cand.end());
+      double cheapest_left = kInfeasible;
+      if (root && removed_in_stage == 0) {
+        for (std::uint32_t v : cand) {
+          if (dirty_[v] == 1) {
+            plan(v, p, w, c0, r0, true);
+            cost_[v] = p.err;
+            dirty_[v] = p.lower_bound ? 2 : 0;
+          }
+          cheapest_left = std::min(cheapest_left, cost_[v]);
+        }
       }
       if (!root && eps >= top) break;
       if (root && removed_in_stage == 0) {
@@ -762,8 +856,8 @@ class Builder {
     std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
       return err[a] > err[b] || (err[a] == err[b] && a > b);
     });
-    std::vector<std::uint32_t> op_of(m);
-    for (std::uint32_t i = 0; i < m; ++i) op_of[order[i]] = i + 1;
+    op_of_.assign(m, 0);
+    for (std::uint32_t i = 0; i < m; ++i) op_of_[order[i]] = i + 1;
 
     Crmr crmr;
     CrmrInfo& info = crmr.header;
@@ -791,7 +885,7 @@ class Builder {
     for (std::size_t k = 0; k < m; ++k) {
       const Removal& r = removals_[k];
       for (std::uint32_t i = r.star_begin; i < r.star_end; ++i) {
-        owner[star_ids_[i]] = op_of[k];
+        owner[star_ids_[i]] = op_of_[k];
         local[star_ids_[i]] = i - r.star_begin;
       }
     }
@@ -800,9 +894,11 @@ class Builder {
     for (double e : err) err0 = std::max(err0, e);
     info.err0 = err0;
     info.err_final = std::min(err_final_, err0);
+    birth_of_.resize(m);
+    for (std::size_t k = 0; k < m; ++k) birth_of_[k] = resolution_of(info, err[k]);
 
     crmr.ops.resize(m + 1);
-    std::unordered_map<std::uint64_t, std::uint32_t> current;  // directed edge -> triangle
+    IdMap<std::uint32_t> current;  // directed edge -> triangle
     current.reserve(base.size() * 3);
     auto enter = [&](std::uint32_t t) {
       for (int k = 0; k < 3; ++k) current[edge_key(tris_[t].v[k], tris_[t].v[(k + 1) % 3])] = t;
@@ -823,12 +919,14 @@ class Builder {
       Op& op = crmr.ops[i + 1];
       fill_op(op, i + 1, r.vertex, frag, pre, owner, local, current);
       op.error = err[k];
-      op.birth_res = resolution_of(info, err[k]);
+      op.birth_res = birth_of_[k];
       for (std::uint32_t t : pre) leave(t);
       for (std::uint32_t t : frag) enter(t);
       if ((i & 0xffff) == 0) report(0.9 + 0.05 * double(i) / double(std::max<std::size_t>(1, m)));
     }
     stats_.finest_vertices = finest_vertices_;
+    stats_.samples_scanned = scanned_;
+    stats_.plans = plans_;
     stats_.finest_triangles = finest_triangles_;
     stats_.base_triangles = base.size();
     stats_.removals = m;
@@ -840,10 +938,11 @@ class Builder {
       }
       stats_.base_vertices = static_cast<std::uint64_t>(std::count(seen.begin(), seen.end(), 1));
     }
-    // Free the build state before link_dag allocates.
+    // What link_dag would add, derived from the build records instead (bench: link_dag was
+    // a third of the assembly): pre_tris, parents, children, killers, bounds in fill_op; ROIs.
     std::vector<MTri>().swap(tris_);
     std::vector<std::uint32_t>().swap(star_ids_);
-    link_dag(crmr);
+    compute_rois(crmr);
     std::vector<std::uint64_t> depth(crmr.ops.size(), 0);
     for (const Op& op : crmr.ops) {
       for (OpId c : op.children) depth[c.value] = std::max(depth[c.value], depth[op.id.value] + 1);
@@ -861,9 +960,10 @@ class Builder {
   void fill_op(Op& op, std::uint32_t id, std::uint32_t new_vertex,
                const std::vector<std::uint32_t>& frag, const std::vector<std::uint32_t>& pre,
                const std::vector<std::uint32_t>& owner, const std::vector<std::uint32_t>& local,
-               const std::unordered_map<std::uint64_t, std::uint32_t>& current) const {
+               const IdMap<std::uint32_t>& current) const {
     op.id = OpId(id);
-    std::vector<std::uint32_t> vs;
+    std::vector<std::uint32_t>& vs = scratch_vs_;
+    vs.clear();
     for (std::uint32_t t : frag) vs.insert(vs.end(), tris_[t].v.begin(), tris_[t].v.end());
     std::sort(vs.begin(), vs.end());
     vs.erase(std::unique(vs.begin(), vs.end()), vs.end());
@@ -887,6 +987,11 @@ class Builder {
       FragmentTriangle& ft = op.fragment[i];
       for (int k = 0; k < 3; ++k) ft.v[k] = index(t.v[k]);
       if (t.is_void) ft.flags |= FragmentTriangle::kVoid;
+      if (t.creator != kNone) {
+        ft.killer = OpId(op_of_[t.creator]);
+        ft.death_res = birth_of_[t.creator];
+        op.children.push_back(ft.killer);
+      }
       for (std::uint8_t k = 0; k < 3; ++k) {
         const std::uint32_t a = t.v[k], b = t.v[(k + 1) % 3];
         const std::uint32_t n = t.nbr[k];
@@ -896,8 +1001,8 @@ class Builder {
         }
         // A fragment boundary edge: its closest coarser version is the newer of the replaced
         // triangle inside (PreF) and the current triangle outside; none on the model boundary.
-        auto out = current.find(edge_key(b, a));
-        if (out == current.end()) continue;
+        const std::uint32_t* out = current.find(edge_key(b, a));
+        if (out == nullptr) continue;
         std::uint32_t inside = kNone;
         int inside_edge = -1;
         for (std::uint32_t q : pre) {
@@ -909,7 +1014,7 @@ class Builder {
         }
         if (inside == kNone)
           throw_internal("block TIN: a fragment boundary edge has no PreF triangle");
-        const std::uint32_t o = out->second;
+        const std::uint32_t o = *out;
         if (owner[o] > owner[inside]) {
           const int j = index_of(tris_[o], b);
           op.coarser.push_back(
@@ -923,7 +1028,20 @@ class Builder {
       }
     }
     op.pre.clear();
-    for (std::uint32_t t : pre) op.pre.push_back({OpId(owner[t]), local[t]});
+    op.pre_tris.clear();
+    for (std::uint32_t t : pre) {
+      op.pre.push_back({OpId(owner[t]), local[t]});
+      op.parents.push_back(OpId(owner[t]));
+      PreTriangle pt;
+      for (int k = 0; k < 3; ++k) pt.v[k] = index(tris_[t].v[k]);
+      if (tris_[t].is_void) pt.flags |= FragmentTriangle::kVoid;
+      op.pre_tris.push_back(pt);
+    }
+    for (std::vector<OpId>* ids : {&op.parents, &op.children}) {
+      std::sort(ids->begin(), ids->end());
+      ids->erase(std::unique(ids->begin(), ids->end()), ids->end());
+    }
+    compute_op_bounds(op);
   }
 
   void report(double f) const {
@@ -941,14 +1059,20 @@ class Builder {
   std::vector<MTri> tris_;
   std::vector<Removal> removals_;
   std::vector<std::uint32_t> star_ids_;
-  std::unordered_map<std::uint64_t, std::uint32_t> shared_;      // grid index -> border vertex
-  std::unordered_map<std::uint64_t, std::uint32_t> open_edges_;  // edge -> (tri << 2 | edge)
-  std::unordered_map<std::uint64_t, std::uint32_t> scratch_outer_;
+  IdMap<std::uint32_t> shared_;      // grid index -> border vertex + 1
+  IdMap<std::uint32_t> open_edges_;  // edge -> (tri << 2 | edge)
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> scratch_outer_;
+  mutable std::uint64_t scanned_ = 0, plans_ = 0;
+  std::vector<std::uint32_t> op_of_;  // removal -> op id
+  std::vector<double> birth_of_;      // removal -> birth_res
+  mutable std::vector<std::uint32_t> scratch_vs_;
   mutable std::vector<std::array<double, 2>> clip_a_, clip_b_;  // overlay_bound's scratch
   std::vector<double> cost_;
   std::vector<std::uint8_t> dirty_;
   std::vector<std::uint32_t> stamp_;
   std::uint32_t round_stamp_ = 0;
+  std::vector<std::uint32_t> cand_mark_, seen_;  // candidates of this level; in the next round
+  std::uint32_t cand_stamp_ = 0, seen_stamp_ = 0;
 };
 
 }  // namespace

@@ -65,6 +65,12 @@ struct BlockTinStats {
   std::uint64_t max_block_samples = 0;   // largest window held in memory
   int exact_levels = 0;                  // upper levels decimated with exact bounds
   std::uint64_t samples_rescanned = 0;   // samples re-read for them
+  std::uint64_t samples_scanned = 0;     // sample visits of exact bounds
+  std::uint64_t plans = 0;               // removals planned (evaluated)
+  // Wall time: survey pass, leaf windows read, leaf greedy TINs, leaf decimation, upper levels
+  // (with their reads), assembling the CRMR.
+  double seconds_survey = 0, seconds_read = 0, seconds_greedy = 0, seconds_level0 = 0,
+         seconds_upper = 0, seconds_assemble = 0;
 };
 
 /// Builds the CRMR. Throws smr::Error on unusable input (fewer than 2x2 samples, no valid sample)

@@ -41,6 +41,7 @@
 #include <utility>
 #include <vector>
 
+#include "smr/build/triangle_rows.h"
 #include "storage/error.h"
 
 #if defined(__SSE2__)
@@ -88,38 +89,6 @@ struct BuildTri {
   std::uint32_t heap_pos = kNone;  // index in the queue, or kNone
 };
 static_assert(sizeof(BuildTri) <= 48);
-
-std::int64_t floor_div(std::int64_t n, std::int64_t d) {  // d > 0
-  std::int64_t q = n / d;
-  if ((n % d != 0) && (n < 0)) --q;
-  return q;
-}
-
-/// x(row) = q + r / den (0 <= r < den) along an edge, exactly, stepped one row at a time.
-struct EdgeStepper {
-  std::int64_t q = 0, r = 0, den = 1, dq = 0, dr = 0;
-  // The edge from (xa, ya) to (xb, yb), yb > ya, at row `row`.
-  EdgeStepper(std::int64_t xa, std::int64_t ya, std::int64_t xb, std::int64_t yb, std::int64_t row)
-      : den(yb - ya) {
-    const std::int64_t dx = xb - xa;
-    const std::int64_t num = xa * den + (row - ya) * dx;
-    q = floor_div(num, den);
-    r = num - q * den;
-    dq = floor_div(dx, den);
-    dr = dx - dq * den;
-  }
-  EdgeStepper() = default;
-  std::int64_t floor() const { return q; }
-  std::int64_t ceil() const { return q + (r != 0); }
-  void step() {
-    q += dq;
-    r += dr;
-    if (r >= den) {
-      r -= den;
-      ++q;
-    }
-  }
-};
 
 /// |z - plane| at column `col` of a row whose plane is a * col + zrow.
 inline double sample_error(float z, double a, std::int64_t col, double zrow) {
@@ -423,17 +392,9 @@ class Builder {
     const double c = z[0] - a * double(x[0]) - b * double(y[0]);
     const double cx = double(x[0] + x[1] + x[2]) / 3.0, cy = double(y[0] + y[1] + y[2]) / 3.0;
 
-    // Row spans of the closed triangle: vertices sorted by row (s0 <= s1 <= s2); the long edge
-    // s0-s2 bounds every row, the edge s0-s1 the rows above s1 and s1-s2 the rows below.
-    int s0 = 0, s1 = 1, s2 = 2;
-    if (y[s0] > y[s1]) std::swap(s0, s1);
-    if (y[s1] > y[s2]) std::swap(s1, s2);
-    if (y[s0] > y[s1]) std::swap(s0, s1);
-    const std::int64_t ymin = y[s0], ymid = y[s1], ymax = y[s2];
+    build::TriangleRows rows(x, y);
+    const std::int64_t ymin = rows.ymin(), ymax = rows.ymax();
     if (ymin == ymax) throw_internal("greedy TIN: degenerate triangle");
-    EdgeStepper lng(x[s0], ymin, x[s2], ymax, ymin), up, down;
-    if (ymid > ymin) up = EdgeStepper(x[s0], ymin, x[s1], ymid, ymin);
-    if (ymax > ymid) down = EdgeStepper(x[s1], ymid, x[s2], ymax, ymid);
 
     double best = 0.0;
     std::uint32_t cand = kNone;
@@ -447,20 +408,7 @@ class Builder {
 
     for (std::int64_t row = ymin; row <= ymax; ++row) {
       std::int64_t xl, xr;
-      if (row < ymid) {
-        xl = std::min(lng.ceil(), up.ceil());
-        xr = std::max(lng.floor(), up.floor());
-        up.step();
-      } else if (row > ymid) {
-        xl = std::min(lng.ceil(), down.ceil());
-        xr = std::max(lng.floor(), down.floor());
-        down.step();
-      } else {
-        xl = std::min(lng.ceil(), x[s1]);
-        xr = std::max(lng.floor(), x[s1]);
-        if (ymax > ymid) down.step();
-      }
-      lng.step();
+      rows.next(xl, xr);
       if (xl > xr) continue;
       const std::size_t base = static_cast<std::size_t>(row) * width;
       if (row + kLookaheadRows <= ymax) {  // the span a few rows ahead, roughly

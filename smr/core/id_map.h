@@ -2,7 +2,8 @@
 // linear probing, a power-of-two capacity and a load of at most 1/2. Extraction keeps one entry
 // per op of X, which on a whole-database output is every op: std::unordered_map spends ~40-50
 // bytes per entry on nodes and buckets, this map 2 x (8 + sizeof(V)) at worst, in two arrays.
-// No erase (extraction only adds). The id ~0 is reserved as the empty marker.
+// Erase shifts the following entries of the probe run back (no tombstones). The id ~0 is
+// reserved as the empty marker.
 #pragma once
 
 #include <algorithm>
@@ -47,7 +48,32 @@ class IdMap {
       if (keys_[i] == kEmpty) return nullptr;
     }
   }
+  V* find(std::uint64_t id) { return const_cast<V*>(static_cast<const IdMap&>(*this).find(id)); }
   bool contains(std::uint64_t id) const { return find(id) != nullptr; }
+  /// Removes `id`; false if it was absent.
+  bool erase(std::uint64_t id) {
+    if (size_ == 0) return false;
+    std::size_t i = slot(id);
+    while (keys_[i] != id) {
+      if (keys_[i] == kEmpty) return false;
+      i = (i + 1) & mask_;
+    }
+    // Backward shift: move every later entry of the run whose home is not in (i, j] into i.
+    for (std::size_t j = (i + 1) & mask_; keys_[j] != kEmpty; j = (j + 1) & mask_) {
+      const std::size_t home = slot(keys_[j]);
+      const bool stays = i <= j ? (i < home && home <= j) : (i < home || home <= j);
+      if (stays) continue;
+      keys_[i] = keys_[j];
+      values_[i] = values_[j];
+      i = j;
+    }
+    keys_[i] = kEmpty;
+    --size_;
+    return true;
+  }
+  void reserve(std::size_t n) {
+    while (2 * n > keys_.size()) grow();
+  }
   /// Calls f(id, value) for every entry, in no particular order.
   template <class F>
   void for_each(F&& f) const {

@@ -1,5 +1,5 @@
 // smr/core/id_map.h against std::unordered_map: same contents after random inserts and updates
-// (with growth from empty), lookups of absent ids, iteration visiting each entry once.
+// and erases (with growth from empty), lookups of absent ids, iteration visiting each entry once.
 #include "smr/core/id_map.h"
 
 #include <gtest/gtest.h>
@@ -19,7 +19,10 @@ TEST(IdMap, AgreesWithUnorderedMap) {
     EXPECT_EQ(m.find(3), nullptr);
     for (int i = 0; i < 200000; ++i) {
       const std::uint64_t id = rng() % range;
-      if (rng() % 2) {
+      const std::uint64_t op = rng() % 3;
+      if (op == 2) {
+        ASSERT_EQ(m.erase(id), truth.erase(id) == 1) << id;
+      } else if (op == 1) {
         EXPECT_EQ(m.insert(id), truth.emplace(id, 0).second);
       } else {
         const auto v = static_cast<std::uint32_t>(rng());
