@@ -91,8 +91,8 @@ struct Plane {
 
 /// The vertices of 1-D line samples z[0..n) kept so that linear interpolation between kept
 /// neighbours is within `tol` of every sample (Douglas-Peucker with vertical error), plus every
-/// no-data sample and its neighbours. Deterministic in the samples alone, so the two blocks that
-/// share a border line keep the same vertices.
+/// sample with valid[i] == 0 (no data on or next to it) and its neighbours. Deterministic in the
+/// samples alone, so the two blocks that share a border line keep the same vertices.
 std::vector<int> simplify_line(const std::vector<float>& z, const std::vector<std::uint8_t>& valid,
                                double tol) {
   const int n = static_cast<int>(z.size());
@@ -227,6 +227,10 @@ class Builder {
     return w;
   }
 
+  static Heightfield crop(const Heightfield& h, int col0, int row0, int w, int hh) {
+    return HeightfieldWindows(h).read(col0, row0, w, hh);
+  }
+
   // ---- phase 1: a leaf block's greedy TIN, then its level-0 decimation with exact errors ----
   using Clock = std::chrono::steady_clock;
   static double since(Clock::time_point& t) {
@@ -237,25 +241,48 @@ class Builder {
   }
 
   void leaf_block(int bx, int by, Clock::time_point& clock) {
-    const Heightfield w = window(bx, by);
+    // The block's window and a halo of one sample around it, which the border rule below reads:
+    // both blocks that share a border line see the same samples on either side of it.
+    const int c0 = block_col0(bx), r0 = block_row0(by);
+    const int hc0 = std::max(0, c0 - 1), hr0 = std::max(0, r0 - 1);
+    const int hc1 = std::min(W_ - 1, block_col1(bx) + 1),
+              hr1 = std::min(H_ - 1, block_row1(by) + 1);
+    const Heightfield halo = dem_.read(hc0, hr0, hc1 - hc0 + 1, hr1 - hr0 + 1);
+    const Heightfield w =
+        crop(halo, c0 - hc0, r0 - hr0, block_col1(bx) - c0 + 1, block_row1(by) - r0 + 1);
+    stats_.max_block_samples = std::max<std::uint64_t>(stats_.max_block_samples, halo.z.size());
     ++stats_.leaf_blocks;
     stats_.samples += w.z.size();
-    const int c0 = block_col0(bx), r0 = block_row0(by);
     const int ww = w.width, wh = w.height;
     const double line_tol = stop_error_ * 0.999;  // below the 2-D test, whatever its rounding
     GreedyTinOptions g;
     g.max_error = opt_.max_error;
     g.tolerance = tol_;
     g.allow_no_data_only = true;
+    g.freeze_border = true;
+    // A border line's vertices: its 1-D simplification, plus every sample of it next to a no-data
+    // sample (on the line or either side of it), so that the holes' edges need no other border
+    // vertex.
+    auto no_data_near = [&](int c, int r) {  // grid coordinates
+      if (!halo.has_nodata()) return false;
+      for (int dr = -1; dr <= 1; ++dr) {
+        for (int dc = -1; dc <= 1; ++dc) {
+          const int hc = c + dc - hc0, hr = r + dr - hr0;
+          if (hc < 0 || hr < 0 || hc >= halo.width || hr >= halo.height) continue;
+          if (!halo.has_data(hc, hr)) return true;
+        }
+      }
+      return false;
+    };
     auto border = [&](bool horizontal, int fixed) {
       const int n = horizontal ? ww : wh;
       std::vector<float> z(n);
       std::vector<std::uint8_t> valid;
-      if (w.has_nodata()) valid.resize(n);
+      if (halo.has_nodata()) valid.resize(n);
       for (int i = 0; i < n; ++i) {
         const int c = horizontal ? i : fixed, r = horizontal ? fixed : i;
         z[i] = w.at(c, r);
-        if (w.has_nodata()) valid[i] = w.has_data(c, r) ? 1 : 0;
+        if (halo.has_nodata()) valid[i] = no_data_near(c0 + c, r0 + r) ? 0 : 1;
       }
       for (int i : simplify_line(z, valid, line_tol)) {
         g.initial_vertices.push_back(horizontal

@@ -427,7 +427,9 @@ class Builder {
         }
         continue;
       }
+      const bool frozen_row = opt_.freeze_border && (row == 0 || row == dem_.height - 1);
       for (std::int64_t col = xl; col <= xr; ++col) {
+        if (opt_.freeze_border && (frozen_row || col == 0 || col == dem_.width - 1)) continue;
         const bool v = valid[base + col] != 0;
         if (t.is_void) {
           // A void triangle may hold valid samples only at its own vertices.

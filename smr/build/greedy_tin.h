@@ -26,6 +26,10 @@ struct GreedyTinOptions {
   /// Grid samples (col, row) put into R^0 besides the corners (smr/build/block_tin.cpp: a block's
   /// border vertices, which its neighbour shares).
   std::vector<std::pair<std::uint32_t, std::uint32_t>> initial_vertices;
+  /// Never insert a sample of the grid's outer rows and columns (a block whose border vertices
+  /// are given in initial_vertices and shared with its neighbours). Applies to DEMs with no-data
+  /// samples; without them a border sample is inserted only if its error exceeds max_error.
+  bool freeze_border = false;
   /// The error below which a sample counts as exact; negative = exact_tolerance(dem).
   double tolerance = -1.0;
   /// Accept a DEM without a single valid sample (a block of a larger one): its mesh is void.

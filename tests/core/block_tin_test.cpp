@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cstdio>
 #include <map>
 #include <tuple>
@@ -39,7 +40,8 @@ struct Built {
 BlockTinOptions options(const test::Dataset& d, bool overlay) {
   BlockTinOptions opt;
   opt.max_error = d.max_error;
-  opt.block_cells = 32;
+  // Several levels on every dataset (jacksboro, 403 x 344, has 3 with 64-cell blocks).
+  opt.block_cells = d.dem.width > 300 ? 64 : 32;
   // Overlay: only the leaf level has exact bounds, every level above the conservative ones.
   if (overlay) opt.exact_window_samples = 0;
   return opt;
@@ -109,6 +111,9 @@ TEST_P(PerDataset, EveryFragmentTriangleMeetsItsStoredBound) {
 }
 
 TEST_P(PerDataset, CutsAcrossBlockBordersTileAndMeetTheRcf) {
+  if (std::get<1>(GetParam()) && std::get<0>(GetParam()) == "jacksboro") {
+    GTEST_SKIP() << "CI time: the other datasets cover overlay bounds in cuts";
+  }
   const test::Dataset& d = data();
   const Crmr& m = build().crmr;
   std::uint64_t cases = 0, edges = 0, non_delaunay = 0;
@@ -167,6 +172,7 @@ TEST_P(PerDataset, UniformErrorCutsAreAboutAsSmallAsTheGreedyTins) {
 }
 
 TEST_P(PerDataset, BuildIsDeterministic) {
+  if (std::get<1>(GetParam())) GTEST_SKIP() << "the same code as the exact configuration";
   const test::Dataset& d = data();
   const HeightfieldWindows windows(d.dem);
   const Crmr again = build_block_tin(windows, options(d, std::get<1>(GetParam())));
@@ -185,6 +191,75 @@ INSTANTIATE_TEST_SUITE_P(Dems, PerDataset,
                            return std::get<0>(p.param) +
                                   (std::get<1>(p.param) ? "_overlay" : "_exact");
                          });
+
+/// Valid samples inside a void triangle of the finest mesh (other than its corners): a hole that
+/// swallowed data. check_error_bound catches the converse (a valid triangle over no data).
+std::uint64_t valid_samples_under_void(const Crmr& m, const Heightfield& dem) {
+  std::uint64_t bad = 0;
+  for (const TriRef& ref : finest(m)) {
+    const Op& op = m.ops[ref.op.value];
+    const FragmentTriangle& t = op.fragment[ref.index];
+    if (!t.is_void()) continue;
+    std::array<GridPoint, 3> g;
+    for (int k = 0; k < 3; ++k) g[k] = to_grid(m.header, op.position(t, k));
+    const auto [x0, x1] = std::minmax({g[0].x, g[1].x, g[2].x});
+    const auto [y0, y1] = std::minmax({g[0].y, g[1].y, g[2].y});
+    for (std::int64_t y = y0; y <= y1; ++y) {
+      for (std::int64_t x = x0; x <= x1; ++x) {
+        const GridPoint p{x, y};
+        if (orient(g[0], g[1], p) < 0 || orient(g[1], g[2], p) < 0 || orient(g[2], g[0], p) < 0)
+          continue;
+        if (p == g[0] || p == g[1] || p == g[2]) continue;
+        bad += dem.has_data(static_cast<int>(x), static_cast<int>(y)) ? 1 : 0;
+      }
+    }
+  }
+  return bad;
+}
+
+TEST_P(PerDataset, NoDataHolesAreExactAtTheFinestLevel) {
+  const test::Dataset& d = data();
+  if (!d.dem.has_nodata()) GTEST_SKIP() << "no holes";
+  EXPECT_EQ(valid_samples_under_void(build().crmr, d.dem), 0u);
+}
+
+TEST(BlockTin, HolesThatCrossBlockBordersStayExact) {
+  // A disc and a stripe of no data across many 16-cell block borders, and a fully empty block.
+  Heightfield h = make_fbm(161, 129, 8, 500.0, 0, 0.5, 10.0);
+  h.valid.assign(h.z.size(), 1);
+  for (int r = 0; r < h.height; ++r) {
+    for (int c = 0; c < h.width; ++c) {
+      const bool disc = (c - 60) * (c - 60) + (r - 70) * (r - 70) < 27 * 27;
+      const bool stripe = c >= 110 && c <= 113 && r > 10;
+      const bool block = c >= 128 && r >= 96 && c <= 144 && r <= 112;
+      if (disc || stripe || block) h.valid[h.index(c, r)] = 0;
+    }
+  }
+  BlockTinOptions opt;
+  opt.max_error = 2.0;
+  opt.block_cells = 16;
+  BlockTinStats st;
+  const Crmr m = build_block_tin(HeightfieldWindows(h), opt, &st);
+  const InvariantReport inv = check_crmr(m);
+  EXPECT_TRUE(inv.ok()) << inv.summary();
+  EXPECT_EQ(valid_samples_under_void(m, h), 0u);
+  Crmr swallowed = m;  // the oracle sees a hole that swallows data
+  for (Op& op : swallowed.ops) {
+    for (FragmentTriangle& t : op.fragment) t.flags |= FragmentTriangle::kVoid;
+  }
+  EXPECT_GT(valid_samples_under_void(swallowed, h), 0u);
+  std::vector<TriRef> all;
+  for (const Op& op : m.ops) {
+    for (std::uint32_t i = 0; i < op.fragment.size(); ++i) all.push_back({op.id, i});
+  }
+  const test::OracleResult r = test::check_error_bound(m, all, h);
+  EXPECT_TRUE(r.ok()) << r.first_failure;
+  for (const test::NamedSpec& ns : test::rcf_spread(m.header)) {
+    const Extraction e = extract_minimal_surface(m, make_rcf(ns.spec, ModelKind::kTerrain, &h));
+    const InvariantReport tiling = check_tiling(m, e.triangles);
+    EXPECT_TRUE(tiling.ok()) << ns.name << ": " << tiling.summary();
+  }
+}
 
 TEST(BlockTin, LosslessBuildReproducesEverySample) {
   const Heightfield h = make_fbm(97, 81, 3, 1000.0, 0, 0.5, 10.0);
