@@ -275,9 +275,8 @@ struct IngestArgs {
            " z-quantum=" + number(z_quantum) + " page-kb=" + std::to_string(page_kb) +
            (is_mesh() ? std::string(" repair=") + (repair ? "yes" : "no") + " coalesce=" +
                             std::to_string(coalesce) + " coalesce-ratio=" + number(coalesce_ratio)
-                      : std::string(" builder=") + builder +
-                            (builder == "blocks" ? " block-cells=" + std::to_string(block_cells)
-                                                 : std::string()));
+            : builder == "blocks" ? " builder=blocks block-cells=" + std::to_string(block_cells)
+                                  : std::string());
   }
 };
 
