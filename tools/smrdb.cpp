@@ -188,6 +188,7 @@ struct IngestArgs {
   double coalesce_ratio = 0.7;
   std::string builder = "greedy";
   int block_cells = 256;
+  std::string tmp_dir;
 
   bool is_mesh() const { return smr::is_mesh_path(dem); }
 
@@ -222,6 +223,9 @@ struct IngestArgs {
     app.add_option("--block-cells", block_cells,
                    "DEMs, --builder blocks: side of a leaf block in grid cells (a power of two)")
         ->capture_default_str();
+    app.add_option("--tmp", tmp_dir,
+                   "DEMs, --builder blocks: directory for the scratch copy of the samples "
+                   "(default: the system's temporary directory)");
     app.add_option("--codec", codec, "Geometry codec of the pages: draco, zstd or raw")
         ->capture_default_str();
     app.add_option("--z-quantum", z_quantum,
@@ -257,6 +261,7 @@ struct IngestArgs {
           "--max-vertices and --base-vertices apply to --builder greedy; the block "
           "builder refines to --max-error and decimates down to the corners");
     }
+    if (!tmp_dir.empty() && builder != "blocks") throw_input("--tmp applies to --builder blocks");
     if (block_cells < 8 || (block_cells & (block_cells - 1)) != 0)
       throw_input("--block-cells must be a power of two, at least 8, got " +
                   std::to_string(block_cells));
@@ -311,6 +316,7 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
     smr::BlockTinOptions opt;
     opt.max_error = a.max_error;
     opt.block_cells = a.block_cells;
+    opt.tmp_dir = a.tmp_dir;
     opt.progress = [&](double f) { progress.update(0.8 * f); };
     smr::BlockTinStats st;
     crmr = smr::build_block_tin(*dem, opt, &st);
@@ -334,6 +340,7 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
                         {"samples_rescanned", st.samples_rescanned},
                         {"samples_scanned", st.samples_scanned},
                         {"plans", st.plans},
+                        {"temp_bytes", st.temp_bytes},
                         {"seconds",
                          {{"survey", st.seconds_survey},
                           {"read", st.seconds_read},

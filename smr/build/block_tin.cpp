@@ -9,7 +9,9 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <limits>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
@@ -18,6 +20,7 @@
 #include "smr/build/triangle_rows.h"
 #include "smr/core/id_map.h"
 #include "storage/error.h"
+#include "storage/temp_file.h"
 
 namespace smr {
 namespace {
@@ -137,6 +140,94 @@ std::vector<int> simplify_line(const std::vector<float>& z, const std::vector<st
   return out;
 }
 
+/// The DEM's samples, copied block by block to a scratch file as the leaf pass reads them, so the
+/// upper levels re-read their windows from it (page cache, plain floats) instead of decoding the
+/// source again. Tile (tx, ty) holds the samples the leaf block (tx, ty) owns: columns
+/// [tx * B, tx * B + B), the last tile column and row up to the raster's edge (B + 1).
+class SampleSpill {
+ public:
+  SampleSpill(const std::string& dir, int width, int height, int b, int nx, int ny)
+      : W_(width),
+        H_(height),
+        B_(b),
+        nx_(nx),
+        ny_(ny),
+        stride_(std::uint64_t(b + 1) * std::uint64_t(b + 1)),
+        file_(dir, std::uint64_t(nx) * std::uint64_t(ny) * stride_ * 5) {}
+
+  /// Stores tile (tx, ty) from window w, whose sample (0, 0) is grid (c0, r0).
+  void put(int tx, int ty, const Heightfield& w, int c0, int r0) {
+    const auto [cw, rh] = owned(tx, ty);
+    std::vector<float> z(static_cast<std::size_t>(cw) * static_cast<std::size_t>(rh));
+    std::vector<std::uint8_t> v(z.size(), 1);
+    for (int r = 0; r < rh; ++r) {
+      for (int c = 0; c < cw; ++c) {
+        const std::size_t i = std::size_t(r) * std::size_t(cw) + std::size_t(c);
+        z[i] = w.at(tx * B_ - c0 + c, ty * B_ - r0 + r);
+        v[i] = w.has_data(tx * B_ - c0 + c, ty * B_ - r0 + r) ? 1 : 0;
+      }
+    }
+    const std::uint64_t at = offset(tx, ty);
+    file_.write(at, z.data(), z.size() * sizeof(float));
+    file_.write(at + stride_ * sizeof(float), v.data(), v.size());
+  }
+
+  /// Samples [col0, col0 + w) x [row0, row0 + h), as RasterWindows::read; every tile must be put.
+  Heightfield read(int col0, int row0, int w, int h, const Heightfield& like) const {
+    Heightfield out;
+    out.width = w;
+    out.height = h;
+    out.source = like.source;
+    out.georef = like.georef;
+    out.georef.x0 += col0 * like.georef.dx;
+    out.georef.y0 += row0 * like.georef.dy;
+    out.z.resize(std::size_t(w) * std::size_t(h));
+    out.valid.resize(out.z.size());
+    std::vector<float> z;
+    std::vector<std::uint8_t> v;
+    const int tx0 = tile_of(col0, nx_), tx1 = tile_of(col0 + w - 1, nx_);
+    const int ty0 = tile_of(row0, ny_), ty1 = tile_of(row0 + h - 1, ny_);
+    bool any_invalid = false;
+    for (int ty = ty0; ty <= ty1; ++ty) {
+      for (int tx = tx0; tx <= tx1; ++tx) {
+        const auto [cw, rh] = owned(tx, ty);
+        z.resize(std::size_t(cw) * std::size_t(rh));
+        v.resize(z.size());
+        const std::uint64_t at = offset(tx, ty);
+        file_.read(at, z.data(), z.size() * sizeof(float));
+        file_.read(at + stride_ * sizeof(float), v.data(), v.size());
+        const int c_lo = std::max(col0, tx * B_), c_hi = std::min(col0 + w, tx * B_ + cw);
+        const int r_lo = std::max(row0, ty * B_), r_hi = std::min(row0 + h, ty * B_ + rh);
+        for (int r = r_lo; r < r_hi; ++r) {
+          for (int c = c_lo; c < c_hi; ++c) {
+            const std::size_t i =
+                std::size_t(r - ty * B_) * std::size_t(cw) + std::size_t(c - tx * B_);
+            const std::size_t o = out.index(c - col0, r - row0);
+            out.z[o] = z[i];
+            out.valid[o] = v[i];
+            any_invalid |= v[i] == 0;
+          }
+        }
+      }
+    }
+    if (!any_invalid) out.valid.clear();
+    return out;
+  }
+  std::uint64_t bytes() const { return file_.bytes_written(); }
+
+ private:
+  std::pair<int, int> owned(int tx, int ty) const {
+    return {tx == nx_ - 1 ? W_ - tx * B_ : B_, ty == ny_ - 1 ? H_ - ty * B_ : B_};
+  }
+  int tile_of(int x, int n) const { return std::min(x / B_, n - 1); }
+  std::uint64_t offset(int tx, int ty) const {
+    return (std::uint64_t(ty) * std::uint64_t(nx_) + std::uint64_t(tx)) * stride_ * 5;
+  }
+  int W_, H_, B_, nx_, ny_;
+  std::uint64_t stride_;
+  storage::TempFile file_;
+};
+
 class Builder {
  public:
   Builder(const RasterWindows& dem, const BlockTinOptions& opt, BlockTinStats& stats)
@@ -154,6 +245,8 @@ class Builder {
       throw_input("max_error must be a finite number >= 0");
     }
     B_ = opt.block_cells;
+    like_.source = dem.source();
+    like_.georef = dem.georef();
     bw_ = (W_ - 2) / B_ + 1;
     bh_ = (H_ - 2) / B_ + 1;
     int span = 1;
@@ -171,7 +264,19 @@ class Builder {
       into += std::chrono::duration<double>(now - t).count();
       t = now;
     };
-    survey();
+    // A lossless build needs the DEM's largest |z| before any block (its tolerance decides which
+    // errors are zero, on both sides of every border): one pass reads it. With a max error, the
+    // tolerance only rounds bounds outward, and each block's own samples raise it as they come.
+    if (levels_ > 0 && opt_.exact_window_samples > 0) {
+      const std::string dir =
+          opt_.tmp_dir.empty() ? std::filesystem::temp_directory_path().string() : opt_.tmp_dir;
+      spill_ = std::make_unique<SampleSpill>(dir, W_, H_, B_, bw_, bh_);
+    }
+    if (opt_.max_error == 0.0) {
+      survey();
+    } else {
+      stop_error_ = eps0_ = opt_.max_error;
+    }
     lap(stats_.seconds_survey);
     for (int by = 0; by < bh_; ++by) {
       for (int bx = 0; bx < bw_; ++bx) {
@@ -179,6 +284,7 @@ class Builder {
         report(0.7 * double(by * bw_ + bx + 1) / double(bw_ * bh_));
       }
     }
+    if (valid_samples_ == 0) throw_input(dem_.source() + ": every sample is no data");
     finest_vertices_ = verts_.size();
     for (int level = 1; level <= levels_; ++level) {
       upper_level(level);
@@ -251,6 +357,13 @@ class Builder {
     const Heightfield w =
         crop(halo, c0 - hc0, r0 - hr0, block_col1(bx) - c0 + 1, block_row1(by) - r0 + 1);
     stats_.max_block_samples = std::max<std::uint64_t>(stats_.max_block_samples, halo.z.size());
+    if (spill_) spill_->put(bx, by, w, c0, r0);
+    for (std::size_t i = 0; i < w.z.size(); ++i) {
+      if (!w.valid.empty() && w.valid[i] == 0) continue;
+      ++valid_samples_;
+      if (opt_.max_error != 0.0) tol_ = std::max(tol_, 1e-9 * std::abs(double(w.z[i])));
+    }
+    if (opt_.max_error != 0.0) tol_ = std::max(tol_, 1e-9);
     ++stats_.leaf_blocks;
     stats_.samples += w.z.size();
     const int ww = w.width, wh = w.height;
@@ -740,7 +853,8 @@ class Builder {
         if (vs.empty()) continue;
         const int c0 = bx * span, r0 = by * span;
         const int c1 = std::min(c0 + span, W_ - 1), r1 = std::min(r0 + span, H_ - 1);
-        const Heightfield w = dem_.read(c0, r0, c1 - c0 + 1, r1 - r0 + 1);
+        const Heightfield w = spill_ ? spill_->read(c0, r0, c1 - c0 + 1, r1 - r0 + 1, like_)
+                                     : dem_.read(c0, r0, c1 - c0 + 1, r1 - r0 + 1);
         stats_.max_block_samples = std::max<std::uint64_t>(stats_.max_block_samples, w.z.size());
         stats_.samples_rescanned += w.z.size();
         decimate_level(level, &w, c0, r0, &vs);
@@ -953,6 +1067,7 @@ class Builder {
     }
     stats_.finest_vertices = finest_vertices_;
     stats_.samples_scanned = scanned_;
+    stats_.temp_bytes = spill_ ? spill_->bytes() : 0;
     stats_.plans = plans_;
     stats_.finest_triangles = finest_triangles_;
     stats_.base_triangles = base.size();
@@ -1080,6 +1195,9 @@ class Builder {
   BlockTinStats& stats_;
   const int W_, H_;
   int B_ = 256, bw_ = 1, bh_ = 1, levels_ = 0;
+  std::uint64_t valid_samples_ = 0;
+  std::unique_ptr<SampleSpill> spill_;
+  Heightfield like_;  // an empty window: the source's name and georef
   double tol_ = 0.0, range_ = 0.0, stop_error_ = 0.0, eps0_ = 0.0, err_final_ = 0.0;
   std::uint64_t finest_vertices_ = 0, finest_triangles_ = 0;
   std::vector<MVert> verts_;

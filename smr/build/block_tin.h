@@ -31,6 +31,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <string>
 
 #include "smr/core/crmr.h"
 #include "smr/core/heightfield.h"
@@ -48,6 +49,9 @@ struct BlockTinOptions {
   /// block with exact error bounds, re-reading each block's window; larger blocks use the
   /// conservative overlay bound. Sizes the largest window held in memory (4 + 1 bytes a sample).
   std::uint64_t exact_window_samples = std::uint64_t{16} << 20;
+  /// Directory of the scratch file holding the samples for the upper levels' re-reads (empty =
+  /// the system's temporary directory). Checked for room before any work.
+  std::string tmp_dir;
   /// Progress in [0, 1].
   std::function<void(double)> progress;
 };
@@ -67,6 +71,7 @@ struct BlockTinStats {
   std::uint64_t samples_rescanned = 0;   // samples re-read for them
   std::uint64_t samples_scanned = 0;     // sample visits of exact bounds
   std::uint64_t plans = 0;               // removals planned (evaluated)
+  std::uint64_t temp_bytes = 0;          // written to the scratch file
   // Wall time: survey pass, leaf windows read, leaf greedy TINs, leaf decimation, upper levels
   // (with their reads), assembling the CRMR.
   double seconds_survey = 0, seconds_read = 0, seconds_greedy = 0, seconds_level0 = 0,

@@ -12,6 +12,7 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <limits>
@@ -29,7 +30,15 @@ namespace {
 
 void ensure_registered() {
   static std::once_flag once;
-  std::call_once(once, [] { GDALAllRegister(); });
+  std::call_once(once, [] {
+    GDALAllRegister();
+    // GDAL's block cache defaults to 5 % of the machine's memory (1.2 GiB here), which a reader
+    // that copies every window out at once does not need: decoded tiles are read once per
+    // window. 64 MiB unless the user chose (GDAL_CACHEMAX).
+    if (std::getenv("GDAL_CACHEMAX") == nullptr) {
+      GDALSetCacheMax64(std::min<GIntBig>(GDALGetCacheMax64(), GIntBig{64} << 20));
+    }
+  });
 }
 
 // Keeps GDAL from printing to stderr while alive (GDAL's handler stack is per thread) and records
