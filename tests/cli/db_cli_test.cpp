@@ -608,6 +608,9 @@ TEST_F(DbCli, BlockIngestOfATiledGeoTiffIsDeterministicAndSurvivesKills) {
   expect_user_error("ingest " + tif + " --builder blocks --block-cells 12 -o " + path("d.smrdb"),
                     "--block-cells");
   expect_user_error("ingest " + tif + " --builder fastest -o " + path("d.smrdb"), "--builder");
+  expect_user_error("ingest " + tif + " --builder blocks --block-cells 16 --tmp " +
+                        path("no-such-dir") + " -o " + path("d.smrdb"),
+                    "no-such-dir");
   expect_user_error("ingest " + tif + " --builder blocks --max-vertices 100 -o " + path("d.smrdb"),
                     "--max-vertices");
   EXPECT_FALSE(fs::exists(path("d.smrdb")));
