@@ -22,16 +22,6 @@
 namespace smr {
 namespace {
 
-std::vector<TriRef> finest(const Crmr& m) {
-  std::vector<TriRef> out;
-  for (const Op& op : m.ops) {
-    for (std::uint32_t i = 0; i < op.fragment.size(); ++i) {
-      if (!op.fragment[i].killer.valid()) out.push_back({op.id, i});
-    }
-  }
-  return out;
-}
-
 struct Built {
   Crmr crmr;
   BlockTinStats stats;
@@ -102,7 +92,7 @@ TEST_P(PerDataset, EveryFragmentTriangleMeetsItsStoredBound) {
   }
   const test::OracleResult r = test::check_error_bound(b.crmr, all, d.dem);
   EXPECT_TRUE(r.ok()) << r.failures << " samples over the bound; first: " << r.first_failure;
-  const auto fin = finest(b.crmr);
+  const auto fin = test::finest_mesh(b.crmr);
   const test::OracleResult f = test::check_error_bound(b.crmr, fin, d.dem);
   EXPECT_TRUE(f.ok()) << f.first_failure;
   if (!d.dem.has_nodata()) {
@@ -196,7 +186,7 @@ INSTANTIATE_TEST_SUITE_P(Dems, PerDataset,
 /// swallowed data. check_error_bound catches the converse (a valid triangle over no data).
 std::uint64_t valid_samples_under_void(const Crmr& m, const Heightfield& dem) {
   std::uint64_t bad = 0;
-  for (const TriRef& ref : finest(m)) {
+  for (const TriRef& ref : test::finest_mesh(m)) {
     const Op& op = m.ops[ref.op.value];
     const FragmentTriangle& t = op.fragment[ref.index];
     if (!t.is_void()) continue;
@@ -269,7 +259,7 @@ TEST(BlockTin, LosslessBuildReproducesEverySample) {
   EXPECT_EQ(m.header.err_final, 0.0);
   const InvariantReport inv = check_crmr(m);
   EXPECT_TRUE(inv.ok()) << inv.summary();
-  const auto tris = finest(m);
+  const auto tris = test::finest_mesh(m);
   const test::OracleResult r = test::check_error_bound(m, tris, h);
   EXPECT_TRUE(r.ok()) << r.first_failure;
   EXPECT_GE(r.checked, h.sample_count());

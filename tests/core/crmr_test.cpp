@@ -15,16 +15,6 @@
 namespace smr {
 namespace {
 
-std::vector<TriRef> finest(const Crmr& m) {
-  std::vector<TriRef> out;
-  for (const Op& op : m.ops) {
-    for (std::uint32_t i = 0; i < op.fragment.size(); ++i) {
-      if (!op.fragment[i].killer.valid()) out.push_back({op.id, i});
-    }
-  }
-  return out;
-}
-
 class PerDataset : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(PerDataset, InvariantsHoldAfterBuild) {
@@ -49,7 +39,7 @@ TEST(Checker, NoticesPreFCornersThatDisagreeWithTheCreator) {
 
 TEST_P(PerDataset, FinestMeshMeetsTheStoredErrorBound) {
   const test::Dataset& d = test::dataset(GetParam());
-  const auto tris = finest(d.crmr);
+  const auto tris = test::finest_mesh(d.crmr);
   const test::OracleResult r = test::check_error_bound(d.crmr, tris, d.dem);
   EXPECT_TRUE(r.ok()) << r.failures << " samples over the bound; first: " << r.first_failure;
   EXPECT_GT(r.checked, d.dem.sample_count() / 2);
@@ -73,7 +63,7 @@ TEST_P(PerDataset, LosslessBuildReproducesEverySample) {
   opt.max_error = 0.0;
   const Crmr m = build_greedy_tin(h, opt);
   EXPECT_EQ(m.header.err_final, 0.0);
-  const auto tris = finest(m);
+  const auto tris = test::finest_mesh(m);
   const test::OracleResult r = test::check_error_bound(m, tris, h);  // bound = error_at(1) = 0
   EXPECT_TRUE(r.ok()) << r.first_failure;
   const InvariantReport inv = check_crmr(m);
@@ -122,7 +112,7 @@ TEST(GreedyTin, VertexBudgetStopsTheBuild) {
   EXPECT_LE(m.header.vertex_count, 520u);
   EXPECT_GT(m.header.err_final, 0.0);
   EXPECT_TRUE(check_crmr(m).ok());
-  const test::OracleResult r = test::check_error_bound(m, finest(m), h);
+  const test::OracleResult r = test::check_error_bound(m, test::finest_mesh(m), h);
   EXPECT_TRUE(r.ok()) << r.first_failure;
 }
 
@@ -142,7 +132,7 @@ TEST(GreedyTin, NoDataHolesAreTriangulatedExactly) {
   const test::Dataset& d = test::dataset("elev");
   ASSERT_TRUE(d.dem.has_nodata());
   std::uint64_t void_tris = 0, valid_tris = 0;
-  for (const TriRef& t : finest(d.crmr)) {
+  for (const TriRef& t : test::finest_mesh(d.crmr)) {
     if (d.crmr.triangle(t).is_void()) {
       ++void_tris;
     } else {

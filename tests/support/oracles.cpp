@@ -12,6 +12,16 @@
 
 namespace smr::test {
 
+std::vector<TriRef> finest_mesh(const Crmr& m) {
+  std::vector<TriRef> out;
+  for (const Op& op : m.ops) {
+    for (std::uint32_t i = 0; i < op.fragment.size(); ++i) {
+      if (!op.fragment[i].killer.valid()) out.push_back({op.id, i});
+    }
+  }
+  return out;
+}
+
 namespace {
 std::string tri_name(const TriRef& t) {
   return "op " + std::to_string(t.op.value) + " triangle " + std::to_string(t.index);

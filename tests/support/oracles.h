@@ -26,6 +26,9 @@ struct OracleResult {
   bool ok() const { return failures == 0; }
 };
 
+/// The finest mesh M^m: every fragment triangle no op replaces.
+std::vector<TriRef> finest_mesh(const Crmr& m);
+
 /// Every grid sample in the closed (non-void) triangle deviates from the triangle's plane by no
 /// more than error_at(death_res) (+ a float-rounding tolerance). No-data samples are skipped.
 OracleResult check_error_bound(const OpSource& source, std::span<const TriRef> triangles,
