@@ -583,8 +583,8 @@ TEST_F(DbCli, BlockIngestOfATiledGeoTiffIsDeterministicAndSurvivesKills) {
 
   const std::string target = path("c.smrdb");
   const std::vector<std::string> ingest = {
-      "ingest",      tif, "--builder", "blocks", "--block-cells", "16",
-      "--max-error", "1", "-q",        "-o",     target};
+      "ingest", tif,  "--builder", "blocks", "--block-cells", "16", "--max-error",
+      "1",      "-q", "--force",   "-o",     target};
   const auto t0 = Clock::now();
   ASSERT_EQ(wait_for(spawn_smrdb(ingest)), 0);
   const double full = std::chrono::duration<double>(Clock::now() - t0).count();
@@ -599,7 +599,8 @@ TEST_F(DbCli, BlockIngestOfATiledGeoTiffIsDeterministicAndSurvivesKills) {
     if (fs::exists(target)) {
       EXPECT_EQ(read_file(target), bytes) << "run " << i << " left a different database";
     }
-    ASSERT_EQ(wait_for(spawn_smrdb(ingest)), 0);  // the re-run
+    // The re-run (--force: the killed run may have finished, leaving the complete database).
+    ASSERT_EQ(wait_for(spawn_smrdb(ingest)), 0);
     EXPECT_EQ(read_file(target), bytes) << "the re-run after kill " << i << " differs";
     for (const std::string& t : stale_temps(target)) fs::remove(t);
   }
