@@ -173,14 +173,8 @@ class SampleSpill {
   }
 
   /// Samples [col0, col0 + w) x [row0, row0 + h), as RasterWindows::read; every tile must be put.
-  Heightfield read(int col0, int row0, int w, int h, const Heightfield& like) const {
-    Heightfield out;
-    out.width = w;
-    out.height = h;
-    out.source = like.source;
-    out.georef = like.georef;
-    out.georef.x0 += col0 * like.georef.dx;
-    out.georef.y0 += row0 * like.georef.dy;
+  Heightfield read(int col0, int row0, int w, int h, const RasterWindows& source) const {
+    Heightfield out = window_header(source.georef(), source.source(), col0, row0, w, h);
     out.z.resize(std::size_t(w) * std::size_t(h));
     out.valid.resize(out.z.size());
     std::vector<float> z;
@@ -245,8 +239,6 @@ class Builder {
       throw_input("max_error must be a finite number >= 0");
     }
     B_ = opt.block_cells;
-    like_.source = dem.source();
-    like_.georef = dem.georef();
     bw_ = (W_ - 2) / B_ + 1;
     bh_ = (H_ - 2) / B_ + 1;
     int span = 1;
@@ -853,7 +845,7 @@ class Builder {
         if (vs.empty()) continue;
         const int c0 = bx * span, r0 = by * span;
         const int c1 = std::min(c0 + span, W_ - 1), r1 = std::min(r0 + span, H_ - 1);
-        const Heightfield w = spill_ ? spill_->read(c0, r0, c1 - c0 + 1, r1 - r0 + 1, like_)
+        const Heightfield w = spill_ ? spill_->read(c0, r0, c1 - c0 + 1, r1 - r0 + 1, dem_)
                                      : dem_.read(c0, r0, c1 - c0 + 1, r1 - r0 + 1);
         stats_.max_block_samples = std::max<std::uint64_t>(stats_.max_block_samples, w.z.size());
         stats_.samples_rescanned += w.z.size();
@@ -1197,7 +1189,6 @@ class Builder {
   int B_ = 256, bw_ = 1, bh_ = 1, levels_ = 0;
   std::uint64_t valid_samples_ = 0;
   std::unique_ptr<SampleSpill> spill_;
-  Heightfield like_;  // an empty window: the source's name and georef
   double tol_ = 0.0, range_ = 0.0, stop_error_ = 0.0, eps0_ = 0.0, err_final_ = 0.0;
   std::uint64_t finest_vertices_ = 0, finest_triangles_ = 0;
   std::vector<MVert> verts_;

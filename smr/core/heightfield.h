@@ -54,6 +54,20 @@ struct Heightfield {
   }
 };
 
+/// The header of window [col0, col0 + w) x [row0, row0 + h) of a raster with `georef` (its
+/// sample (0, 0) is the raster's (col0, row0)); no samples yet.
+inline Heightfield window_header(const Georef& georef, const std::string& source, int col0,
+                                 int row0, int w, int h) {
+  Heightfield out;
+  out.width = w;
+  out.height = h;
+  out.source = source;
+  out.georef = georef;
+  out.georef.x0 += col0 * georef.dx;
+  out.georef.y0 += row0 * georef.dy;
+  return out;
+}
+
 /// Read access to a DEM one window at a time, so that a builder never needs the whole grid in
 /// memory (smr/build/block_tin.h). Windows follow the Heightfield conventions: row 0 is the south.
 class RasterWindows {
@@ -78,13 +92,7 @@ class HeightfieldWindows final : public RasterWindows {
   const Georef& georef() const override { return h_.georef; }
   const std::string& source() const override { return h_.source; }
   Heightfield read(int col0, int row0, int w, int h) const override {
-    Heightfield out;
-    out.width = w;
-    out.height = h;
-    out.source = h_.source;
-    out.georef = h_.georef;
-    out.georef.x0 += col0 * h_.georef.dx;
-    out.georef.y0 += row0 * h_.georef.dy;
+    Heightfield out = window_header(h_.georef, h_.source, col0, row0, w, h);
     out.z.resize(static_cast<std::size_t>(w) * static_cast<std::size_t>(h));
     bool any_invalid = false;
     if (h_.has_nodata()) out.valid.resize(out.z.size());

@@ -174,13 +174,7 @@ class GdalWindows final : public RasterWindows {
       throw_internal("'" + path_ + "': window outside the raster");
     }
     GdalErrors errors;
-    Heightfield out;
-    out.width = w;
-    out.height = h;
-    out.source = path_;
-    out.georef = georef_;
-    out.georef.x0 += col0 * georef_.dx;
-    out.georef.y0 += row0 * georef_.dy;
+    Heightfield out = window_header(georef_, path_, col0, row0, w, h);
     // File lines of the window, the first one first.
     const int line0 = north_up_ ? height_ - row0 - h : row0;
     const std::size_t n = static_cast<std::size_t>(w) * static_cast<std::size_t>(h);
