@@ -107,17 +107,17 @@ std::vector<int> simplify_line(const std::vector<float>& z, const std::vector<st
       for (int j = std::max(0, i - 1); j <= std::min(n - 1, i + 1); ++j) keep[j] = 1;
     }
   }
-  std::vector<std::pair<int, int>> todo;
+  std::vector<std::pair<int, int>> pending;
   int prev = 0;
   for (int i = 1; i < n; ++i) {
     if (keep[i]) {
-      if (i - prev > 1) todo.push_back({prev, i});
+      if (i - prev > 1) pending.push_back({prev, i});
       prev = i;
     }
   }
-  while (!todo.empty()) {
-    auto [lo, hi] = todo.back();
-    todo.pop_back();
+  while (!pending.empty()) {
+    auto [lo, hi] = pending.back();
+    pending.pop_back();
     double worst = tol;
     int at = -1;
     for (int i = lo + 1; i < hi; ++i) {
@@ -130,8 +130,8 @@ std::vector<int> simplify_line(const std::vector<float>& z, const std::vector<st
     }
     if (at < 0) continue;
     keep[at] = 1;
-    if (at - lo > 1) todo.push_back({lo, at});
-    if (hi - at > 1) todo.push_back({at, hi});
+    if (at - lo > 1) pending.push_back({lo, at});
+    if (hi - at > 1) pending.push_back({at, hi});
   }
   std::vector<int> out;
   for (int i = 0; i < n; ++i) {
