@@ -285,6 +285,12 @@ struct IngestArgs {
   }
 };
 
+smr::WriteOptions write_options(const IngestArgs& a, smr::tools::GdalProgress& progress);
+nlohmann::json database_report(const smr::WriteReport& w, const IngestArgs& a,
+                               const std::string& db_path, std::uint64_t vertices);
+nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
+                             smr::tools::GdalProgress& progress, bool verify);
+
 // Reads the DEM, builds the CRMR and writes the database. Returns the report.
 nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quiet, bool verify) {
   nlohmann::json report;
@@ -312,42 +318,7 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
     t0 = Clock::now();
     crmr = smr::build_qem_pm(mesh, a.dem, opt);
   } else if (a.builder == "blocks") {
-    const std::unique_ptr<smr::RasterWindows> dem = smr::open_dem(a.dem);
-    smr::BlockTinOptions opt;
-    opt.max_error = a.max_error;
-    opt.block_cells = a.block_cells;
-    opt.tmp_dir = a.tmp_dir;
-    opt.progress = [&](double f) { progress.update(0.8 * f); };
-    smr::BlockTinStats st;
-    crmr = smr::build_block_tin(*dem, opt, &st);
-    report["input"] = {{"path", a.dem},
-                       {"kind", "terrain"},
-                       {"width", dem->width()},
-                       {"height", dem->height()},
-                       {"samples", st.samples},
-                       {"geographic", dem->georef().geographic},
-                       {"largest_window_samples", st.max_block_samples}};
-    report["blocks"] = {{"block_cells", a.block_cells},
-                        {"leaf_blocks", st.leaf_blocks},
-                        {"levels", st.levels},
-                        {"rounds", st.rounds},
-                        {"dag_height", st.dag_height},
-                        {"removals", st.removals},
-                        {"finest_vertices", st.finest_vertices},
-                        {"base_vertices", st.base_vertices},
-                        {"non_delaunay_holes", st.non_delaunay_holes},
-                        {"exact_levels", st.exact_levels},
-                        {"samples_rescanned", st.samples_rescanned},
-                        {"samples_scanned", st.samples_scanned},
-                        {"plans", st.plans},
-                        {"temp_bytes", st.temp_bytes},
-                        {"seconds",
-                         {{"survey", st.seconds_survey},
-                          {"read", st.seconds_read},
-                          {"greedy", st.seconds_greedy},
-                          {"level0", st.seconds_level0},
-                          {"upper", st.seconds_upper},
-                          {"assemble", st.seconds_assemble}}}};
+    return ingest_blocks(a, db_path, progress, verify);
   } else {
     const smr::Heightfield dem = smr::read_dem(a.dem);
     report["input"] = {{"path", a.dem},
@@ -385,16 +356,27 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
     const smr::InvariantReport r = smr::check_crmr(crmr);
     if (!r.ok()) smr::throw_internal("CRMR invariants violated: " + r.summary());
   }
+  smr::WriteOptions wo = write_options(a, progress);
+  const smr::WriteReport w = smr::write_database(crmr, db_path, wo);
+  progress.done();
+  report["database"] = database_report(w, a, db_path, crmr.header.vertex_count);
+  return report;
+}
+
+smr::WriteOptions write_options(const IngestArgs& a, smr::tools::GdalProgress& progress) {
   smr::WriteOptions wo;
   wo.codec = *smr::storage::parse_codec(a.codec);
   wo.force = a.force;
   wo.z_step = a.z_quantum;
   wo.page_bytes = a.page_kb * 1024 - 16;
   wo.parameters = a.describe();
-  wo.progress = [&](double f) { progress.update(0.8 + 0.2 * f); };
-  const smr::WriteReport w = smr::write_database(crmr, db_path, wo);
-  progress.done();
-  report["database"] = {
+  wo.progress = [&progress](double f) { progress.update(0.8 + 0.2 * f); };
+  return wo;
+}
+
+nlohmann::json database_report(const smr::WriteReport& w, const IngestArgs& a,
+                               const std::string& db_path, std::uint64_t vertices) {
+  return {
       {"path", db_path},
       {"codec", a.codec},
       {"pages", w.pages},
@@ -403,11 +385,102 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
       {"locator_bytes", w.node_bytes},
       {"rtree_bytes", w.rtree_bytes},
       {"file_bytes", w.file_bytes},
-      {"bytes_per_vertex",
-       double(w.file_bytes) / double(std::max<std::uint64_t>(1, crmr.header.vertex_count))},
+      {"bytes_per_vertex", double(w.file_bytes) / double(std::max<std::uint64_t>(1, vertices))},
       {"z_quantum", w.grid.step.z},
       {"z_shift", w.z_shift},
+      {"dag_depth", w.dag_depth},
       {"write_seconds", w.seconds}};
+}
+
+// Between the block builder and the database writer: names the source by file name only (as
+// ingest() does for the in-memory builders) and counts what the report shows of the ops.
+class IngestTap final : public smr::OpSink {
+ public:
+  IngestTap(smr::OpSink& inner, std::string source) : inner_(inner), source_(std::move(source)) {}
+  void begin(const smr::CrmrInfo& header) override {
+    smr::CrmrInfo h = header;
+    h.source = source_;
+    vertices = h.vertex_count;
+    err0 = h.err0;
+    err_final = h.err_final;
+    inner_.begin(h);
+  }
+  void add(smr::Op&& op) override {
+    for (const auto& t : op.fragment) finest += !t.killer.valid() && !t.is_void();
+    if (op.id.value == 0) base = op.fragment.size();
+    triangles += op.fragment.size();
+    ++ops;
+    inner_.add(std::move(op));
+  }
+  std::uint64_t ops = 0, triangles = 0, finest = 0, base = 0, vertices = 0;
+  double err0 = 0.0, err_final = 0.0;
+
+ private:
+  smr::OpSink& inner_;
+  std::string source_;
+};
+
+// --builder blocks: the builder streams its ops into the database writer, which spools them to
+// --tmp; neither the raster nor the CRMR is ever whole in memory.
+nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
+                             smr::tools::GdalProgress& progress, bool verify) {
+  nlohmann::json report;
+  const auto t0 = Clock::now();
+  const std::unique_ptr<smr::RasterWindows> dem = smr::open_dem(a.dem);
+  smr::BlockTinOptions opt;
+  opt.max_error = a.max_error;
+  opt.block_cells = a.block_cells;
+  opt.tmp_dir = a.tmp_dir;
+  opt.progress = [&](double f) { progress.update(0.8 * f); };
+  smr::BlockTinStats st;
+  smr::DatabaseStreamWriter writer(db_path, write_options(a, progress), a.tmp_dir);
+  IngestTap tap(writer, std::filesystem::path(a.dem).filename().string());
+  smr::build_block_tin(*dem, tap, opt, &st);
+  const double build_seconds = seconds_since(t0);
+  const smr::WriteReport w = writer.finish();
+  progress.done();
+  report["input"] = {{"path", a.dem},
+                     {"kind", "terrain"},
+                     {"width", dem->width()},
+                     {"height", dem->height()},
+                     {"samples", st.samples},
+                     {"geographic", dem->georef().geographic},
+                     {"largest_window_samples", st.max_block_samples}};
+  report["blocks"] = {{"block_cells", a.block_cells},
+                      {"leaf_blocks", st.leaf_blocks},
+                      {"levels", st.levels},
+                      {"rounds", st.rounds},
+                      {"dag_height", st.dag_height},
+                      {"removals", st.removals},
+                      {"finest_vertices", st.finest_vertices},
+                      {"base_vertices", st.base_vertices},
+                      {"non_delaunay_holes", st.non_delaunay_holes},
+                      {"exact_levels", st.exact_levels},
+                      {"samples_rescanned", st.samples_rescanned},
+                      {"samples_scanned", st.samples_scanned},
+                      {"plans", st.plans},
+                      {"temp_bytes", st.temp_bytes + w.spool_bytes},
+                      {"seconds",
+                       {{"survey", st.seconds_survey},
+                        {"read", st.seconds_read},
+                        {"greedy", st.seconds_greedy},
+                        {"level0", st.seconds_level0},
+                        {"upper", st.seconds_upper},
+                        {"assemble", st.seconds_assemble}}}};
+  report["crmr"] = {{"ops", tap.ops},
+                    {"fragment_triangles", tap.triangles},
+                    {"vertices", tap.vertices},
+                    {"finest_triangles", tap.finest},
+                    {"base_triangles", tap.base},
+                    {"err0", tap.err0},
+                    {"err_final", tap.err_final},
+                    {"build_seconds", build_seconds}};
+  report["database"] = database_report(w, a, db_path, tap.vertices);
+  if (verify) {
+    // The CRMR never exists in memory: check what was written (checksums, DAG, links, index).
+    const smr::VerifyReport r = smr::verify_database(db_path, nullptr);
+    if (!r.ok()) smr::throw_internal("database invariants violated: " + r.faults.front());
+  }
   return report;
 }
 

@@ -249,7 +249,7 @@ class Builder {
     }
   }
 
-  Crmr run() {
+  void run(OpSink& sink) {
     Clock::time_point t = Clock::now();
     auto lap = [&](double& into) {
       const Clock::time_point now = Clock::now();
@@ -283,9 +283,8 @@ class Builder {
       report(0.7 + 0.2 * double(level) / double(std::max(1, levels_)));
     }
     lap(stats_.seconds_upper);
-    Crmr crmr = assemble();
+    assemble(sink);
     lap(stats_.seconds_assemble);
-    return crmr;
   }
 
  private:
@@ -971,8 +970,9 @@ class Builder {
     }
   }
 
-  // ---- the CRMR: ops in falling error, replayed coarse to fine for the links ----
-  Crmr assemble() {
+  // ---- the CRMR: ops in falling error, replayed coarse to fine for the links, each handed to the
+  // sink as soon as it is made ----
+  void assemble(OpSink& sink) {
     const std::size_t m = removals_.size();
     // err' = max(own, children's err'): children (creators of star triangles) come first.
     std::vector<double> err(m);
@@ -992,8 +992,7 @@ class Builder {
     op_of_.assign(m, 0);
     for (std::uint32_t i = 0; i < m; ++i) op_of_[order[i]] = i + 1;
 
-    Crmr crmr;
-    CrmrInfo& info = crmr.header;
+    CrmrInfo info;
     info.kind = ModelKind::kTerrain;
     info.georef = dem_.georef();
     info.grid_width = W_;
@@ -1030,7 +1029,8 @@ class Builder {
     birth_of_.resize(m);
     for (std::size_t k = 0; k < m; ++k) birth_of_[k] = resolution_of(info, err[k]);
 
-    crmr.ops.resize(m + 1);
+    // Everything the header needs is known: the sink may start.
+    sink.begin(info);
     IdMap<std::uint32_t> current;  // directed edge -> triangle
     current.reserve(base.size() * 3);
     auto enter = [&](std::uint32_t t) {
@@ -1039,8 +1039,19 @@ class Builder {
     auto leave = [&](std::uint32_t t) {
       for (int k = 0; k < 3; ++k) current.erase(edge_key(tris_[t].v[k], tris_[t].v[(k + 1) % 3]));
     };
-    fill_op(crmr.ops[0], 0, kNone, base, {}, owner, local, current);
-    crmr.ops[0].error = err0;
+    std::vector<std::uint32_t> depth(m + 1, 0);  // longest parent chain from R^0
+    auto emit = [&](Op&& op) {
+      std::uint32_t& d = depth[op.id.value];
+      for (OpId p : op.parents) d = std::max(d, depth[p.value] + 1);
+      stats_.dag_height = std::max<std::uint64_t>(stats_.dag_height, d);
+      sink.add(std::move(op));
+    };
+    {
+      Op op;
+      fill_op(op, 0, kNone, base, {}, owner, local, current);
+      op.error = err0;
+      emit(std::move(op));
+    }
     for (std::uint32_t t : base) enter(t);
     std::vector<std::uint32_t> frag, pre;
     for (std::uint32_t i = 0; i < m; ++i) {
@@ -1049,13 +1060,14 @@ class Builder {
       frag.assign(star_ids_.begin() + r.star_begin, star_ids_.begin() + r.star_end);
       pre.clear();
       for (std::uint32_t t = r.new_begin; t < r.new_end; ++t) pre.push_back(t);
-      Op& op = crmr.ops[i + 1];
+      Op op;
       fill_op(op, i + 1, r.vertex, frag, pre, owner, local, current);
       op.error = err[k];
       op.birth_res = birth_of_[k];
       for (std::uint32_t t : pre) leave(t);
       for (std::uint32_t t : frag) enter(t);
-      if ((i & 0xffff) == 0) report(0.9 + 0.05 * double(i) / double(std::max<std::size_t>(1, m)));
+      emit(std::move(op));
+      if ((i & 0xffff) == 0) report(0.9 + 0.1 * double(i) / double(std::max<std::size_t>(1, m)));
     }
     stats_.finest_vertices = finest_vertices_;
     stats_.samples_scanned = scanned_;
@@ -1072,18 +1084,12 @@ class Builder {
       }
       stats_.base_vertices = static_cast<std::uint64_t>(std::count(seen.begin(), seen.end(), 1));
     }
-    // What link_dag would add, derived from the build records instead (bench: link_dag was
-    // a third of the assembly): pre_tris, parents, children, killers, bounds in fill_op; ROIs.
+    // The build records are done with: the sink's finish may use their memory.
     std::vector<MTri>().swap(tris_);
     std::vector<std::uint32_t>().swap(star_ids_);
-    compute_rois(crmr);
-    std::vector<std::uint64_t> depth(crmr.ops.size(), 0);
-    for (const Op& op : crmr.ops) {
-      for (OpId c : op.children) depth[c.value] = std::max(depth[c.value], depth[op.id.value] + 1);
-      stats_.dag_height = std::max(stats_.dag_height, depth[op.id.value]);
-    }
+    std::vector<Removal>().swap(removals_);
+    std::vector<MVert>().swap(verts_);
     report(1.0);
-    return crmr;
   }
 
   Vec3 world(const MVert& v) const {
@@ -1213,10 +1219,17 @@ class Builder {
 
 }  // namespace
 
-Crmr build_block_tin(const RasterWindows& dem, const BlockTinOptions& options,
+void build_block_tin(const RasterWindows& dem, OpSink& sink, const BlockTinOptions& options,
                      BlockTinStats* stats) {
   BlockTinStats local;
-  return Builder(dem, options, stats != nullptr ? *stats : local).run();
+  Builder(dem, options, stats != nullptr ? *stats : local).run(sink);
+}
+
+Crmr build_block_tin(const RasterWindows& dem, const BlockTinOptions& options,
+                     BlockTinStats* stats) {
+  CrmrCollector collector;
+  build_block_tin(dem, collector, options, stats);
+  return collector.take();
 }
 
 }  // namespace smr

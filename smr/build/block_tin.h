@@ -78,8 +78,12 @@ struct BlockTinStats {
          seconds_upper = 0, seconds_assemble = 0;
 };
 
-/// Builds the CRMR. Throws smr::Error on unusable input (fewer than 2x2 samples, no valid sample)
+/// Builds the CRMR into `sink`, op by op in id order as the final sweep makes them (the ops never
+/// exist all at once; smr::DatabaseStreamWriter writes them to a database). Throws smr::Error on unusable input (fewer than 2x2 samples, no valid sample)
 /// or options (block_cells not a power of two >= 8, max_degree < 3).
+void build_block_tin(const RasterWindows& dem, OpSink& sink, const BlockTinOptions& options = {},
+                     BlockTinStats* stats = nullptr);
+/// The same, collected in memory (ROIs computed).
 Crmr build_block_tin(const RasterWindows& dem, const BlockTinOptions& options = {},
                      BlockTinStats* stats = nullptr);
 

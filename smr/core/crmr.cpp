@@ -39,6 +39,17 @@ std::uint64_t Crmr::triangle_count() const {
   return n;
 }
 
+void CrmrCollector::add(Op&& op) {
+  if (op.id.value != crmr_.ops.size())
+    throw_internal("op sink: op " + std::to_string(op.id.value) + " arrived out of id order");
+  crmr_.ops.push_back(std::move(op));
+}
+
+Crmr CrmrCollector::take() {
+  compute_rois(crmr_);
+  return std::move(crmr_);
+}
+
 void compute_op_bounds(Op& op) {
   std::vector<Vec3> points, normals;
   points.reserve(3 * (op.fragment.size() + op.pre_tris.size()));

@@ -67,6 +67,29 @@ class Crmr final : public OpSource {
   std::uint64_t triangle_count() const;  // over all fragments
 };
 
+/// Receives a CRMR op by op, so that a builder never holds the whole DAG (DESIGN.md section 4;
+/// STYLE.md, tippecanoe: "the builder streams ops to the writer"). begin() is called once with
+/// the model's header (bounds, err0 and err_final final), then add() with ops 0 (R^0), 1, 2, ...
+/// in id order, each complete: links, pre_tris and compute_op_bounds() done. ROIs and subtree
+/// cones need the children's and are the sink's to derive (compute_rois' rule, children last).
+class OpSink {
+ public:
+  virtual ~OpSink() = default;
+  virtual void begin(const CrmrInfo& header) = 0;
+  virtual void add(Op&& op) = 0;
+};
+
+/// The in-memory sink: collects the ops into a Crmr; take() computes the ROIs and returns it.
+class CrmrCollector final : public OpSink {
+ public:
+  void begin(const CrmrInfo& header) override { crmr_.header = header; }
+  void add(Op&& op) override;
+  Crmr take();
+
+ private:
+  Crmr crmr_;
+};
+
 double error_at(const CrmrInfo& info, double res);
 double resolution_of(const CrmrInfo& info, double error);
 

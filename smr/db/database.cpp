@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <filesystem>
 #include <limits>
 #include <map>
 #include <set>
@@ -13,6 +14,7 @@
 #include "smr/db/page.h"
 #include "storage/checksum.h"
 #include "storage/error.h"
+#include "storage/temp_file.h"
 
 namespace smr {
 
@@ -143,41 +145,92 @@ auto naming_file(const std::string& path, F&& f) -> decltype(f()) {
 
 // ------------------------------------------------------------------------------------ writing
 
-WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptions& options) {
-  const auto t0 = std::chrono::steady_clock::now();
+namespace {
+
+// What the index and the meta record need of every op, in id order (~200 bytes an op): the
+// R-tree entry (ROI derived at the end), the op's normal cone (its subtree cone once derived),
+// its children, and counts. Both writers fill it from ops already snapped to the grid.
+struct IndexRecords {
+  std::vector<index::Entry> entries;
+  std::vector<NormalCone> cones;
+  std::vector<std::uint32_t> child_ids;    // children of op i: [child_begin[i], child_begin[i+1])
+  std::vector<std::uint64_t> child_begin{0};
+  std::vector<std::uint32_t> depth;  // longest parent chain from R^0 (parents have smaller ids)
+  std::uint32_t dag_depth = 0;
+  std::uint64_t triangles = 0;
+
+  void add(const Op& op) {
+    if (op.id.value != entries.size())
+      throw_internal("database writer: op " + std::to_string(op.id.value) +
+                     " arrived out of id order");
+    entries.push_back(
+        {op.id.value, to_index(op.box), to_index(op.box), op.birth_res, estimated_bytes(op)});
+    cones.push_back(op.cone);
+    for (OpId c : op.children) child_ids.push_back(static_cast<std::uint32_t>(c.value));
+    child_begin.push_back(child_ids.size());
+    std::uint32_t d = 0;
+    for (OpId p : op.parents) {
+      if (p.value < op.id.value) d = std::max(d, depth[p.value] + 1);  // always, in a valid CRMR
+    }
+    depth.push_back(d);
+    dag_depth = std::max(dag_depth, d);
+    triangles += op.fragment.size();
+  }
+
+  // ROI = own box united with the children's ROIs; subtree cone likewise (compute_rois' rule).
+  // Children have larger ids, so one backward pass finishes every child before its parents.
+  void derive() {
+    for (std::size_t i = entries.size(); i-- > 0;) {
+      NormalCone cone = cones[i];
+      for (std::uint64_t k = child_begin[i]; k < child_begin[i + 1]; ++k) {
+        const std::uint32_t c = child_ids[k];
+        if (c <= i || c >= entries.size())
+          throw_internal("database writer: op " + std::to_string(i) + " has a child out of order");
+        entries[i].roi.add(entries[c].roi);
+        cone = cone_union(cone, cones[c]);
+      }
+      cones[i] = canonical_cone(cone);
+    }
+    std::vector<std::uint32_t>().swap(child_ids);
+    std::vector<std::uint64_t>().swap(child_begin);
+  }
+};
+
+// Writes pages (in R-tree leaf order), locators, the R-tree and the meta record (last), then
+// commits. `op_of(id, held)` returns op `id` as the page must hold it (snapped, ROI, subtree cone,
+// error shifted), either one that outlives the call or one it appends to `held` (cleared for each
+// page, with room reserved for the page's ops, so earlier pointers stay valid).
+WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header,
+                         const QuantGrid& grid, double z_shift, IndexRecords& records,
+                         const std::function<const Op*(std::uint64_t, std::vector<Op>&)>& op_of,
+                         const WriteOptions& options) {
   auto progress = [&](double f) {
     if (options.progress) options.progress(f);
   };
-  // Opening the writer first checks the path (exists without --force) before any work.
-  storage::DatabaseWriter writer(path, options.force);
   WriteReport report;
-  report.grid = choose_grid(crmr.header, options.z_step);
-  report.z_shift = quantize(crmr, report.grid);
-  report.ops = crmr.ops.size();
-
-  std::vector<index::Entry> entries;
-  entries.reserve(crmr.ops.size());
-  for (const Op& op : crmr.ops) {
-    entries.push_back(
-        {op.id.value, to_index(op.roi), to_index(op.box), op.birth_res, estimated_bytes(op)});
-  }
+  report.grid = grid;
+  report.z_shift = z_shift;
+  report.ops = records.entries.size();
   index::BuildOptions bo;
   bo.leaf_weight = options.page_bytes;
   bo.fanout = options.rtree_fanout;
-  bo.order_dims = crmr.header.kind == ModelKind::kTerrain ? 2 : 3;
-  const index::Plan plan = index::plan(entries, bo);
+  bo.order_dims = header.kind == ModelKind::kTerrain ? 2 : 3;
+  const index::Plan plan = index::plan(records.entries, bo);
   report.pages = plan.leaves.size();
 
   // Data pages, in leaf order; remember where each op went.
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> where(crmr.ops.size(), {~0ull, 0u});
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> where(report.ops, {~0ull, 0u});
+  std::vector<Op> held;
   std::vector<const Op*> page_ops;
   for (std::uint64_t leaf = 0; leaf < plan.leaves.size(); ++leaf) {
+    held.clear();
     page_ops.clear();
+    held.reserve(plan.leaves[leaf].size());
     for (std::uint64_t id : plan.leaves[leaf]) {
       where.at(id) = {leaf, std::uint32_t(page_ops.size())};
-      page_ops.push_back(&crmr.ops[id]);
+      page_ops.push_back(op_of(id, held));
     }
-    const Bytes sealed = storage::seal(encode_page(page_ops, report.grid, options.codec));
+    const Bytes sealed = storage::seal(encode_page(page_ops, grid, options.codec));
     report.page_bytes += sealed.size();
     writer.append(Table::kPages, leaf, sealed);
     if (leaf % 256 == 0) progress(0.9 * double(leaf) / double(plan.leaves.size()));
@@ -191,41 +244,28 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
     writer.append(Table::kNodes, block, sealed);
   }
   // The R-tree, then its header.
-  const Bytes header = index::write(plan, entries, bo, [&](std::uint64_t id, ByteView node) {
+  const Bytes tree = index::write(plan, records.entries, bo, [&](std::uint64_t id, ByteView node) {
     report.rtree_bytes += node.size();
     ++report.rtree_nodes;
     writer.append(Table::kRtree, id, node);
   });
-  writer.append(Table::kRtree, kRtreeHeaderKey, header);
+  writer.append(Table::kRtree, kRtreeHeaderKey, tree);
   progress(0.95);
 
-  std::uint64_t triangles = 0;
-  for (const Op& op : crmr.ops) triangles += op.fragment.size();
-  // DAG depth: the longest parent chain (parents have smaller ids), so `info` need not read
-  // every op.
-  std::vector<std::uint32_t> depth(crmr.ops.size(), 0);
-  std::uint32_t dag_depth = 0;
-  for (const Op& op : crmr.ops) {
-    for (OpId p : op.parents) {
-      if (p.value < op.id.value)  // always, in a valid CRMR (checked on read by verify)
-        depth[op.id.value] = std::max(depth[op.id.value], depth[p.value] + 1);
-    }
-    dag_depth = std::max(dag_depth, depth[op.id.value]);
-  }
   json meta = {
       {"format", "smrdb"},
       {"version", kDatabaseFormat},
       {"checksum", "xxh3-64"},
       {"codec", std::string(storage::codec_name(options.codec))},
-      {"model", info_json(crmr.header)},
-      {"grid", {{"origin", vec_json(report.grid.origin)}, {"step", vec_json(report.grid.step)}}},
-      {"z_shift", report.z_shift},
+      {"model", info_json(header)},
+      {"grid", {{"origin", vec_json(grid.origin)}, {"step", vec_json(grid.step)}}},
+      {"z_shift", z_shift},
       {"counts",
-       {{"ops", crmr.ops.size()},
-        {"triangles", triangles},
+       {{"ops", report.ops},
+        {"triangles", records.triangles},
         {"pages", plan.leaves.size()},
         {"rtree_nodes", report.rtree_nodes},
-        {"dag_depth", dag_depth}}},
+        {"dag_depth", records.dag_depth}}},
       {"bytes",
        {{"pages", report.page_bytes}, {"nodes", report.node_bytes}, {"rtree", report.rtree_bytes}}},
       {"page_bytes_target", options.page_bytes},
@@ -233,10 +273,111 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
   const std::string text = meta.dump();
   writer.put(Table::kMeta, "meta", storage::seal(storage::as_bytes(text)));  // last
   writer.finish();
-  report.file_bytes = storage::Env::open_read_only(path).file_bytes();
-  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  report.file_bytes = storage::Env::open_read_only(writer.path()).file_bytes();
+  report.dag_depth = records.dag_depth;
+  report.triangles = records.triangles;
   progress(1.0);
   return report;
+}
+
+}  // namespace
+
+WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptions& options) {
+  const auto t0 = std::chrono::steady_clock::now();
+  // Opening the writer first checks the path (exists without --force) before any work.
+  storage::DatabaseWriter writer(path, options.force);
+  const QuantGrid grid = choose_grid(crmr.header, options.z_step);
+  const double shift = quantize(crmr, grid);
+  IndexRecords records;
+  for (const Op& op : crmr.ops) records.add(op);
+  records.derive();  // the ROIs quantize() computed, for the index entries
+  WriteReport report = write_tables(
+      writer, crmr.header, grid, shift, records,
+      [&](std::uint64_t id, std::vector<Op>&) -> const Op* { return &crmr.ops.at(id); }, options);
+  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return report;
+}
+
+struct DatabaseStreamWriter::State {
+  State(const std::string& path, const WriteOptions& o, const std::string& tmp)
+      : options(o), writer(path, o.force), tmp_dir(tmp) {}
+  WriteOptions options;
+  storage::DatabaseWriter writer;
+  std::string tmp_dir;
+  std::chrono::steady_clock::time_point t0 = std::chrono::steady_clock::now();
+  std::unique_ptr<storage::TempFile> spool;  // the ops, each a one-op raw page, in id order
+  std::vector<std::uint64_t> offsets{0};     // op i at [offsets[i], offsets[i+1])
+  CrmrInfo header;
+  QuantGrid grid;
+  double shift = 0.0;
+  IndexRecords records;
+  bool begun = false, finished = false;
+};
+
+DatabaseStreamWriter::DatabaseStreamWriter(const std::string& path, const WriteOptions& options,
+                                           const std::string& tmp_dir)
+    : s_(std::make_unique<State>(path, options, tmp_dir)) {
+  const std::string dir =
+      tmp_dir.empty() ? std::filesystem::temp_directory_path().string() : tmp_dir;
+  s_->spool = std::make_unique<storage::TempFile>(dir, 0);
+}
+
+DatabaseStreamWriter::~DatabaseStreamWriter() = default;
+
+void DatabaseStreamWriter::begin(const CrmrInfo& header) {
+  if (s_->begun) throw_internal("database writer: begin() called twice");
+  s_->begun = true;
+  s_->header = header;
+  s_->grid = choose_grid(header, s_->options.z_step);
+  s_->header.bounds = Box3{};  // of the snapped vertices, as quantize() does
+}
+
+void DatabaseStreamWriter::add(Op&& op) {
+  if (!s_->begun || s_->finished) throw_internal("database writer: add() outside begin/finish");
+  // quantize(): snap, track the largest move, recompute the bounds.
+  s_->shift = std::max(s_->shift, snap_vertices(op, s_->grid));
+  for (const Vertex& v : op.vertices) s_->header.bounds.add(v.p);
+  compute_op_bounds(op);
+  s_->records.add(op);
+  // The spooled copy: ROI and subtree cone are the op's own until finish() derives them.
+  op.roi = op.box;
+  op.subtree_cone = canonical_cone(op.cone);
+  const Op* one[] = {&op};
+  const Bytes bytes = encode_page(one, s_->grid, storage::CodecId::kRaw);
+  s_->spool->write(s_->offsets.back(), bytes.data(), bytes.size());
+  s_->offsets.push_back(s_->offsets.back() + bytes.size());
+}
+
+WriteReport DatabaseStreamWriter::finish() {
+  if (!s_->begun || s_->finished) throw_internal("database writer: finish() without begin()");
+  s_->finished = true;
+  State& s = *s_;
+  s.records.derive();
+  s.header.err0 += s.shift;
+  s.header.err_final += s.shift;
+  Bytes buffer;
+  WriteReport report = write_tables(
+      s.writer, s.header, s.grid, s.shift, s.records,
+      [&](std::uint64_t id, std::vector<Op>& held) -> const Op* {
+        buffer.resize(s.offsets.at(id + 1) - s.offsets[id]);
+        s.spool->read(s.offsets[id], buffer.data(), buffer.size());
+        std::vector<Op> one = decode_page(buffer, s.grid, "scratch op " + std::to_string(id));
+        if (one.size() != 1 || one[0].id.value != id)
+          throw_internal("database writer: the scratch file lost op " + std::to_string(id));
+        Op& op = held.emplace_back(std::move(one[0]));
+        op.roi = from_index(s.records.entries[id].roi);
+        op.subtree_cone = s.records.cones[id];
+        op.error += s.shift;
+        return &op;
+      },
+      s.options);
+  report.spool_bytes = s.offsets.back();
+  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - s.t0).count();
+  return report;
+}
+
+const CrmrInfo& DatabaseStreamWriter::header() const {
+  return s_->header;
 }
 
 // ------------------------------------------------------------------------------------ reading

@@ -55,6 +55,9 @@ struct WriteReport {
   std::uint64_t ops = 0, pages = 0, rtree_nodes = 0;
   std::uint64_t page_bytes = 0, node_bytes = 0, rtree_bytes = 0;  // value bytes per table
   std::uint64_t file_bytes = 0;
+  std::uint64_t dag_depth = 0;    // longest parent-to-child path from R^0
+  std::uint64_t triangles = 0;    // over all fragments
+  std::uint64_t spool_bytes = 0;  // DatabaseStreamWriter: ops held in its scratch file
   double seconds = 0.0;
 };
 
@@ -63,6 +66,31 @@ struct WriteReport {
 /// so afterwards it equals what the database holds. Throws smr::Error (kInvalidInput if `path`
 /// exists without options.force).
 WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptions& options);
+
+/// Writes a database from ops streamed in id order (an OpSink: a builder hands each op over as it
+/// makes it and never holds the whole CRMR). Each op is snapped to the grid (choose_grid on the
+/// header given to begin()) and spooled, as a one-op raw page, to an anonymous scratch file in
+/// `tmp_dir` (storage::TempFile: gone with the process however it ends); memory keeps only what
+/// the index needs, ~200 bytes an op. finish() derives ROIs and subtree cones (children first),
+/// plans the R-tree and writes the pages in leaf order, re-reading their ops from the scratch
+/// file, then the locators, the R-tree and the meta record, last. The same ops give the same
+/// bytes as write_database on the Crmr they make up.
+class DatabaseStreamWriter final : public OpSink {
+ public:
+  /// Opens the output at once: an existing `path` without options.force throws before any work.
+  DatabaseStreamWriter(const std::string& path, const WriteOptions& options,
+                       const std::string& tmp_dir);
+  ~DatabaseStreamWriter() override;  // without finish(): nothing is left at `path`
+  void begin(const CrmrInfo& header) override;
+  void add(Op&& op) override;
+  WriteReport finish();
+  /// The header as stored: bounds of the snapped vertices, errors raised by the largest move.
+  const CrmrInfo& header() const;
+
+ private:
+  struct State;
+  std::unique_ptr<State> s_;
+};
 
 struct DatabaseStats {
   storage::CacheStats cache;

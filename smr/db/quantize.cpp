@@ -73,15 +73,19 @@ QuantGrid choose_grid(const CrmrInfo& info, double z_step) {
   return g;
 }
 
+double snap_vertices(Op& op, const QuantGrid& grid) {
+  double shift = 0.0;
+  for (Vertex& v : op.vertices) {
+    const Vec3 q = grid.dequantize(grid.quantize(v.p));
+    shift = std::max(shift, glm::length(q - v.p));
+    v.p = q;
+  }
+  return shift;
+}
+
 double quantize(Crmr& crmr, const QuantGrid& grid) {
   double shift = 0.0;
-  for (Op& op : crmr.ops) {
-    for (Vertex& v : op.vertices) {
-      const Vec3 q = grid.dequantize(grid.quantize(v.p));
-      shift = std::max(shift, glm::length(q - v.p));
-      v.p = q;
-    }
-  }
+  for (Op& op : crmr.ops) shift = std::max(shift, snap_vertices(op, grid));
   crmr.header.bounds = Box3{};
   for (Op& op : crmr.ops) {
     for (const Vertex& v : op.vertices) crmr.header.bounds.add(v.p);

@@ -35,6 +35,9 @@ struct QuantGrid {
 /// 3-D mesh, the step of every axis).
 QuantGrid choose_grid(const CrmrInfo& info, double z_step);
 
+/// Snaps the vertices of `op` to `grid` and returns the largest move; bounds are left to the caller.
+double snap_vertices(Op& op, const QuantGrid& grid);
+
 /// Snaps every vertex of `crmr` to `grid`, recomputes bounds and ROIs, and raises every stored
 /// error (ops, err0, err_final) by the largest vertex shift, which it returns.
 double quantize(Crmr& crmr, const QuantGrid& grid);

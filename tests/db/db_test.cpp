@@ -10,6 +10,7 @@
 #include <iterator>
 #include <unordered_map>
 
+#include "smr/build/block_tin.h"
 #include "smr/core/invariants.h"
 #include "smr/db/database.h"
 #include "smr/db/page.h"
@@ -17,6 +18,7 @@
 #include "storage/error.h"
 #include "tests/support/datasets.h"
 #include "tests/support/files.h"
+#include "tests/support/meshes.h"
 #include "tests/support/oracles.h"
 #include "tests/support/rcf_spread.h"
 
@@ -192,6 +194,106 @@ TEST(Database, OpsOutOfRangeAreAnErrorNotACrash) {
   const auto db = Database::open(dir.file("x.smrdb"), {});
   EXPECT_THROW(db->op(OpId{m.ops.size()}), Error);
   EXPECT_THROW(db->page(db->page_count()), Error);
+}
+
+
+// The streaming writer (ops handed over one at a time, spooled to a scratch file) writes the same
+// bytes as write_database on the whole CRMR, for each builder's kind of CRMR: greedy terrain,
+// block-decimation terrain with no-data holes, a 3-D mesh with spawned components; and after it
+// the writer's header equals the quantized CRMR's.
+void expect_streamed_equals_whole(const Crmr& crmr, const WriteOptions& o, const TempDir& dir) {
+  Crmr whole = crmr;
+  write_database(whole, dir.file("whole.smrdb"), o);
+  const std::string scratch = dir.file("scratch");
+  fs::create_directories(scratch);
+  DatabaseStreamWriter w(dir.file("streamed.smrdb"), o, scratch);
+  w.begin(crmr.header);
+  for (const Op& op : crmr.ops) w.add(Op(op));
+  const WriteReport r = w.finish();
+  EXPECT_TRUE(read_file(dir.file("whole.smrdb")) == read_file(dir.file("streamed.smrdb")))
+      << "the streamed database differs from the whole CRMR's";
+  EXPECT_EQ(w.header(), whole.header);
+  EXPECT_EQ(r.ops, crmr.ops.size());
+  EXPECT_GT(r.spool_bytes, 0u);
+  EXPECT_TRUE(fs::is_empty(scratch)) << "the scratch file is visible";
+}
+
+TEST(DatabaseStreamWriter, WritesTheBytesOfTheWholeCrmr) {
+  TempDir dir;
+  WriteOptions o;
+  o.force = true;
+  {
+    SCOPED_TRACE("greedy jacksboro, zstd");
+    expect_streamed_equals_whole(test::dataset("jacksboro").crmr, o, dir);
+  }
+  {
+    SCOPED_TRACE("blocks over topobathy (no data), draco");
+    BlockTinOptions bo;
+    bo.block_cells = 32;
+    bo.max_error = test::dataset("topobathy").max_error;
+    const HeightfieldWindows windows(test::dataset("topobathy").dem);
+    WriteOptions draco = o;
+    draco.codec = storage::CodecId::kDraco;
+    expect_streamed_equals_whole(build_block_tin(windows, bo), draco, dir);
+  }
+  {
+    SCOPED_TRACE("blobby_3cc (spawned components), raw");
+    WriteOptions raw = o;
+    raw.codec = storage::CodecId::kRaw;
+    expect_streamed_equals_whole(test::built_mesh("blobby_3cc.off").crmr, raw, dir);
+  }
+}
+
+// The block builder streams straight into the writer (the way `smrdb ingest --builder blocks`
+// runs): the same file as collecting its CRMR and writing it whole, and the DAG depth both report.
+TEST(DatabaseStreamWriter, TheBlockBuilderStreamsIntoIt) {
+  const test::Dataset& d = test::dataset("fbm257");
+  TempDir dir;
+  BlockTinOptions bo;
+  bo.block_cells = 32;
+  bo.max_error = d.max_error;
+  const HeightfieldWindows windows(d.dem);
+  BlockTinStats collected_stats, streamed_stats;
+  Crmr whole = build_block_tin(windows, bo, &collected_stats);
+  write_database(whole, dir.file("whole.smrdb"), {});
+  DatabaseStreamWriter w(dir.file("streamed.smrdb"), {}, dir.path().string());
+  build_block_tin(windows, w, bo, &streamed_stats);
+  const WriteReport r = w.finish();
+  EXPECT_TRUE(read_file(dir.file("whole.smrdb")) == read_file(dir.file("streamed.smrdb")));
+  EXPECT_EQ(streamed_stats.dag_height, collected_stats.dag_height);
+  EXPECT_EQ(r.dag_depth, streamed_stats.dag_height);
+  EXPECT_GE(r.dag_depth, 3u);
+  EXPECT_EQ(r.ops, whole.ops.size());
+}
+
+// Misuse and interruption: an existing database without force is refused before any op; ops out
+// of id order are a bug reported as such; a writer dropped before finish() leaves no database.
+TEST(DatabaseStreamWriter, RefusesMisuseAndLeavesNothingWhenDropped) {
+  const test::Dataset& d = test::dataset("fbm129");
+  TempDir dir;
+  const std::string path = dir.file("x.smrdb");
+  {
+    DatabaseStreamWriter w(path, {}, dir.path().string());
+    w.begin(d.crmr.header);
+    w.add(Op(d.crmr.ops[0]));
+    EXPECT_THROW(w.add(Op(d.crmr.ops[2])), Error);
+  }
+  EXPECT_TRUE(fs::is_empty(dir.path())) << "a dropped writer left files behind";
+  {
+    Crmr m = d.crmr;
+    write_database(m, path, {});
+  }
+  const std::string before = read_file(path);
+  try {
+    DatabaseStreamWriter w(path, {}, dir.path().string());
+    FAIL() << "opened an existing database without force";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::kInvalidInput);
+    EXPECT_NE(std::string(e.what()).find("--force"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(read_file(path) == before);
+  EXPECT_THROW(DatabaseStreamWriter(dir.file("y.smrdb"), {}, dir.file("no-such-dir")), Error);
+  EXPECT_FALSE(fs::exists(dir.file("y.smrdb")));
 }
 
 }  // namespace
