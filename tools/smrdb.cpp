@@ -1,6 +1,7 @@
 // smrdb: the command line. Parses options, reports progress on stderr, prints JSON on request.
 // Nothing below tools/ prints or exits; errors arrive here as smr::Error (exit 1, or 2 for bugs).
 #include <malloc.h>
+#include <sys/resource.h>
 
 #include <charconv>
 #include <chrono>
@@ -38,6 +39,34 @@ using Clock = std::chrono::steady_clock;
 
 double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// The process's peak resident set so far (getrusage: kilobytes on Linux), in MiB.
+double peak_rss_mb() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_maxrss) / 1024.0;
+}
+
+// "256M", "2G", "1.5G", "512K" or a plain number of bytes (binary units: M = 2^20).
+std::uint64_t parse_bytes(const std::string& text, const std::string& option) {
+  double v = 0.0;
+  std::size_t used = 0;
+  try {
+    v = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  const std::string unit = text.substr(used);
+  const int shift = unit.empty() || unit == "B"  ? 0
+                    : unit == "K" || unit == "k" ? 10
+                    : unit == "M" || unit == "m" ? 20
+                    : unit == "G" || unit == "g" ? 30
+                    : unit == "T" || unit == "t" ? 40
+                                                 : -1;
+  if (used == 0 || shift < 0 || !std::isfinite(v) || v <= 0.0 || v * std::ldexp(1.0, shift) > 1e18)
+    throw_input(option + " expects a size such as 256M or 2G, got '" + text + "'");
+  return static_cast<std::uint64_t>(v * std::ldexp(1.0, shift));
 }
 
 std::vector<double> parse_numbers(const std::string& text, std::size_t count,
@@ -186,11 +215,18 @@ struct IngestArgs {
   bool repair = false;
   std::uint32_t coalesce = 32;
   double coalesce_ratio = 0.7;
-  std::string builder = "greedy";
+  std::string builder;  // empty: blocks with --memory, else greedy
   int block_cells = 256;
   std::string tmp_dir;
+  std::string memory;  // --memory as typed
 
   bool is_mesh() const { return smr::is_mesh_path(dem); }
+  std::string effective_builder() const {
+    return !builder.empty() ? builder : !memory.empty() ? "blocks" : "greedy";
+  }
+  std::uint64_t memory_bytes() const {
+    return memory.empty() ? 0 : parse_bytes(memory, "--memory");
+  }
 
   void add_to(CLI::App& app) {
     app.add_option("input", dem,
@@ -217,9 +253,13 @@ struct IngestArgs {
                    "this many where the collapse rules allow)")
         ->capture_default_str();
     app.add_option("--builder", builder,
-                   "DEMs: greedy (Delaunay insertion, the DEM read whole) or blocks "
-                   "(hierarchical block decimation, the DEM read one block at a time)")
-        ->capture_default_str();
+                   "DEMs: greedy (Delaunay insertion, the DEM read whole; the default) or blocks "
+                   "(hierarchical block decimation, the DEM read one block at a time; the default "
+                   "with --memory)");
+    app.add_option("--memory", memory,
+                   "DEMs, --builder blocks: memory budget (e.g. 256M, 2G): sizes the windows "
+                   "held for exact error bounds, the raster and write caches; peak RSS is "
+                   "reported by --json");
     app.add_option("--block-cells", block_cells,
                    "DEMs, --builder blocks: side of a leaf block in grid cells (a power of two)")
         ->capture_default_str();
@@ -252,16 +292,25 @@ struct IngestArgs {
     if (!is_mesh() && repair) throw_input("--repair applies to meshes (.ply, .obj, .off, .stl)");
     if (!(coalesce_ratio >= 0.0 && coalesce_ratio <= 1.0))
       throw_input("--coalesce-ratio must be in [0, 1]");
-    if (builder != "greedy" && builder != "blocks")
+    if (!builder.empty() && builder != "greedy" && builder != "blocks")
       throw_input("--builder must be greedy or blocks, got '" + builder + "'");
-    if (is_mesh() && builder != "greedy")
+    if (is_mesh() && !builder.empty())
       throw_input("--builder applies to DEMs; meshes are built by quadric edge collapse");
-    if (builder == "blocks" && (max_vertices != 0 || base_vertices != 4)) {
+    if (is_mesh() && !memory.empty())
+      throw_input(
+          "--memory applies to DEMs: meshes are built in memory (out-of-core mesh ingest is not "
+          "available yet)");
+    const std::string chosen = effective_builder();
+    if (!memory.empty() && chosen != "blocks")
+      throw_input("--memory needs --builder blocks: the greedy builder reads the DEM whole");
+    if (!memory.empty() && memory_bytes() < (std::uint64_t{32} << 20))
+      throw_input("--memory must be at least 32M, got '" + memory + "'");
+    if (chosen == "blocks" && (max_vertices != 0 || base_vertices != 4)) {
       throw_input(
           "--max-vertices and --base-vertices apply to --builder greedy; the block "
           "builder refines to --max-error and decimates down to the corners");
     }
-    if (!tmp_dir.empty() && builder != "blocks") throw_input("--tmp applies to --builder blocks");
+    if (!tmp_dir.empty() && chosen != "blocks") throw_input("--tmp applies to --builder blocks");
     if (block_cells < 8 || (block_cells & (block_cells - 1)) != 0)
       throw_input("--block-cells must be a power of two, at least 8, got " +
                   std::to_string(block_cells));
@@ -280,8 +329,10 @@ struct IngestArgs {
            " z-quantum=" + number(z_quantum) + " page-kb=" + std::to_string(page_kb) +
            (is_mesh() ? std::string(" repair=") + (repair ? "yes" : "no") + " coalesce=" +
                             std::to_string(coalesce) + " coalesce-ratio=" + number(coalesce_ratio)
-            : builder == "blocks" ? " builder=blocks block-cells=" + std::to_string(block_cells)
-                                  : std::string());
+            : effective_builder() == "blocks"
+                ? " builder=blocks block-cells=" + std::to_string(block_cells) +
+                      (memory.empty() ? std::string() : " memory=" + std::to_string(memory_bytes()))
+                : std::string());
   }
 };
 
@@ -317,7 +368,7 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
     opt.progress = [&](double f) { progress.update(0.8 * f); };
     t0 = Clock::now();
     crmr = smr::build_qem_pm(mesh, a.dem, opt);
-  } else if (a.builder == "blocks") {
+  } else if (a.effective_builder() == "blocks") {
     return ingest_blocks(a, db_path, progress, verify);
   } else {
     const smr::Heightfield dem = smr::read_dem(a.dem);
@@ -376,20 +427,19 @@ smr::WriteOptions write_options(const IngestArgs& a, smr::tools::GdalProgress& p
 
 nlohmann::json database_report(const smr::WriteReport& w, const IngestArgs& a,
                                const std::string& db_path, std::uint64_t vertices) {
-  return {
-      {"path", db_path},
-      {"codec", a.codec},
-      {"pages", w.pages},
-      {"rtree_nodes", w.rtree_nodes},
-      {"page_bytes", w.page_bytes},
-      {"locator_bytes", w.node_bytes},
-      {"rtree_bytes", w.rtree_bytes},
-      {"file_bytes", w.file_bytes},
-      {"bytes_per_vertex", double(w.file_bytes) / double(std::max<std::uint64_t>(1, vertices))},
-      {"z_quantum", w.grid.step.z},
-      {"z_shift", w.z_shift},
-      {"dag_depth", w.dag_depth},
-      {"write_seconds", w.seconds}};
+  return {{"path", db_path},
+          {"codec", a.codec},
+          {"pages", w.pages},
+          {"rtree_nodes", w.rtree_nodes},
+          {"page_bytes", w.page_bytes},
+          {"locator_bytes", w.node_bytes},
+          {"rtree_bytes", w.rtree_bytes},
+          {"file_bytes", w.file_bytes},
+          {"bytes_per_vertex", double(w.file_bytes) / double(std::max<std::uint64_t>(1, vertices))},
+          {"z_quantum", w.grid.step.z},
+          {"z_shift", w.z_shift},
+          {"dag_depth", w.dag_depth},
+          {"write_seconds", w.seconds}};
 }
 
 // Between the block builder and the database writer: names the source by file name only (as
@@ -397,13 +447,13 @@ nlohmann::json database_report(const smr::WriteReport& w, const IngestArgs& a,
 class IngestTap final : public smr::OpSink {
  public:
   IngestTap(smr::OpSink& inner, std::string source) : inner_(inner), source_(std::move(source)) {}
-  void begin(const smr::CrmrInfo& header) override {
+  void begin(const smr::CrmrInfo& header, std::uint64_t op_count) override {
     smr::CrmrInfo h = header;
     h.source = source_;
     vertices = h.vertex_count;
     err0 = h.err0;
     err_final = h.err_final;
-    inner_.begin(h);
+    inner_.begin(h, op_count);
   }
   void add(smr::Op&& op) override {
     for (const auto& t : op.fragment) finest += !t.killer.valid() && !t.is_void();
@@ -431,9 +481,12 @@ nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
   opt.max_error = a.max_error;
   opt.block_cells = a.block_cells;
   opt.tmp_dir = a.tmp_dir;
+  opt.memory_bytes = a.memory_bytes();
   opt.progress = [&](double f) { progress.update(0.8 * f); };
   smr::BlockTinStats st;
-  smr::DatabaseStreamWriter writer(db_path, write_options(a, progress), a.tmp_dir);
+  smr::WriteOptions wo = write_options(a, progress);
+  if (opt.memory_bytes != 0) wo.batch_bytes = opt.memory_bytes / 16;
+  smr::DatabaseStreamWriter writer(db_path, wo, a.tmp_dir);
   IngestTap tap(writer, std::filesystem::path(a.dem).filename().string());
   smr::build_block_tin(*dem, tap, opt, &st);
   const double build_seconds = seconds_since(t0);
@@ -572,7 +625,9 @@ int cmd_ingest(const IngestArgs& a, const std::string& db_path, bool json, bool 
                bool verify) {
   a.validate();
   check_database_path(db_path, a.force);
-  const nlohmann::json r = ingest(a, db_path, quiet, verify);
+  nlohmann::json r = ingest(a, db_path, quiet, verify);
+  r["peak_rss_mb"] = peak_rss_mb();
+  if (a.memory_bytes() != 0) r["memory_budget_mb"] = double(a.memory_bytes()) / double(1 << 20);
   print_report(r, json);
   if (!json && !quiet) {
     std::fprintf(stderr, "%s: %llu ops in %llu pages, %.1f MB (%.1f bytes/vertex) -> %s\n",

@@ -18,6 +18,7 @@
 
 #include "smr/build/greedy_tin.h"
 #include "smr/build/triangle_rows.h"
+#include "smr/core/chunked.h"
 #include "smr/core/id_map.h"
 #include "storage/error.h"
 #include "storage/temp_file.h"
@@ -51,6 +52,13 @@ struct MTri {
   TriBound bound;                   // of the source against the triangle's plane
   std::uint32_t creator = kNone;    // removal whose hole it fills; kNone = M^m
   std::uint32_t destroyer = kNone;  // removal whose star it is in; kNone = alive
+  bool is_void = false;
+};
+
+/// What the assembly needs of a triangle (MTri less its adjacency and bounds): a third the size.
+struct ATri {
+  std::array<std::uint32_t, 3> v{};
+  std::uint32_t creator = kNone, destroyer = kNone;
   bool is_void = false;
 };
 
@@ -239,6 +247,9 @@ class Builder {
       throw_input("max_error must be a finite number >= 0");
     }
     B_ = opt.block_cells;
+    exact_window_samples_ = opt.exact_window_samples;
+    if (opt.memory_bytes != 0)
+      exact_window_samples_ = std::min(exact_window_samples_, opt.memory_bytes / 40);
     bw_ = (W_ - 2) / B_ + 1;
     bh_ = (H_ - 2) / B_ + 1;
     int span = 1;
@@ -259,7 +270,7 @@ class Builder {
     // A lossless build needs the DEM's largest |z| before any block (its tolerance decides which
     // errors are zero, on both sides of every border): one pass reads it. With a max error, the
     // tolerance only rounds bounds outward, and each block's own samples raise it as they come.
-    if (levels_ > 0 && opt_.exact_window_samples > 0) {
+    if (levels_ > 0 && exact_window_samples_ > 0) {
       const std::string dir =
           opt_.tmp_dir.empty() ? std::filesystem::temp_directory_path().string() : opt_.tmp_dir;
       spill_ = std::make_unique<SampleSpill>(dir, W_, H_, B_, bw_, bh_);
@@ -270,6 +281,11 @@ class Builder {
       stop_error_ = eps0_ = opt_.max_error;
     }
     lap(stats_.seconds_survey);
+    // The reader's cache serves the leaf pass only: the upper levels re-read the scratch file.
+    const std::uint64_t cache_before =
+        opt_.memory_bytes != 0
+            ? dem_.set_cache_bytes(std::min(opt_.memory_bytes / 16, std::uint64_t{64} << 20))
+            : 0;
     for (int by = 0; by < bh_; ++by) {
       for (int bx = 0; bx < bw_; ++bx) {
         leaf_block(bx, by, t);
@@ -277,6 +293,10 @@ class Builder {
       }
     }
     if (valid_samples_ == 0) throw_input(dem_.source() + ": every sample is no data");
+    // Nothing reads the source from here on: hand its cache back, and the leaf pass's maps.
+    const std::uint64_t cap = dem_.set_cache_bytes(0);
+    dem_.set_cache_bytes(opt_.memory_bytes != 0 ? cache_before : cap);
+    shared_ = IdMap<std::uint32_t>();
     finest_vertices_ = verts_.size();
     for (int level = 1; level <= levels_; ++level) {
       upper_level(level);
@@ -576,7 +596,8 @@ class Builder {
     bool delaunay = true;
   };
 
-  static int index_of(const MTri& t, std::uint32_t v) {
+  template <class Tri>
+  static int index_of(const Tri& t, std::uint32_t v) {
     for (int k = 0; k < 3; ++k) {
       if (t.v[k] == v) return k;
     }
@@ -754,7 +775,7 @@ class Builder {
     Removal r;
     r.vertex = v;
     r.star_begin = static_cast<std::uint32_t>(star_ids_.size());
-    star_ids_.insert(star_ids_.end(), p.star.begin(), p.star.end());
+    for (std::uint32_t t : p.star) star_ids_.push_back(t);
     r.star_end = static_cast<std::uint32_t>(star_ids_.size());
     r.new_begin = static_cast<std::uint32_t>(tris_.size());
     r.err = p.err;
@@ -826,7 +847,7 @@ class Builder {
     const int nx = (W_ - 2) / span + 1, ny = (H_ - 2) / span + 1;
     const std::uint64_t window =
         std::uint64_t(std::min(span, W_ - 1) + 1) * std::uint64_t(std::min(span, H_ - 1) + 1);
-    if (window > opt_.exact_window_samples) {
+    if (window > exact_window_samples_) {
       decimate_level(level, nullptr, 0, 0, nullptr);
       return;
     }
@@ -1030,14 +1051,24 @@ class Builder {
     for (std::size_t k = 0; k < m; ++k) birth_of_[k] = resolution_of(info, err[k]);
 
     // Everything the header needs is known: the sink may start.
-    sink.begin(info);
-    IdMap<std::uint32_t> current;  // directed edge -> triangle
-    current.reserve(base.size() * 3);
+    sink.begin(info, m + 1);
+    // The sweep needs neither adjacency nor bounds: keep the rest, a third of the bytes, freeing
+    // the full records as they are copied.
+    tris_.drain([&](std::size_t, const MTri& t) {
+      atris_.push_back(ATri{t.v, t.creator, t.destroyer, t.is_void});
+    });
+    // The decimation's per-vertex scratch is done with.
+    std::vector<double>().swap(cost_);
+    std::vector<std::uint8_t>().swap(dirty_);
+    for (auto* v : {&stamp_, &cand_mark_, &seen_}) std::vector<std::uint32_t>().swap(*v);
+    open_edges_ = IdMap<std::uint32_t>();
+    IdMap<std::uint32_t> current(60);  // directed edge -> triangle; at most 3 per M^m triangle
+    current.reserve(3 * finest_triangles_);
     auto enter = [&](std::uint32_t t) {
-      for (int k = 0; k < 3; ++k) current[edge_key(tris_[t].v[k], tris_[t].v[(k + 1) % 3])] = t;
+      for (int k = 0; k < 3; ++k) current[edge_key(atris_[t].v[k], atris_[t].v[(k + 1) % 3])] = t;
     };
     auto leave = [&](std::uint32_t t) {
-      for (int k = 0; k < 3; ++k) current.erase(edge_key(tris_[t].v[k], tris_[t].v[(k + 1) % 3]));
+      for (int k = 0; k < 3; ++k) current.erase(edge_key(atris_[t].v[k], atris_[t].v[(k + 1) % 3]));
     };
     std::vector<std::uint32_t> depth(m + 1, 0);  // longest parent chain from R^0
     auto emit = [&](Op&& op) {
@@ -1057,7 +1088,8 @@ class Builder {
     for (std::uint32_t i = 0; i < m; ++i) {
       const std::uint32_t k = order[i];
       const Removal& r = removals_[k];
-      frag.assign(star_ids_.begin() + r.star_begin, star_ids_.begin() + r.star_end);
+      frag.clear();
+      for (std::uint32_t j = r.star_begin; j < r.star_end; ++j) frag.push_back(star_ids_[j]);
       pre.clear();
       for (std::uint32_t t = r.new_begin; t < r.new_end; ++t) pre.push_back(t);
       Op op;
@@ -1080,13 +1112,13 @@ class Builder {
     {
       std::vector<std::uint8_t> seen(verts_.size(), 0);
       for (std::uint32_t t : base) {
-        for (std::uint32_t v : tris_[t].v) seen[v] = 1;
+        for (std::uint32_t v : atris_[t].v) seen[v] = 1;
       }
       stats_.base_vertices = static_cast<std::uint64_t>(std::count(seen.begin(), seen.end(), 1));
     }
     // The build records are done with: the sink's finish may use their memory.
-    std::vector<MTri>().swap(tris_);
-    std::vector<std::uint32_t>().swap(star_ids_);
+    atris_.release();
+    star_ids_.release();
     std::vector<Removal>().swap(removals_);
     std::vector<MVert>().swap(verts_);
     report(1.0);
@@ -1104,7 +1136,7 @@ class Builder {
     op.id = OpId(id);
     std::vector<std::uint32_t>& vs = scratch_vs_;
     vs.clear();
-    for (std::uint32_t t : frag) vs.insert(vs.end(), tris_[t].v.begin(), tris_[t].v.end());
+    for (std::uint32_t t : frag) vs.insert(vs.end(), atris_[t].v.begin(), atris_[t].v.end());
     std::sort(vs.begin(), vs.end());
     vs.erase(std::unique(vs.begin(), vs.end()), vs.end());
     if (new_vertex != kNone) {
@@ -1123,7 +1155,7 @@ class Builder {
     for (std::uint32_t v : vs) op.vertices.push_back({VertexId(v), world(verts_[v])});
     op.fragment.resize(frag.size());
     for (std::size_t i = 0; i < frag.size(); ++i) {
-      const MTri& t = tris_[frag[i]];
+      const ATri& t = atris_[frag[i]];
       FragmentTriangle& ft = op.fragment[i];
       for (int k = 0; k < 3; ++k) ft.v[k] = index(t.v[k]);
       if (t.is_void) ft.flags |= FragmentTriangle::kVoid;
@@ -1132,13 +1164,13 @@ class Builder {
         ft.death_res = birth_of_[t.creator];
         op.children.push_back(ft.killer);
       }
+    }
+    derive_fragment_neighbours(op);
+    for (std::size_t i = 0; i < frag.size(); ++i) {
+      const ATri& t = atris_[frag[i]];
       for (std::uint8_t k = 0; k < 3; ++k) {
+        if (op.fragment[i].nbr[k] != FragmentTriangle::kNoNeighbour) continue;
         const std::uint32_t a = t.v[k], b = t.v[(k + 1) % 3];
-        const std::uint32_t n = t.nbr[k];
-        if (n != kNone && owner[n] == id && tris_[n].destroyer == t.destroyer) {
-          ft.nbr[k] = static_cast<std::int32_t>(local[n]);
-          continue;
-        }
         // A fragment boundary edge: its closest coarser version is the newer of the replaced
         // triangle inside (PreF) and the current triangle outside; none on the model boundary.
         const std::uint32_t* out = current.find(edge_key(b, a));
@@ -1146,8 +1178,8 @@ class Builder {
         std::uint32_t inside = kNone;
         int inside_edge = -1;
         for (std::uint32_t q : pre) {
-          const int j = index_of(tris_[q], a);
-          if (j >= 0 && tris_[q].v[(j + 1) % 3] == b) {
+          const int j = index_of(atris_[q], a);
+          if (j >= 0 && atris_[q].v[(j + 1) % 3] == b) {
             inside = q;
             inside_edge = j;
           }
@@ -1156,7 +1188,7 @@ class Builder {
           throw_internal("block TIN: a fragment boundary edge has no PreF triangle");
         const std::uint32_t o = *out;
         if (owner[o] > owner[inside]) {
-          const int j = index_of(tris_[o], b);
+          const int j = index_of(atris_[o], b);
           op.coarser.push_back(
               {static_cast<std::uint32_t>(i), k,
                EdgeRef{TriRef{OpId(owner[o]), local[o]}, static_cast<std::uint8_t>(j)}});
@@ -1173,8 +1205,8 @@ class Builder {
       op.pre.push_back({OpId(owner[t]), local[t]});
       op.parents.push_back(OpId(owner[t]));
       PreTriangle pt;
-      for (int k = 0; k < 3; ++k) pt.v[k] = index(tris_[t].v[k]);
-      if (tris_[t].is_void) pt.flags |= FragmentTriangle::kVoid;
+      for (int k = 0; k < 3; ++k) pt.v[k] = index(atris_[t].v[k]);
+      if (atris_[t].is_void) pt.flags |= FragmentTriangle::kVoid;
       op.pre_tris.push_back(pt);
     }
     for (std::vector<OpId>* ids : {&op.parents, &op.children}) {
@@ -1193,14 +1225,16 @@ class Builder {
   BlockTinStats& stats_;
   const int W_, H_;
   int B_ = 256, bw_ = 1, bh_ = 1, levels_ = 0;
+  std::uint64_t exact_window_samples_ = 0;
   std::uint64_t valid_samples_ = 0;
   std::unique_ptr<SampleSpill> spill_;
   double tol_ = 0.0, range_ = 0.0, stop_error_ = 0.0, eps0_ = 0.0, err_final_ = 0.0;
   std::uint64_t finest_vertices_ = 0, finest_triangles_ = 0;
   std::vector<MVert> verts_;
-  std::vector<MTri> tris_;
+  Chunked<MTri> tris_;
+  Chunked<ATri> atris_;  // tris_ compacted for the assembly
   std::vector<Removal> removals_;
-  std::vector<std::uint32_t> star_ids_;
+  Chunked<std::uint32_t> star_ids_;
   IdMap<std::uint32_t> shared_;      // grid index -> border vertex + 1
   IdMap<std::uint32_t> open_edges_;  // edge -> (tri << 2 | edge)
   std::vector<std::pair<std::uint64_t, std::uint32_t>> scratch_outer_;

@@ -49,6 +49,10 @@ struct BlockTinOptions {
   /// block with exact error bounds, re-reading each block's window; larger blocks use the
   /// conservative overlay bound. Sizes the largest window held in memory (4 + 1 bytes a sample).
   std::uint64_t exact_window_samples = std::uint64_t{16} << 20;
+  /// Memory budget in bytes (0 = none): caps exact_window_samples at a 40th of it (a window
+  /// costs 5 bytes a sample, and its copy) and the reader's block cache at a 16th (at most
+  /// 64 MiB), which is emptied once the leaf blocks are read.
+  std::uint64_t memory_bytes = 0;
   /// Directory of the scratch file holding the samples for the upper levels' re-reads (empty =
   /// the system's temporary directory). Checked for room before any work.
   std::string tmp_dir;
@@ -79,8 +83,9 @@ struct BlockTinStats {
 };
 
 /// Builds the CRMR into `sink`, op by op in id order as the final sweep makes them (the ops never
-/// exist all at once; smr::DatabaseStreamWriter writes them to a database). Throws smr::Error on unusable input (fewer than 2x2 samples, no valid sample)
-/// or options (block_cells not a power of two >= 8, max_degree < 3).
+/// exist all at once; smr::DatabaseStreamWriter writes them to a database). Throws smr::Error on
+/// unusable input (fewer than 2x2 samples, no valid sample) or options (block_cells not a power of
+/// two >= 8, max_degree < 3).
 void build_block_tin(const RasterWindows& dem, OpSink& sink, const BlockTinOptions& options = {},
                      BlockTinStats* stats = nullptr);
 /// The same, collected in memory (ROIs computed).

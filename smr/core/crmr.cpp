@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <string>
+#include <unordered_map>
 
 #include "storage/error.h"
 
@@ -48,6 +49,41 @@ void CrmrCollector::add(Op&& op) {
 Crmr CrmrCollector::take() {
   compute_rois(crmr_);
   return std::move(crmr_);
+}
+
+// In-fragment neighbours: the triangle across each edge that has the reversed edge. Fragments
+// are small (a few triangles), so a quadratic scan beats a hash map; R^0 may be large.
+void derive_fragment_neighbours(Op& op) {
+  const std::size_t n = op.fragment.size();
+  if (n > 64) {
+    std::unordered_map<std::uint64_t, std::int32_t> by_edge;
+    by_edge.reserve(n * 3);
+    for (std::size_t i = 0; i < n; ++i) {
+      const auto& v = op.fragment[i].v;
+      for (int k = 0; k < 3; ++k)
+        by_edge[(std::uint64_t(v[k]) << 32) | v[(k + 1) % 3]] = std::int32_t(i);
+    }
+    for (FragmentTriangle& t : op.fragment) {
+      for (int k = 0; k < 3; ++k) {
+        auto it = by_edge.find((std::uint64_t(t.v[(k + 1) % 3]) << 32) | t.v[k]);
+        t.nbr[k] = it == by_edge.end() ? FragmentTriangle::kNoNeighbour : it->second;
+      }
+    }
+    return;
+  }
+  for (FragmentTriangle& t : op.fragment) {
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t a = t.v[(k + 1) % 3], b = t.v[k];  // the reversed edge a -> b
+      t.nbr[k] = FragmentTriangle::kNoNeighbour;
+      for (std::size_t j = 0; j < n; ++j) {
+        const auto& u = op.fragment[j].v;
+        if ((u[0] == a && u[1] == b) || (u[1] == a && u[2] == b) || (u[2] == a && u[0] == b)) {
+          t.nbr[k] = std::int32_t(j);
+          break;
+        }
+      }
+    }
+  }
 }
 
 void compute_op_bounds(Op& op) {

@@ -69,20 +69,24 @@ class Crmr final : public OpSource {
 
 /// Receives a CRMR op by op, so that a builder never holds the whole DAG (DESIGN.md section 4;
 /// STYLE.md, tippecanoe: "the builder streams ops to the writer"). begin() is called once with
-/// the model's header (bounds, err0 and err_final final), then add() with ops 0 (R^0), 1, 2, ...
+/// the model's header (bounds, err0 and err_final final) and the number of ops to come (0 if not
+/// known; sinks size their records with it), then add() with ops 0 (R^0), 1, 2, ...
 /// in id order, each complete: links, pre_tris and compute_op_bounds() done. ROIs and subtree
 /// cones need the children's and are the sink's to derive (compute_rois' rule, children last).
 class OpSink {
  public:
   virtual ~OpSink() = default;
-  virtual void begin(const CrmrInfo& header) = 0;
+  virtual void begin(const CrmrInfo& header, std::uint64_t op_count) = 0;
   virtual void add(Op&& op) = 0;
 };
 
 /// The in-memory sink: collects the ops into a Crmr; take() computes the ROIs and returns it.
 class CrmrCollector final : public OpSink {
  public:
-  void begin(const CrmrInfo& header) override { crmr_.header = header; }
+  void begin(const CrmrInfo& header, std::uint64_t op_count) override {
+    crmr_.header = header;
+    crmr_.ops.reserve(op_count);
+  }
   void add(Op&& op) override;
   Crmr take();
 
@@ -96,6 +100,11 @@ double resolution_of(const CrmrInfo& info, double error);
 /// Sets op.box, op.sphere and op.cone from the op's own record: the corners and normals of F
 /// then of PreF (via pre_tris), in that order. Deterministic, so the store recomputes them.
 void compute_op_bounds(Op& op);
+
+/// Sets every fragment triangle's `nbr` from the fragment itself: across edge k, the triangle that
+/// has the reversed edge (kNoNeighbour if none). Fragments are small, so it scans them; R^0 may be
+/// large and is hashed.
+void derive_fragment_neighbours(Op& op);
 
 /// ROI of every op = its box united with its children's ROIs (children have larger ids).
 void compute_rois(Crmr& crmr);

@@ -81,6 +81,10 @@ class RasterWindows {
   /// (x0, y0 at sample (col0, row0)) and whose `valid` is empty when every sample has data.
   /// Throws smr::Error naming the source when they cannot be read.
   virtual Heightfield read(int col0, int row0, int w, int h) const = 0;
+  /// Caps the reader's cache of decoded source blocks at `bytes`; 0 empties it (a builder that
+  /// has read what it needs hands the memory back). Returns the previous cap; readers without
+  /// such a cache ignore it and return 0.
+  virtual std::uint64_t set_cache_bytes(std::uint64_t /*bytes*/) const { return 0; }
 };
 
 /// Windows of a Heightfield already in memory (tests, small inputs).

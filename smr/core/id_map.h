@@ -1,8 +1,8 @@
 // A flat hash map from 64-bit ids (OpId values, vertex ids) to small values: open addressing with
-// linear probing, a power-of-two capacity and a load of at most 1/2. Extraction keeps one entry
-// per op of X, which on a whole-database output is every op: std::unordered_map spends ~40-50
-// bytes per entry on nodes and buckets, this map 2 x (8 + sizeof(V)) at worst, in two arrays.
-// Erase shifts the following entries of the probe run back (no tombstones). The id ~0 is
+// linear probing, a power-of-two capacity and a load of at most 1/2 (or as chosen). Extraction
+// keeps one entry per op of X, which on a whole-database output is every op: std::unordered_map
+// spends ~40-50 bytes per entry on nodes and buckets, this map 2 x (8 + sizeof(V)) at worst, in two
+// arrays. Erase shifts the following entries of the probe run back (no tombstones). The id ~0 is
 // reserved as the empty marker.
 #pragma once
 
@@ -20,12 +20,17 @@ class IdMap {
  public:
   static constexpr std::uint64_t kEmpty = ~std::uint64_t{0};
 
+  IdMap() = default;
+  /// A map filled to at most `max_load_percent` of its slots (50 by default; a big map known in
+  /// advance trades a few more probes for half the memory at 60-75).
+  explicit IdMap(unsigned max_load_percent) : max_load_(max_load_percent) {}
+
   std::size_t size() const { return size_; }
   bool empty() const { return size_ == 0; }
 
   /// The value of `id`, inserted as V{} when absent. `id` must not be kEmpty.
   V& operator[](std::uint64_t id) {
-    if (2 * (size_ + 1) > keys_.size()) grow();
+    if ((size_ + 1) * 100 > keys_.size() * max_load_) grow();
     std::size_t i = slot(id);
     while (keys_[i] != kEmpty && keys_[i] != id) i = (i + 1) & mask_;
     if (keys_[i] == kEmpty) {
@@ -71,8 +76,11 @@ class IdMap {
     --size_;
     return true;
   }
+  /// Room for n entries without growing (one rehash at most).
   void reserve(std::size_t n) {
-    while (2 * n > keys_.size()) grow();
+    std::size_t capacity = std::max<std::size_t>(16, keys_.size());
+    while (n * 100 > capacity * max_load_) capacity *= 2;
+    if (capacity > keys_.size()) rehash(capacity);
   }
   /// Calls f(id, value) for every entry, in no particular order.
   template <class F>
@@ -84,8 +92,9 @@ class IdMap {
 
  private:
   std::size_t slot(std::uint64_t id) const { return std::size_t(mix64(id)) & mask_; }
-  void grow() {
-    std::vector<std::uint64_t> keys(std::max<std::size_t>(16, 2 * keys_.size()), kEmpty);
+  void grow() { rehash(std::max<std::size_t>(16, 2 * keys_.size())); }
+  void rehash(std::size_t capacity) {
+    std::vector<std::uint64_t> keys(capacity, kEmpty);
     std::vector<V> values(keys.size());
     keys.swap(keys_);
     values.swap(values_);
@@ -103,6 +112,7 @@ class IdMap {
   std::vector<V> values_;
   std::size_t mask_ = 0;
   std::size_t size_ = 0;
+  std::size_t max_load_ = 50;  // percent
 };
 
 }  // namespace smr

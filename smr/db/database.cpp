@@ -153,11 +153,18 @@ namespace {
 struct IndexRecords {
   std::vector<index::Entry> entries;
   std::vector<NormalCone> cones;
-  std::vector<std::uint32_t> child_ids;    // children of op i: [child_begin[i], child_begin[i+1])
+  std::vector<std::uint32_t> child_ids;  // children of op i: [child_begin[i], child_begin[i+1])
   std::vector<std::uint64_t> child_begin{0};
   std::vector<std::uint32_t> depth;  // longest parent chain from R^0 (parents have smaller ids)
   std::uint32_t dag_depth = 0;
   std::uint64_t triangles = 0;
+
+  void reserve(std::uint64_t ops) {
+    entries.reserve(ops);
+    cones.reserve(ops);
+    child_begin.reserve(ops + 1);
+    depth.reserve(ops);
+  }
 
   void add(const Op& op) {
     if (op.id.value != entries.size())
@@ -285,10 +292,11 @@ WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header
 WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
   // Opening the writer first checks the path (exists without --force) before any work.
-  storage::DatabaseWriter writer(path, options.force);
+  storage::DatabaseWriter writer(path, options.force, options.batch_bytes);
   const QuantGrid grid = choose_grid(crmr.header, options.z_step);
   const double shift = quantize(crmr, grid);
   IndexRecords records;
+  records.reserve(crmr.ops.size());
   for (const Op& op : crmr.ops) records.add(op);
   records.derive();  // the ROIs quantize() computed, for the index entries
   WriteReport report = write_tables(
@@ -300,7 +308,7 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
 
 struct DatabaseStreamWriter::State {
   State(const std::string& path, const WriteOptions& o, const std::string& tmp)
-      : options(o), writer(path, o.force), tmp_dir(tmp) {}
+      : options(o), writer(path, o.force, o.batch_bytes), tmp_dir(tmp) {}
   WriteOptions options;
   storage::DatabaseWriter writer;
   std::string tmp_dir;
@@ -324,12 +332,14 @@ DatabaseStreamWriter::DatabaseStreamWriter(const std::string& path, const WriteO
 
 DatabaseStreamWriter::~DatabaseStreamWriter() = default;
 
-void DatabaseStreamWriter::begin(const CrmrInfo& header) {
+void DatabaseStreamWriter::begin(const CrmrInfo& header, std::uint64_t op_count) {
   if (s_->begun) throw_internal("database writer: begin() called twice");
   s_->begun = true;
   s_->header = header;
   s_->grid = choose_grid(header, s_->options.z_step);
   s_->header.bounds = Box3{};  // of the snapped vertices, as quantize() does
+  s_->records.reserve(op_count);
+  s_->offsets.reserve(op_count + 1);
 }
 
 void DatabaseStreamWriter::add(Op&& op) {

@@ -45,6 +45,8 @@ struct WriteOptions {
   // two leaves, so small nodes read fewer unused bytes: 16 read 8 % fewer index bytes than 64 on
   // a 4097^2 fBm view (benchmarks/README.md), with little more than 8 gives.
   std::uint32_t rtree_fanout = 16;
+  // Bytes of values buffered before each LMDB commit (memory held while writing).
+  std::uint64_t batch_bytes = std::uint64_t{64} << 20;
   std::string parameters;                // free text recorded in meta (the command line, say)
   std::function<void(double)> progress;  // fraction done, from 0 to 1
 };
@@ -81,7 +83,7 @@ class DatabaseStreamWriter final : public OpSink {
   DatabaseStreamWriter(const std::string& path, const WriteOptions& options,
                        const std::string& tmp_dir);
   ~DatabaseStreamWriter() override;  // without finish(): nothing is left at `path`
-  void begin(const CrmrInfo& header) override;
+  void begin(const CrmrInfo& header, std::uint64_t op_count) override;
   void add(Op&& op) override;
   WriteReport finish();
   /// The header as stored: bounds of the snapped vertices, errors raised by the largest move.

@@ -18,44 +18,6 @@ namespace {
 
 constexpr std::size_t kMaxRecordBytes = std::size_t{1} << 31;
 
-std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
-  return (std::uint64_t(a) << 32) | b;
-}
-
-// In-fragment neighbours: the triangle across each edge that has the reversed edge. Fragments
-// are small (a few triangles), so a quadratic scan beats a hash map; R^0 may be large.
-void derive_neighbours(Op& op) {
-  const std::size_t n = op.fragment.size();
-  if (n > 64) {
-    std::unordered_map<std::uint64_t, std::int32_t> by_edge;
-    by_edge.reserve(n * 3);
-    for (std::size_t i = 0; i < n; ++i) {
-      const auto& v = op.fragment[i].v;
-      for (int k = 0; k < 3; ++k) by_edge[edge_key(v[k], v[(k + 1) % 3])] = std::int32_t(i);
-    }
-    for (FragmentTriangle& t : op.fragment) {
-      for (int k = 0; k < 3; ++k) {
-        auto it = by_edge.find(edge_key(t.v[(k + 1) % 3], t.v[k]));
-        t.nbr[k] = it == by_edge.end() ? FragmentTriangle::kNoNeighbour : it->second;
-      }
-    }
-    return;
-  }
-  for (FragmentTriangle& t : op.fragment) {
-    for (int k = 0; k < 3; ++k) {
-      const std::uint32_t a = t.v[(k + 1) % 3], b = t.v[k];  // the reversed edge a -> b
-      t.nbr[k] = FragmentTriangle::kNoNeighbour;
-      for (std::size_t j = 0; j < n; ++j) {
-        const auto& u = op.fragment[j].v;
-        if ((u[0] == a && u[1] == b) || (u[1] == a && u[2] == b) || (u[2] == a && u[0] == b)) {
-          t.nbr[k] = std::int32_t(j);
-          break;
-        }
-      }
-    }
-  }
-}
-
 template <class T>
 std::uint64_t count_of(const std::vector<T>& v) {
   return v.size();
@@ -279,7 +241,7 @@ std::vector<Op> decode_page(ByteView page, const QuantGrid& grid, const std::str
       op.fragment[v].flags |= FragmentTriangle::kVoid;
     }
     for (std::uint32_t p : mine) local_of[p] = kNone;
-    derive_neighbours(op);
+    derive_fragment_neighbours(op);
     const std::uint64_t np = count(r.remaining(), "parent");
     op.parents.resize(np);
     for (auto& p : op.parents) {

@@ -35,7 +35,8 @@ struct QuantGrid {
 /// 3-D mesh, the step of every axis).
 QuantGrid choose_grid(const CrmrInfo& info, double z_step);
 
-/// Snaps the vertices of `op` to `grid` and returns the largest move; bounds are left to the caller.
+/// Snaps the vertices of `op` to `grid` and returns the largest move; bounds are left to the
+/// caller.
 double snap_vertices(Op& op, const QuantGrid& grid);
 
 /// Snaps every vertex of `crmr` to `grid`, recomputes bounds and ROIs, and raises every stored

@@ -169,6 +169,12 @@ class GdalWindows final : public RasterWindows {
   const Georef& georef() const override { return georef_; }
   const std::string& source() const override { return path_; }
 
+  std::uint64_t set_cache_bytes(std::uint64_t bytes) const override {
+    // GDAL's block cache is the process's; lowering its limit evicts blocks down to it.
+    const GIntBig before = GDALGetCacheMax64();
+    GDALSetCacheMax64(static_cast<GIntBig>(bytes));
+    return static_cast<std::uint64_t>(before);
+  }
   Heightfield read(int col0, int row0, int w, int h) const override {
     if (col0 < 0 || row0 < 0 || w <= 0 || h <= 0 || col0 + w > width_ || row0 + h > height_) {
       throw_internal("'" + path_ + "': window outside the raster");

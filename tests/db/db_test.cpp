@@ -196,7 +196,6 @@ TEST(Database, OpsOutOfRangeAreAnErrorNotACrash) {
   EXPECT_THROW(db->page(db->page_count()), Error);
 }
 
-
 // The streaming writer (ops handed over one at a time, spooled to a scratch file) writes the same
 // bytes as write_database on the whole CRMR, for each builder's kind of CRMR: greedy terrain,
 // block-decimation terrain with no-data holes, a 3-D mesh with spawned components; and after it
@@ -207,7 +206,7 @@ void expect_streamed_equals_whole(const Crmr& crmr, const WriteOptions& o, const
   const std::string scratch = dir.file("scratch");
   fs::create_directories(scratch);
   DatabaseStreamWriter w(dir.file("streamed.smrdb"), o, scratch);
-  w.begin(crmr.header);
+  w.begin(crmr.header, crmr.ops.size());
   for (const Op& op : crmr.ops) w.add(Op(op));
   const WriteReport r = w.finish();
   EXPECT_TRUE(read_file(dir.file("whole.smrdb")) == read_file(dir.file("streamed.smrdb")))
@@ -274,7 +273,7 @@ TEST(DatabaseStreamWriter, RefusesMisuseAndLeavesNothingWhenDropped) {
   const std::string path = dir.file("x.smrdb");
   {
     DatabaseStreamWriter w(path, {}, dir.path().string());
-    w.begin(d.crmr.header);
+    w.begin(d.crmr.header, 0);
     w.add(Op(d.crmr.ops[0]));
     EXPECT_THROW(w.add(Op(d.crmr.ops[2])), Error);
   }
