@@ -219,6 +219,7 @@ struct IngestArgs {
   int block_cells = 256;
   std::string tmp_dir;
   std::string memory;  // --memory as typed
+  unsigned threads = 0;
 
   bool is_mesh() const { return smr::is_mesh_path(dem); }
   std::string effective_builder() const {
@@ -266,6 +267,10 @@ struct IngestArgs {
     app.add_option("--tmp", tmp_dir,
                    "DEMs, --builder blocks: directory for the scratch copy of the samples "
                    "(default: the system's temporary directory)");
+    app.add_option("--threads", threads,
+                   "DEMs, --builder blocks: threads building leaf blocks (0 = one per core; the "
+                   "database is the same whatever the number)")
+        ->capture_default_str();
     app.add_option("--codec", codec, "Geometry codec of the pages: draco, zstd or raw")
         ->capture_default_str();
     app.add_option("--z-quantum", z_quantum,
@@ -311,6 +316,7 @@ struct IngestArgs {
           "builder refines to --max-error and decimates down to the corners");
     }
     if (!tmp_dir.empty() && chosen != "blocks") throw_input("--tmp applies to --builder blocks");
+    if (threads != 0 && chosen != "blocks") throw_input("--threads applies to --builder blocks");
     if (block_cells < 8 || (block_cells & (block_cells - 1)) != 0)
       throw_input("--block-cells must be a power of two, at least 8, got " +
                   std::to_string(block_cells));
@@ -482,6 +488,7 @@ nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
   opt.block_cells = a.block_cells;
   opt.tmp_dir = a.tmp_dir;
   opt.memory_bytes = a.memory_bytes();
+  opt.threads = a.threads;
   opt.progress = [&](double f) { progress.update(0.8 * f); };
   smr::BlockTinStats st;
   smr::WriteOptions wo = write_options(a, progress);
@@ -518,6 +525,7 @@ nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
                         {"read", st.seconds_read},
                         {"greedy", st.seconds_greedy},
                         {"level0", st.seconds_level0},
+                        {"leaves", st.seconds_leaves},
                         {"upper", st.seconds_upper},
                         {"assemble", st.seconds_assemble}}}};
   report["crmr"] = {{"ops", tap.ops},

@@ -9,10 +9,15 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
+#include <deque>
+#include <exception>
 #include <filesystem>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -284,14 +289,10 @@ class Builder {
     // The reader's cache serves the leaf pass only: the upper levels re-read the scratch file.
     const std::uint64_t cache_before =
         opt_.memory_bytes != 0
-            ? dem_.set_cache_bytes(std::min(opt_.memory_bytes / 16, std::uint64_t{64} << 20))
+            ? dem_.set_cache_bytes(std::min(opt_.memory_bytes / 8, std::uint64_t{64} << 20))
             : 0;
-    for (int by = 0; by < bh_; ++by) {
-      for (int bx = 0; bx < bw_; ++bx) {
-        leaf_block(bx, by, t);
-        report(0.7 * double(by * bw_ + bx + 1) / double(bw_ * bh_));
-      }
-    }
+    leaf_pass();
+    lap(stats_.seconds_leaves);
     if (valid_samples_ == 0) throw_input(dem_.source() + ": every sample is no data");
     // Nothing reads the source from here on: hand its cache back, and the leaf pass's maps.
     const std::uint64_t cap = dem_.set_cache_bytes(0);
@@ -357,17 +358,30 @@ class Builder {
     return s;
   }
 
-  void leaf_block(int bx, int by, Clock::time_point& clock) {
+  /// A leaf block's samples and the tolerance it is built with, read in block order.
+  struct LeafInput {
+    int bx = 0, by = 0;
+    Heightfield halo, w;  // the block's window with one sample around it, and the window
+    double tol = 0.0;     // the tolerance so far: the largest |z| of this and earlier blocks
+  };
+
+  /// Reads leaf (bx, by) (main thread, in block order: the reader is not shared between threads
+  /// and the tolerance is a running maximum), copies it to the scratch file, counts its samples.
+  LeafInput read_leaf(int bx, int by) {
+    const Clock::time_point t0 = Clock::now();
+    LeafInput in;
+    in.bx = bx;
+    in.by = by;
     // The block's window and a halo of one sample around it, which the border rule below reads:
     // both blocks that share a border line see the same samples on either side of it.
     const int c0 = block_col0(bx), r0 = block_row0(by);
     const int hc0 = std::max(0, c0 - 1), hr0 = std::max(0, r0 - 1);
     const int hc1 = std::min(W_ - 1, block_col1(bx) + 1),
               hr1 = std::min(H_ - 1, block_row1(by) + 1);
-    const Heightfield halo = dem_.read(hc0, hr0, hc1 - hc0 + 1, hr1 - hr0 + 1);
-    const Heightfield w =
-        crop(halo, c0 - hc0, r0 - hr0, block_col1(bx) - c0 + 1, block_row1(by) - r0 + 1);
-    stats_.max_block_samples = std::max<std::uint64_t>(stats_.max_block_samples, halo.z.size());
+    in.halo = dem_.read(hc0, hr0, hc1 - hc0 + 1, hr1 - hr0 + 1);
+    in.w = crop(in.halo, c0 - hc0, r0 - hr0, block_col1(bx) - c0 + 1, block_row1(by) - r0 + 1);
+    const Heightfield& w = in.w;
+    stats_.max_block_samples = std::max<std::uint64_t>(stats_.max_block_samples, in.halo.z.size());
     if (spill_) spill_->put(bx, by, w, c0, r0);
     for (std::size_t i = 0; i < w.z.size(); ++i) {
       if (!w.valid.empty() && w.valid[i] == 0) continue;
@@ -375,8 +389,24 @@ class Builder {
       if (opt_.max_error != 0.0) tol_ = std::max(tol_, 1e-9 * std::abs(double(w.z[i])));
     }
     if (opt_.max_error != 0.0) tol_ = std::max(tol_, 1e-9);
+    in.tol = tol_;
     ++stats_.leaf_blocks;
     stats_.samples += w.z.size();
+    stats_.seconds_read += std::chrono::duration<double>(Clock::now() - t0).count();
+    return in;
+  }
+
+  /// Builds a read leaf block into this (empty) builder's records: its greedy TIN from the shared
+  /// border vertices, exact bounds, level-0 decimation. Runs on a worker thread; merge_leaf then
+  /// appends the records to the whole mesh's.
+  void build_leaf(const LeafInput& in) {
+    Clock::time_point clock = Clock::now();
+    tol_ = in.tol;
+    const int bx = in.bx, by = in.by;
+    const Heightfield& halo = in.halo;
+    const Heightfield& w = in.w;
+    const int c0 = block_col0(bx), r0 = block_row0(by);
+    const int hc0 = std::max(0, c0 - 1), hr0 = std::max(0, r0 - 1);
     const int ww = w.width, wh = w.height;
     const double line_tol = stop_error_ * 0.999;  // below the 2-D test, whatever its rounding
     GreedyTinOptions g;
@@ -422,7 +452,6 @@ class Builder {
     std::sort(prescribed.begin(), prescribed.end());
     prescribed.erase(std::unique(prescribed.begin(), prescribed.end()), prescribed.end());
 
-    stats_.seconds_read += since(clock);
     const Crmr tin = build_greedy_tin(w, g);
     stats_.seconds_greedy += since(clock);
 
@@ -493,6 +522,173 @@ class Builder {
     stats_.seconds_level0 += since(clock);
     // Edges on the block's outer border wait for the neighbour; edges that became internal
     // in the decimation were removed from open_edges_ as their triangles died.
+  }
+
+  /// Appends a leaf builder's records (built by build_leaf) to this one's, renumbered: vertices
+  /// through global_vertex in the leaf's own order (so border vertices are shared and the ids
+  /// are those a single pass would give), triangles, removals and stars after this one's, and
+  /// the leaf's open border edges glued to the earlier blocks' or left open for later ones.
+  void merge_leaf(Builder& leaf) {
+    const std::uint32_t tri_base = static_cast<std::uint32_t>(tris_.size());
+    const std::uint32_t rem_base = static_cast<std::uint32_t>(removals_.size());
+    const std::uint32_t star_base = static_cast<std::uint32_t>(star_ids_.size());
+    auto tri = [&](std::uint32_t t) { return t == kNone ? kNone : t + tri_base; };
+    auto rem = [&](std::uint32_t r) { return r == kNone ? kNone : r + rem_base; };
+    std::vector<std::uint32_t> vmap(leaf.verts_.size());
+    for (std::size_t v = 0; v < leaf.verts_.size(); ++v) {
+      const MVert& lv = leaf.verts_[v];
+      const std::uint32_t g = global_vertex(lv.col, lv.row, lv.z);
+      vmap[v] = g;
+      verts_[g].tri = tri(lv.tri);  // the leaf wrote it last, as a single pass would
+      verts_[g].sticky = verts_[g].sticky || lv.sticky;
+    }
+    leaf.tris_.drain([&](std::size_t, const MTri& lt) {
+      MTri m = lt;
+      for (int k = 0; k < 3; ++k) {
+        m.v[k] = vmap[lt.v[k]];
+        m.nbr[k] = tri(lt.nbr[k]);
+      }
+      m.creator = rem(lt.creator);
+      m.destroyer = rem(lt.destroyer);
+      tris_.push_back(m);
+    });
+    for (Removal r : leaf.removals_) {
+      r.vertex = vmap[r.vertex];
+      r.star_begin += star_base;
+      r.star_end += star_base;
+      r.new_begin += tri_base;
+      r.new_end += tri_base;
+      removals_.push_back(r);
+    }
+    leaf.star_ids_.drain([&](std::size_t, std::uint32_t t) { star_ids_.push_back(t + tri_base); });
+    leaf.open_edges_.for_each([&](std::uint64_t key, std::uint32_t value) {
+      const std::uint32_t a = vmap[key >> 32], b = vmap[key & 0xffffffffu];
+      const std::uint32_t t = (value >> 2) + tri_base, e = value & 3;
+      const std::uint64_t back = edge_key(b, a);
+      if (const std::uint32_t* o = open_edges_.find(back); o != nullptr) {
+        const std::uint32_t other = *o >> 2, oe = *o & 3;
+        tris_[t].nbr[e] = other;
+        tris_[other].nbr[oe] = t;
+        open_edges_.erase(back);
+      } else {
+        open_edges_[edge_key(a, b)] = (t << 2) | e;
+      }
+    });
+    err_final_ = std::max(err_final_, leaf.err_final_);
+    finest_triangles_ += leaf.finest_triangles_;
+    scanned_ += leaf.scanned_;
+    plans_ += leaf.plans_;
+    stats_.rounds += leaf.stats_.rounds;
+    stats_.non_delaunay_holes += leaf.stats_.non_delaunay_holes;
+    stats_.seconds_greedy += leaf.stats_.seconds_greedy;
+    stats_.seconds_level0 += leaf.stats_.seconds_level0;
+  }
+
+  /// Every leaf block: read in order on this thread, built on `threads` workers, merged in
+  /// order, so the records (and the database) do not depend on the number of threads. At most
+  /// 2 x threads blocks are in flight.
+  void leaf_pass() {
+    const int n = bw_ * bh_;
+    unsigned threads = opt_.threads != 0 ? opt_.threads : std::thread::hardware_concurrency();
+    threads = std::max(1u, std::min<unsigned>(threads, static_cast<unsigned>(n)));
+    struct Leaf {
+      LeafInput in;
+      BlockTinStats stats;
+      std::unique_ptr<Builder> builder;
+      std::exception_ptr error;
+      bool done = false;
+    };
+    auto make = [&](int k) {
+      auto leaf = std::make_unique<Leaf>();
+      leaf->in = read_leaf(k % bw_, k / bw_);
+      leaf->builder = std::make_unique<Builder>(dem_, opt_, leaf->stats);
+      leaf->builder->stop_error_ = stop_error_;
+      leaf->builder->eps0_ = eps0_;
+      return leaf;
+    };
+    auto merge = [&](Leaf& leaf, int k) {
+      if (leaf.error) std::rethrow_exception(leaf.error);
+      merge_leaf(*leaf.builder);
+      report(0.7 * double(k + 1) / double(n));
+    };
+    if (threads == 1) {
+      for (int k = 0; k < n; ++k) {
+        const auto leaf = make(k);
+        leaf->builder->build_leaf(leaf->in);
+        merge(*leaf, k);
+      }
+      return;
+    }
+    std::mutex mu;
+    std::condition_variable work_cv, done_cv;
+    std::deque<Leaf*> queue;
+    std::vector<std::unique_ptr<Leaf>> slots(static_cast<std::size_t>(n));
+    bool stop = false;
+    auto worker = [&] {
+      for (;;) {
+        Leaf* leaf = nullptr;
+        {
+          std::unique_lock lock(mu);
+          work_cv.wait(lock, [&] { return stop || !queue.empty(); });
+          if (queue.empty()) return;
+          leaf = queue.front();
+          queue.pop_front();
+        }
+        try {
+          leaf->builder->build_leaf(leaf->in);
+        } catch (...) {
+          leaf->error = std::current_exception();
+        }
+        leaf->in = LeafInput{};  // the samples are done with
+        {
+          std::lock_guard lock(mu);
+          leaf->done = true;
+        }
+        done_cv.notify_all();
+      }
+    };
+    std::vector<std::thread> pool;
+    auto join = [&] {
+      {
+        std::lock_guard lock(mu);
+        stop = true;
+      }
+      work_cv.notify_all();
+      for (std::thread& t : pool) t.join();
+      pool.clear();
+    };
+    try {
+      for (unsigned i = 0; i < threads; ++i) pool.emplace_back(worker);
+      const int in_flight = 2 * static_cast<int>(threads);
+      int read = 0;
+      for (int k = 0; k < n; ++k) {
+        // Keep the workers fed, reading ahead of the merge.
+        while (read < n && read < k + in_flight) {
+          slots[std::size_t(read)] = make(read);
+          {
+            std::lock_guard lock(mu);
+            queue.push_back(slots[std::size_t(read)].get());
+          }
+          work_cv.notify_one();
+          ++read;
+        }
+        Leaf& leaf = *slots[std::size_t(k)];
+        {
+          std::unique_lock lock(mu);
+          done_cv.wait(lock, [&] { return leaf.done; });
+        }
+        merge(leaf, k);
+        slots[std::size_t(k)].reset();
+      }
+    } catch (...) {
+      {
+        std::lock_guard lock(mu);
+        queue.clear();
+      }
+      join();
+      throw;
+    }
+    join();
   }
 
   std::uint32_t global_vertex(int col, int row, float z) {

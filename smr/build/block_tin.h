@@ -56,6 +56,9 @@ struct BlockTinOptions {
   /// Directory of the scratch file holding the samples for the upper levels' re-reads (empty =
   /// the system's temporary directory). Checked for room before any work.
   std::string tmp_dir;
+  /// Threads building leaf blocks (0 = one per core). The output does not depend on it: blocks
+  /// are read and merged in order, only their greedy TINs and first decimation run in parallel.
+  unsigned threads = 0;
   /// Progress in [0, 1].
   std::function<void(double)> progress;
 };
@@ -76,10 +79,12 @@ struct BlockTinStats {
   std::uint64_t samples_scanned = 0;     // sample visits of exact bounds
   std::uint64_t plans = 0;               // removals planned (evaluated)
   std::uint64_t temp_bytes = 0;          // written to the scratch file
-  // Wall time: survey pass, leaf windows read, leaf greedy TINs, leaf decimation, upper levels
+  // Seconds: survey pass, leaf windows read, leaf greedy TINs, leaf decimation, upper levels
   // (with their reads), assembling the CRMR.
+  // Leaf reads are wall time on the reading thread; greedy and level 0 are summed over the
+  // workers (thread time); seconds_leaves is the wall time of the whole leaf pass.
   double seconds_survey = 0, seconds_read = 0, seconds_greedy = 0, seconds_level0 = 0,
-         seconds_upper = 0, seconds_assemble = 0;
+         seconds_leaves = 0, seconds_upper = 0, seconds_assemble = 0;
 };
 
 /// Builds the CRMR into `sink`, op by op in id order as the final sweep makes them (the ops never

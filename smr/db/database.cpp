@@ -2,15 +2,21 @@
 
 #include <algorithm>
 #include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <exception>
 #include <filesystem>
 #include <limits>
 #include <map>
+#include <mutex>
 #include <set>
+#include <thread>
 
 #include <malloc.h>
 
 #include <nlohmann/json.hpp>
 
+#include "smr/core/parallel.h"
 #include "smr/db/page.h"
 #include "storage/checksum.h"
 #include "storage/error.h"
@@ -205,8 +211,9 @@ struct IndexRecords {
 
 // Writes pages (in R-tree leaf order), locators, the R-tree and the meta record (last), then
 // commits. `op_of(id, held)` returns op `id` as the page must hold it (snapped, ROI, subtree cone,
-// error shifted), either one that outlives the call or one it appends to `held` (cleared for each
-// page, with room reserved for the page's ops, so earlier pointers stay valid).
+// error shifted), either one that outlives the call or one it appends to `held` (one per page,
+// with room reserved for the page's ops, so earlier pointers stay valid). It is called from
+// several threads at once.
 WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header,
                          const QuantGrid& grid, double z_shift, IndexRecords& records,
                          const std::function<const Op*(std::uint64_t, std::vector<Op>&)>& op_of,
@@ -225,22 +232,30 @@ WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header
   const index::Plan plan = index::plan(records.entries, bo);
   report.pages = plan.leaves.size();
 
-  // Data pages, in leaf order; remember where each op went.
+  // Data pages, in leaf order; remember where each op went. Pages are encoded on every core, a
+  // window of them at a time, and appended in order.
   std::vector<std::pair<std::uint64_t, std::uint32_t>> where(report.ops, {~0ull, 0u});
-  std::vector<Op> held;
-  std::vector<const Op*> page_ops;
-  for (std::uint64_t leaf = 0; leaf < plan.leaves.size(); ++leaf) {
-    held.clear();
-    page_ops.clear();
-    held.reserve(plan.leaves[leaf].size());
-    for (std::uint64_t id : plan.leaves[leaf]) {
-      where.at(id) = {leaf, std::uint32_t(page_ops.size())};
-      page_ops.push_back(op_of(id, held));
+  const unsigned threads = thread_count(options.threads);
+  const std::size_t window = 8 * std::size_t(threads);
+  std::vector<Bytes> pages(window);
+  for (std::size_t first = 0; first < plan.leaves.size(); first += window) {
+    const std::size_t count = std::min(window, plan.leaves.size() - first);
+    parallel_for(count, threads, [&](std::size_t j) {
+      const std::uint64_t leaf = first + j;
+      std::vector<Op> held;
+      held.reserve(plan.leaves[leaf].size());
+      std::vector<const Op*> page_ops;
+      for (std::uint64_t id : plan.leaves[leaf]) {
+        where.at(id) = {leaf, std::uint32_t(page_ops.size())};
+        page_ops.push_back(op_of(id, held));
+      }
+      pages[j] = storage::seal(encode_page(page_ops, grid, options.codec));
+    });
+    for (std::size_t j = 0; j < count; ++j) {
+      report.page_bytes += pages[j].size();
+      writer.append(Table::kPages, first + j, pages[j]);
     }
-    const Bytes sealed = storage::seal(encode_page(page_ops, grid, options.codec));
-    report.page_bytes += sealed.size();
-    writer.append(Table::kPages, leaf, sealed);
-    if (leaf % 256 == 0) progress(0.9 * double(leaf) / double(plan.leaves.size()));
+    progress(0.9 * double(first + count) / double(plan.leaves.size()));
   }
   // Locators.
   for (std::uint64_t block = 0; block * kOpsPerLocatorBlock < where.size(); ++block) {
@@ -320,6 +335,72 @@ struct DatabaseStreamWriter::State {
   double shift = 0.0;
   IndexRecords records;
   bool begun = false, finished = false;
+  std::uint64_t next_id = 0;
+
+  // Spooling runs on its own thread, in id order, while the builder makes the next ops.
+  std::mutex mu;
+  std::condition_variable cv;
+  std::deque<Op> queue;
+  bool closing = false;
+  std::exception_ptr error;
+  std::thread spooler;
+
+  void spool_one(Op& op) {
+    // quantize(): snap, track the largest move, recompute the bounds.
+    shift = std::max(shift, snap_vertices(op, grid));
+    for (const Vertex& v : op.vertices) header.bounds.add(v.p);
+    compute_op_bounds(op);
+    records.add(op);
+    // The spooled copy: ROI and subtree cone are the op's own until finish() derives them.
+    op.roi = op.box;
+    op.subtree_cone = canonical_cone(op.cone);
+    const Op* one[] = {&op};
+    const Bytes bytes = encode_page(one, grid, storage::CodecId::kRaw);
+    spool->write(offsets.back(), bytes.data(), bytes.size());
+    offsets.push_back(offsets.back() + bytes.size());
+  }
+  void run() {
+    for (;;) {
+      Op op;
+      {
+        std::unique_lock lock(mu);
+        cv.wait(lock, [&] { return closing || !queue.empty(); });
+        if (queue.empty()) return;
+        op = std::move(queue.front());
+        queue.pop_front();
+      }
+      cv.notify_all();
+      try {
+        if (!error) spool_one(op);
+      } catch (...) {
+        std::lock_guard lock(mu);
+        error = std::current_exception();
+      }
+    }
+  }
+  // Stops the spooler once the queue is empty; rethrows what it threw.
+  void drain() {
+    if (spooler.joinable()) {
+      {
+        std::lock_guard lock(mu);
+        closing = true;
+      }
+      cv.notify_all();
+      spooler.join();
+    }
+    if (error) std::rethrow_exception(error);
+  }
+  ~State() {
+    if (spooler.joinable()) {
+      {
+        std::lock_guard lock(mu);
+        closing = true;
+        queue.clear();
+      }
+      cv.notify_all();
+      spooler.join();
+    }
+  }
 };
 
 DatabaseStreamWriter::DatabaseStreamWriter(const std::string& path, const WriteOptions& options,
@@ -340,36 +421,40 @@ void DatabaseStreamWriter::begin(const CrmrInfo& header, std::uint64_t op_count)
   s_->header.bounds = Box3{};  // of the snapped vertices, as quantize() does
   s_->records.reserve(op_count);
   s_->offsets.reserve(op_count + 1);
+  s_->spooler = std::thread([s = s_.get()] { s->run(); });
 }
 
 void DatabaseStreamWriter::add(Op&& op) {
-  if (!s_->begun || s_->finished) throw_internal("database writer: add() outside begin/finish");
-  // quantize(): snap, track the largest move, recompute the bounds.
-  s_->shift = std::max(s_->shift, snap_vertices(op, s_->grid));
-  for (const Vertex& v : op.vertices) s_->header.bounds.add(v.p);
-  compute_op_bounds(op);
-  s_->records.add(op);
-  // The spooled copy: ROI and subtree cone are the op's own until finish() derives them.
-  op.roi = op.box;
-  op.subtree_cone = canonical_cone(op.cone);
-  const Op* one[] = {&op};
-  const Bytes bytes = encode_page(one, s_->grid, storage::CodecId::kRaw);
-  s_->spool->write(s_->offsets.back(), bytes.data(), bytes.size());
-  s_->offsets.push_back(s_->offsets.back() + bytes.size());
+  State& s = *s_;
+  if (!s.begun || s.finished) throw_internal("database writer: add() outside begin/finish");
+  if (op.id.value != s.next_id)
+    throw_internal("database writer: op " + std::to_string(op.id.value) +
+                   " arrived out of id order");
+  ++s.next_id;
+  constexpr std::size_t kQueued = 1024;  // ops waiting for the spooler, at most
+  std::unique_lock lock(s.mu);
+  s.cv.wait(lock, [&] { return s.queue.size() < kQueued || s.error; });
+  if (s.error) {
+    lock.unlock();
+    s.drain();
+  }
+  s.queue.push_back(std::move(op));
+  lock.unlock();
+  s.cv.notify_all();
 }
 
 WriteReport DatabaseStreamWriter::finish() {
   if (!s_->begun || s_->finished) throw_internal("database writer: finish() without begin()");
   s_->finished = true;
   State& s = *s_;
+  s.drain();
   s.records.derive();
   s.header.err0 += s.shift;
   s.header.err_final += s.shift;
-  Bytes buffer;
   WriteReport report = write_tables(
       s.writer, s.header, s.grid, s.shift, s.records,
       [&](std::uint64_t id, std::vector<Op>& held) -> const Op* {
-        buffer.resize(s.offsets.at(id + 1) - s.offsets[id]);
+        Bytes buffer(s.offsets.at(id + 1) - s.offsets[id]);
         s.spool->read(s.offsets[id], buffer.data(), buffer.size());
         std::vector<Op> one = decode_page(buffer, s.grid, "scratch op " + std::to_string(id));
         if (one.size() != 1 || one[0].id.value != id)

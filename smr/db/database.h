@@ -45,6 +45,8 @@ struct WriteOptions {
   // two leaves, so small nodes read fewer unused bytes: 16 read 8 % fewer index bytes than 64 on
   // a 4097^2 fBm view (benchmarks/README.md), with little more than 8 gives.
   std::uint32_t rtree_fanout = 16;
+  // Threads encoding pages (0 = one per core); the file does not depend on it.
+  unsigned threads = 0;
   // Bytes of values buffered before each LMDB commit (memory held while writing).
   std::uint64_t batch_bytes = std::uint64_t{64} << 20;
   std::string parameters;                // free text recorded in meta (the command line, say)
@@ -76,7 +78,8 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
 /// the index needs, ~200 bytes an op. finish() derives ROIs and subtree cones (children first),
 /// plans the R-tree and writes the pages in leaf order, re-reading their ops from the scratch
 /// file, then the locators, the R-tree and the meta record, last. The same ops give the same
-/// bytes as write_database on the Crmr they make up.
+/// bytes as write_database on the Crmr they make up. Ops are spooled on a thread of the writer's
+/// own (up to 1024 wait for it), so the builder goes on making the next ones meanwhile.
 class DatabaseStreamWriter final : public OpSink {
  public:
   /// Opens the output at once: an existing `path` without options.force throws before any work.
