@@ -576,10 +576,13 @@ TEST_F(DbCli, BlockIngestOfATiledGeoTiffIsDeterministicAndSurvivesKills) {
   const CliRun e = smrdb("extract " + first + " --floor 0.9 --verify -q -o " + path("out.obj"));
   EXPECT_EQ(e.code, 0) << e.out;
 
-  const std::string second = path("b.smrdb");
-  ASSERT_EQ(smrdb("ingest " + tif + args + second).code, 0);
+  // The same bytes whatever the number of threads (the first run used one per core).
   const std::string bytes = read_file(first);
-  EXPECT_EQ(read_file(second), bytes);
+  for (const char* threads : {"1", "3"}) {
+    const std::string second = path(std::string("b") + threads + ".smrdb");
+    ASSERT_EQ(smrdb("ingest " + tif + args + second + " --threads " + threads).code, 0);
+    EXPECT_EQ(read_file(second), bytes) << "--threads " << threads << " changed the database";
+  }
 
   const std::string target = path("c.smrdb");
   const std::vector<std::string> ingest = {
@@ -614,6 +617,39 @@ TEST_F(DbCli, BlockIngestOfATiledGeoTiffIsDeterministicAndSurvivesKills) {
                     "no-such-dir");
   expect_user_error("ingest " + tif + " --builder blocks --max-vertices 100 -o " + path("d.smrdb"),
                     "--max-vertices");
+  expect_user_error("ingest " + tif + " --threads 2 -o " + path("d.smrdb"), "--threads");
+  EXPECT_FALSE(fs::exists(path("d.smrdb")));
+}
+
+// --memory: the out-of-core builder by default, its budget and the peak RSS in the report, a
+// database that verifies; sizes it cannot read, budgets below the floor and builders or inputs
+// it does not apply to are user errors naming the option.
+TEST_F(DbCli, MemoryBudgetChoosesTheBlockBuilderAndIsReported) {
+  const smr::Heightfield h = smr::make_fbm(129, 97, 5, 300.0);
+  const std::string tif = path("dem.tif");
+  smr::write_geotiff(tif, h);
+  const std::string db = path("m.smrdb");
+  const CliRun r = smrdb("ingest " + tif + " --memory 64M --block-cells 16 --max-error 0.5 -q " +
+                         "--json -o " + db);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out.substr(r.out.find('{')));
+  EXPECT_TRUE(j.contains("blocks")) << "--memory did not choose the block builder";
+  EXPECT_DOUBLE_EQ(j.at("memory_budget_mb").get<double>(), 64.0);
+  EXPECT_GT(j.at("peak_rss_mb").get<double>(), 1.0);
+  EXPECT_GT(j.at("blocks").at("temp_bytes").get<std::uint64_t>(), 0u);
+  EXPECT_GE(j.at("database").at("dag_depth").get<std::uint64_t>(), 3u);
+  EXPECT_TRUE(smr::verify_database(db, nullptr).ok());
+  // 1.5G reads as a fraction of a gibibyte and is recorded as bytes.
+  ASSERT_EQ(
+      smrdb("ingest " + tif + " --memory 1.5G --block-cells 16 -q -o " + path("g.smrdb")).code, 0);
+  for (const char* bad : {"12X", "-5M", "M", "16M"}) {
+    expect_user_error("ingest " + tif + " --memory " + bad + " -o " + path("d.smrdb"), "--memory");
+  }
+  expect_user_error("ingest " + tif + " --memory 64M --builder greedy -o " + path("d.smrdb"),
+                    "--memory");
+  const std::string mesh = path("t.off");
+  write_file(mesh, "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n");
+  expect_user_error("ingest " + mesh + " --memory 64M -o " + path("d.smrdb"), "--memory");
   EXPECT_FALSE(fs::exists(path("d.smrdb")));
 }
 

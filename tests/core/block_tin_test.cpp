@@ -8,6 +8,7 @@
 #include <array>
 #include <cstdio>
 #include <map>
+#include <string>
 #include <tuple>
 
 #include "smr/build/block_tin.h"
@@ -165,12 +166,19 @@ TEST_P(PerDataset, BuildIsDeterministic) {
   if (std::get<1>(GetParam())) GTEST_SKIP() << "the same code as the exact configuration";
   const test::Dataset& d = data();
   const HeightfieldWindows windows(d.dem);
-  const Crmr again = build_block_tin(windows, options(d, std::get<1>(GetParam())));
-  const Crmr& first = build().crmr;
-  ASSERT_EQ(again.ops.size(), first.ops.size());
-  EXPECT_TRUE(again.header == first.header);
-  for (std::size_t i = 0; i < again.ops.size(); ++i) {
-    ASSERT_TRUE(again.ops[i] == first.ops[i]) << "op " << i << " differs";
+  const Crmr& first = build().crmr;  // one thread per core
+  // Leaf blocks are built by worker threads and merged in order: the same CRMR on one thread
+  // (no workers) and on more threads than blocks fit in flight.
+  for (unsigned threads : {1u, 5u}) {
+    SCOPED_TRACE("threads " + std::to_string(threads));
+    BlockTinOptions opt = options(d, std::get<1>(GetParam()));
+    opt.threads = threads;
+    const Crmr again = build_block_tin(windows, opt);
+    ASSERT_EQ(again.ops.size(), first.ops.size());
+    EXPECT_TRUE(again.header == first.header);
+    for (std::size_t i = 0; i < again.ops.size(); ++i) {
+      ASSERT_TRUE(again.ops[i] == first.ops[i]) << "op " << i << " differs";
+    }
   }
 }
 
