@@ -50,8 +50,8 @@ struct BlockTinOptions {
   /// conservative overlay bound. Sizes the largest window held in memory (4 + 1 bytes a sample).
   std::uint64_t exact_window_samples = std::uint64_t{16} << 20;
   /// Memory budget in bytes (0 = none): caps exact_window_samples at a 40th of it (a window
-  /// costs 5 bytes a sample, and its copy) and the reader's block cache at a 16th (at most
-  /// 64 MiB), which is emptied once the leaf blocks are read.
+  /// costs 5 bytes a sample, and its copy) and sets the reader's block cache to an 8th, which
+  /// is emptied once the leaf blocks are read.
   std::uint64_t memory_bytes = 0;
   /// Directory of the scratch file holding the samples for the upper levels' re-reads (empty =
   /// the system's temporary directory). Checked for room before any work.
