@@ -337,13 +337,19 @@ struct DatabaseStreamWriter::State {
   bool begun = false, finished = false;
   std::uint64_t next_id = 0;
 
-  // Spooling runs on its own thread, in id order, while the builder makes the next ops.
+  // Spooling runs on its own thread, in id order, while the builder makes the next ops. Ops are
+  // handed over in batches (one lock and one wake-up per batch, not per op) and the scratch file
+  // is written in large pieces.
+  static constexpr std::size_t kBatch = 256, kBatches = 8, kWriteBytes = std::size_t{4} << 20;
   std::mutex mu;
   std::condition_variable cv;
-  std::deque<Op> queue;
+  std::vector<Op> filling;  // the builder's side, not shared
+  std::deque<std::vector<Op>> queue;
   bool closing = false;
   std::exception_ptr error;
   std::thread spooler;
+  Bytes pending;  // encoded ops not yet written, from offsets[written_ops]
+  std::uint64_t pending_at = 0;
 
   void spool_one(Op& op) {
     // quantize(): snap, track the largest move, recompute the bounds.
@@ -355,28 +361,51 @@ struct DatabaseStreamWriter::State {
     op.roi = op.box;
     op.subtree_cone = canonical_cone(op.cone);
     const Op* one[] = {&op};
-    const Bytes bytes = encode_page(one, grid, storage::CodecId::kRaw);
-    spool->write(offsets.back(), bytes.data(), bytes.size());
+    const Bytes bytes = encode_page(one, grid, storage::CodecId::kRaw, false);
+    pending.insert(pending.end(), bytes.begin(), bytes.end());
     offsets.push_back(offsets.back() + bytes.size());
+    if (pending.size() >= kWriteBytes) flush();
+  }
+  void flush() {
+    spool->write(pending_at, pending.data(), pending.size());
+    pending_at += pending.size();
+    pending.clear();
   }
   void run() {
     for (;;) {
-      Op op;
+      std::vector<Op> batch;
       {
         std::unique_lock lock(mu);
         cv.wait(lock, [&] { return closing || !queue.empty(); });
         if (queue.empty()) return;
-        op = std::move(queue.front());
+        batch = std::move(queue.front());
         queue.pop_front();
       }
       cv.notify_all();
       try {
-        if (!error) spool_one(op);
+        if (!error) {
+          for (Op& op : batch) spool_one(op);
+        }
       } catch (...) {
         std::lock_guard lock(mu);
         error = std::current_exception();
       }
     }
+  }
+  // Hands the builder's current batch to the spooler, waiting while kBatches are queued.
+  void hand_over() {
+    if (filling.empty()) return;
+    std::unique_lock lock(mu);
+    cv.wait(lock, [&] { return queue.size() < kBatches || error; });
+    if (error) {
+      lock.unlock();
+      drain();
+    }
+    queue.push_back(std::move(filling));
+    lock.unlock();
+    cv.notify_all();
+    filling = std::vector<Op>();
+    filling.reserve(kBatch);
   }
   // Stops the spooler once the queue is empty; rethrows what it threw.
   void drain() {
@@ -389,6 +418,7 @@ struct DatabaseStreamWriter::State {
       spooler.join();
     }
     if (error) std::rethrow_exception(error);
+    if (!pending.empty()) flush();
   }
   ~State() {
     if (spooler.joinable()) {
@@ -431,22 +461,15 @@ void DatabaseStreamWriter::add(Op&& op) {
     throw_internal("database writer: op " + std::to_string(op.id.value) +
                    " arrived out of id order");
   ++s.next_id;
-  constexpr std::size_t kQueued = 1024;  // ops waiting for the spooler, at most
-  std::unique_lock lock(s.mu);
-  s.cv.wait(lock, [&] { return s.queue.size() < kQueued || s.error; });
-  if (s.error) {
-    lock.unlock();
-    s.drain();
-  }
-  s.queue.push_back(std::move(op));
-  lock.unlock();
-  s.cv.notify_all();
+  s.filling.push_back(std::move(op));
+  if (s.filling.size() >= State::kBatch) s.hand_over();
 }
 
 WriteReport DatabaseStreamWriter::finish() {
   if (!s_->begun || s_->finished) throw_internal("database writer: finish() without begin()");
   s_->finished = true;
   State& s = *s_;
+  s.hand_over();
   s.drain();
   s.records.derive();
   s.header.err0 += s.shift;

@@ -79,7 +79,8 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
 /// plans the R-tree and writes the pages in leaf order, re-reading their ops from the scratch
 /// file, then the locators, the R-tree and the meta record, last. The same ops give the same
 /// bytes as write_database on the Crmr they make up. Ops are spooled on a thread of the writer's
-/// own (up to 1024 wait for it), so the builder goes on making the next ones meanwhile.
+/// own, handed over in batches of 256 (up to 8 waiting), so the builder goes on making the next
+/// ones meanwhile.
 class DatabaseStreamWriter final : public OpSink {
  public:
   /// Opens the output at once: an existing `path` without options.force throws before any work.

@@ -25,7 +25,8 @@ std::uint64_t count_of(const std::vector<T>& v) {
 
 }  // namespace
 
-Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid, storage::CodecId codec) {
+Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid, storage::CodecId codec,
+                  bool compress_records) {
   // The page's vertices, in order of first use, and each op's local -> page index.
   std::unordered_map<std::uint64_t, std::uint32_t> page_index;
   std::vector<std::uint64_t> ids;
@@ -149,9 +150,13 @@ Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid, storage
   Bytes out;
   ByteWriter pw(out);
   pw.u8(kPageFormat);
-  pw.u8(static_cast<std::uint8_t>(codec));
+  pw.u8(static_cast<std::uint8_t>(codec) | (compress_records ? 0 : kRawRecords));
   pw.varint(ops.size());
-  pw.blob(storage::zstd_compress(records));
+  if (compress_records) {
+    pw.blob(storage::zstd_compress(records));
+  } else {
+    pw.blob(records);
+  }
   Bytes geo;
   storage::encode_geometry(codec, geometry, geo);
   pw.blob(geo);
@@ -161,14 +166,17 @@ Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid, storage
 std::vector<Op> decode_page(ByteView page, const QuantGrid& grid, const std::string& context) {
   ByteReader pr(page, context);
   if (pr.u8() != kPageFormat) pr.fail("unknown page format");
-  const std::uint8_t codec_byte = pr.u8();
+  const std::uint8_t codec_field = pr.u8();
+  const bool raw_records = (codec_field & kRawRecords) != 0;
+  const auto codec_byte = static_cast<std::uint8_t>(codec_field & ~kRawRecords);
   if (codec_byte > static_cast<std::uint8_t>(storage::CodecId::kDraco)) pr.fail("unknown codec");
   const auto codec = static_cast<storage::CodecId>(codec_byte);
   const std::uint64_t op_count = pr.varint();
   const ByteView packed = pr.blob();
   const ByteView geo_bytes = pr.blob();
   pr.expect_end();
-  const Bytes records = storage::zstd_decompress(packed, kMaxRecordBytes, context);
+  const Bytes records = raw_records ? Bytes(packed.begin(), packed.end())
+                                    : storage::zstd_decompress(packed, kMaxRecordBytes, context);
   const GeometryBlob geometry = storage::decode_geometry(codec, geo_bytes, context);
 
   ByteReader r(records, context + " records");
