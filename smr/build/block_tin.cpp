@@ -26,6 +26,7 @@
 #include "smr/build/triangle_rows.h"
 #include "smr/core/chunked.h"
 #include "smr/core/id_map.h"
+#include "smr/core/parallel.h"
 #include "storage/error.h"
 #include "storage/temp_file.h"
 
@@ -590,107 +591,38 @@ class Builder {
   /// order, so the records (and the database) do not depend on the number of threads. At most
   /// 2 x threads blocks are in flight.
   void leaf_pass() {
-    const int n = bw_ * bh_;
-    unsigned threads = opt_.threads != 0 ? opt_.threads : std::thread::hardware_concurrency();
-    threads = std::max(1u, std::min<unsigned>(threads, static_cast<unsigned>(n)));
+    const std::size_t n = std::size_t(bw_) * std::size_t(bh_);
     struct Leaf {
       LeafInput in;
       BlockTinStats stats;
       std::unique_ptr<Builder> builder;
-      std::exception_ptr error;
-      bool done = false;
     };
-    auto make = [&](int k) {
-      auto leaf = std::make_unique<Leaf>();
-      leaf->in = read_leaf(k % bw_, k / bw_);
-      leaf->builder = std::make_unique<Builder>(dem_, opt_, leaf->stats);
-      leaf->builder->stop_error_ = stop_error_;
-      leaf->builder->eps0_ = eps0_;
-      return leaf;
-    };
-    auto merge = [&](Leaf& leaf, int k) {
-      if (leaf.error) std::rethrow_exception(leaf.error);
-      merge_leaf(*leaf.builder);
-      report(0.7 * double(k + 1) / double(n));
-    };
-    if (threads == 1) {
-      for (int k = 0; k < n; ++k) {
-        const auto leaf = make(k);
-        leaf->builder->build_leaf(leaf->in);
-        merge(*leaf, k);
-      }
-      return;
-    }
-    std::mutex mu;
-    std::condition_variable work_cv, done_cv;
-    std::deque<Leaf*> queue;
-    std::vector<std::unique_ptr<Leaf>> slots(static_cast<std::size_t>(n));
-    bool stop = false;
-    auto worker = [&] {
-      for (;;) {
-        Leaf* leaf = nullptr;
-        {
-          std::unique_lock lock(mu);
-          work_cv.wait(lock, [&] { return stop || !queue.empty(); });
-          if (queue.empty()) return;
-          leaf = queue.front();
-          queue.pop_front();
-        }
-        try {
-          leaf->builder->build_leaf(leaf->in);
-        } catch (...) {
-          leaf->error = std::current_exception();
-        }
-        leaf->in = LeafInput{};  // the samples are done with
-        {
-          std::lock_guard lock(mu);
-          leaf->done = true;
-        }
-        done_cv.notify_all();
-      }
-    };
-    std::vector<std::thread> pool;
-    auto join = [&] {
-      {
-        std::lock_guard lock(mu);
-        stop = true;
-      }
-      work_cv.notify_all();
-      for (std::thread& t : pool) t.join();
-      pool.clear();
-    };
-    try {
-      for (unsigned i = 0; i < threads; ++i) pool.emplace_back(worker);
-      const int in_flight = 2 * static_cast<int>(threads);
-      int read = 0;
-      for (int k = 0; k < n; ++k) {
-        // Keep the workers fed, reading ahead of the merge.
-        while (read < n && read < k + in_flight) {
-          slots[std::size_t(read)] = make(read);
-          {
-            std::lock_guard lock(mu);
-            queue.push_back(slots[std::size_t(read)].get());
-          }
-          work_cv.notify_one();
-          ++read;
-        }
-        Leaf& leaf = *slots[std::size_t(k)];
-        {
-          std::unique_lock lock(mu);
-          done_cv.wait(lock, [&] { return leaf.done; });
-        }
-        merge(leaf, k);
-        slots[std::size_t(k)].reset();
-      }
-    } catch (...) {
-      {
-        std::lock_guard lock(mu);
-        queue.clear();
-      }
-      join();
-      throw;
-    }
-    join();
+    const unsigned threads = thread_count(opt_.threads);
+    ordered_pipeline(
+        n, threads, 2 * std::size_t(threads),
+        [&](std::size_t k) {
+          auto leaf = std::make_unique<Leaf>();
+          leaf->in = read_leaf(int(k % std::size_t(bw_)), int(k / std::size_t(bw_)));
+          leaf->builder = make_worker(leaf->stats);
+          return leaf;
+        },
+        [](Leaf& leaf) {
+          leaf.builder->build_leaf(leaf.in);
+          leaf.in = LeafInput{};  // the samples are done with
+        },
+        [&](Leaf& leaf, std::size_t k) {
+          merge_leaf(*leaf.builder);
+          report(0.7 * double(k + 1) / double(n));
+        });
+  }
+
+  /// An empty builder for one block's work on a worker thread, with this one's settings.
+  std::unique_ptr<Builder> make_worker(BlockTinStats& stats) const {
+    auto b = std::make_unique<Builder>(dem_, opt_, stats);
+    b->stop_error_ = stop_error_;
+    b->eps0_ = eps0_;
+    b->tol_ = tol_;
+    return b;
   }
 
   std::uint32_t global_vertex(int col, int row, float z) {
@@ -1084,26 +1016,175 @@ class Builder {
       return;
     }
     ++stats_.exact_levels;
-    std::vector<std::vector<std::uint32_t>> in_block(std::size_t(nx) * std::size_t(ny));
+    // Blocks are independent (their borders are locked and no triangle crosses them): each is
+    // copied out for a worker, decimated there with exact bounds from its window, and merged
+    // back in block order, so the records are the ones a single pass over the blocks makes.
+    const std::size_t blocks = std::size_t(nx) * std::size_t(ny);
+    auto block_of = [&](double col, double row) {
+      const int bx = std::min(int(col) / span, nx - 1), by = std::min(int(row) / span, ny - 1);
+      return std::size_t(by) * std::size_t(nx) + std::size_t(bx);
+    };
+    std::vector<std::vector<std::uint32_t>> cand(blocks), tris(blocks);
     for (std::uint32_t v = 0; v < verts_.size(); ++v) {
       const MVert& m = verts_[v];
       if (m.tri == kNone || locked(m, level)) continue;
-      const int bx = std::min(m.col / span, nx - 1), by = std::min(m.row / span, ny - 1);
-      in_block[std::size_t(by) * std::size_t(nx) + std::size_t(bx)].push_back(v);
+      cand[block_of(m.col, m.row)].push_back(v);
     }
-    for (int by = 0; by < ny; ++by) {
-      for (int bx = 0; bx < nx; ++bx) {
-        const auto& vs = in_block[std::size_t(by) * std::size_t(nx) + std::size_t(bx)];
-        if (vs.empty()) continue;
-        const int c0 = bx * span, r0 = by * span;
-        const int c1 = std::min(c0 + span, W_ - 1), r1 = std::min(r0 + span, H_ - 1);
-        const Heightfield w = spill_ ? spill_->read(c0, r0, c1 - c0 + 1, r1 - r0 + 1, dem_)
-                                     : dem_.read(c0, r0, c1 - c0 + 1, r1 - r0 + 1);
-        stats_.max_block_samples = std::max<std::uint64_t>(stats_.max_block_samples, w.z.size());
-        stats_.samples_rescanned += w.z.size();
-        decimate_level(level, &w, c0, r0, &vs);
+    for (std::uint32_t t = 0; t < tris_.size(); ++t) {
+      const MTri& m = tris_[t];
+      if (m.destroyer != kNone) continue;
+      const MVert &a = verts_[m.v[0]], &b = verts_[m.v[1]], &c = verts_[m.v[2]];
+      tris[block_of((a.col + b.col + c.col) / 3.0, (a.row + b.row + c.row) / 3.0)].push_back(t);
+    }
+    std::vector<std::size_t> todo;
+    for (std::size_t k = 0; k < blocks; ++k) {
+      if (!cand[k].empty()) todo.push_back(k);
+    }
+    if (!spill_) throw_internal("block TIN: an exact level without the samples' scratch copy");
+    const unsigned threads = thread_count(opt_.threads);
+    ordered_pipeline(
+        todo.size(), threads, threads,
+        [&](std::size_t i) {
+          const std::size_t k = todo[i];
+          const int c0 = int(k % std::size_t(nx)) * span, r0 = int(k / std::size_t(nx)) * span;
+          auto block = copy_block(level, std::move(tris[k]), cand[k]);
+          std::vector<std::uint32_t>().swap(cand[k]);
+          block->c0 = c0;
+          block->r0 = r0;
+          block->w = std::min(c0 + span, W_ - 1) - c0 + 1;
+          block->h = std::min(r0 + span, H_ - 1) - r0 + 1;
+          stats_.max_block_samples =
+              std::max<std::uint64_t>(stats_.max_block_samples, std::uint64_t(block->w) * block->h);
+          stats_.samples_rescanned += std::uint64_t(block->w) * std::uint64_t(block->h);
+          return block;
+        },
+        [&](UpperBlock& block) {
+          const Heightfield w = spill_->read(block.c0, block.r0, block.w, block.h, dem_);
+          block.builder->decimate_level(block.level, &w, block.c0, block.r0, &block.cand);
+        },
+        [&](UpperBlock& block, std::size_t) { merge_block(block); });
+  }
+
+  /// A block of an exact upper level copied out of the whole mesh for a worker: its live
+  /// triangles and their vertices, numbered in increasing whole-mesh id (so candidates and ties
+  /// order as in the whole mesh), and what merge_block needs to put the result back.
+  struct UpperBlock {
+    int level = 0, c0 = 0, r0 = 0, w = 0, h = 0;
+    BlockTinStats stats;
+    std::unique_ptr<Builder> builder;
+    std::vector<std::uint32_t> gverts, gtris;  // local id -> whole-mesh id, both increasing
+    std::vector<std::uint32_t> first_tri;      // each local vertex's `tri` as copied
+    std::vector<std::uint32_t> cand;           // local ids of the removal candidates
+    IdMap<std::uint32_t> border_owner;  // edge on the block's border -> its whole-mesh triangle
+  };
+
+  std::unique_ptr<UpperBlock> copy_block(int level, std::vector<std::uint32_t>&& tris,
+                                         const std::vector<std::uint32_t>& cand) {
+    auto block = std::make_unique<UpperBlock>();
+    UpperBlock& u = *block;
+    u.level = level;
+    u.builder = make_worker(u.stats);
+    Builder& b = *u.builder;
+    u.gtris = std::move(tris);
+    for (std::uint32_t t : u.gtris)
+      u.gverts.insert(u.gverts.end(), tris_[t].v.begin(), tris_[t].v.end());
+    std::sort(u.gverts.begin(), u.gverts.end());
+    u.gverts.erase(std::unique(u.gverts.begin(), u.gverts.end()), u.gverts.end());
+    auto local_of = [](const std::vector<std::uint32_t>& ids, std::uint32_t g) {
+      const auto it = std::lower_bound(ids.begin(), ids.end(), g);
+      return it != ids.end() && *it == g ? std::uint32_t(it - ids.begin()) : kNone;
+    };
+    b.verts_.reserve(u.gverts.size());
+    u.first_tri.reserve(u.gverts.size());
+    for (std::uint32_t g : u.gverts) {
+      MVert v = verts_[g];
+      v.tri = v.tri == kNone ? kNone : local_of(u.gtris, v.tri);
+      u.first_tri.push_back(v.tri);
+      b.verts_.push_back(v);
+    }
+    for (std::uint32_t t : u.gtris) {
+      const MTri& g = tris_[t];
+      MTri m;
+      for (int k = 0; k < 3; ++k) {
+        m.v[k] = local_of(u.gverts, g.v[k]);
+        m.nbr[k] = g.nbr[k] == kNone ? kNone : local_of(u.gtris, g.nbr[k]);
+        if (g.nbr[k] != kNone && m.nbr[k] == kNone) {
+          u.border_owner[edge_key(g.v[k], g.v[(k + 1) % 3])] = t;
+        }
+      }
+      m.bound = g.bound;
+      m.is_void = g.is_void;
+      b.tris_.push_back(m);
+    }
+    u.cand.reserve(cand.size());
+    for (std::uint32_t g : cand) u.cand.push_back(local_of(u.gverts, g));
+    return block;
+  }
+
+  /// Puts a decimated block back: its removals, stars and new triangles after the whole mesh's
+  /// (the ids a single pass gives), the copied triangles' deaths and new neighbours, the new
+  /// triangles on the block's border glued to the current triangles outside, and the vertices'
+  /// `tri` where the block changed it.
+  void merge_block(UpperBlock& u) {
+    Builder& b = *u.builder;
+    const auto ncopy = static_cast<std::uint32_t>(u.gtris.size());
+    const auto tri_base = static_cast<std::uint32_t>(tris_.size());
+    const auto rem_base = static_cast<std::uint32_t>(removals_.size());
+    const auto star_base = static_cast<std::uint32_t>(star_ids_.size());
+    auto tri = [&](std::uint32_t t) {
+      return t == kNone ? kNone : t < ncopy ? u.gtris[t] : tri_base + (t - ncopy);
+    };
+    auto rem = [&](std::uint32_t r) { return r == kNone ? kNone : r + rem_base; };
+    for (std::uint32_t t = 0; t < ncopy; ++t) {
+      const MTri& l = b.tris_[t];
+      MTri& g = tris_[u.gtris[t]];
+      if (l.destroyer != kNone) {
+        g.destroyer = rem(l.destroyer);
+        continue;
+      }
+      for (int k = 0; k < 3; ++k) {
+        if (l.nbr[k] != kNone) g.nbr[k] = tri(l.nbr[k]);
       }
     }
+    for (std::uint32_t t = ncopy; t < b.tris_.size(); ++t) {
+      MTri m = b.tris_[t];
+      for (int k = 0; k < 3; ++k) {
+        m.v[k] = u.gverts[m.v[k]];
+        m.nbr[k] = tri(m.nbr[k]);
+      }
+      m.creator = rem(m.creator);
+      m.destroyer = rem(m.destroyer);
+      tris_.push_back(m);
+    }
+    for (Removal r : b.removals_) {
+      r.vertex = u.gverts[r.vertex];
+      r.star_begin += star_base;
+      r.star_end += star_base;
+      r.new_begin = tri(r.new_begin);
+      r.new_end = tri_base + (r.new_end - ncopy);
+      removals_.push_back(r);
+    }
+    for (std::size_t i = 0; i < b.star_ids_.size(); ++i) star_ids_.push_back(tri(b.star_ids_[i]));
+    b.open_edges_.for_each([&](std::uint64_t key, std::uint32_t value) {
+      const std::uint32_t a = u.gverts[key >> 32], c = u.gverts[key & 0xffffffffu];
+      const std::uint32_t t = tri(value >> 2), e = value & 3;
+      const std::uint32_t* owner = u.border_owner.find(edge_key(a, c));
+      if (owner == nullptr) throw_internal("block TIN: a block's new border edge had no owner");
+      const MTri& s = tris_[*owner];
+      const std::uint32_t o = s.nbr[index_of(s, a)];
+      tris_[t].nbr[e] = o;
+      MTri& om = tris_[o];
+      for (int j = 0; j < 3; ++j) {
+        if (om.v[j] == c && om.v[(j + 1) % 3] == a) om.nbr[j] = t;
+      }
+    });
+    for (std::size_t v = 0; v < b.verts_.size(); ++v) {
+      if (b.verts_[v].tri != u.first_tri[v]) verts_[u.gverts[v]].tri = tri(b.verts_[v].tri);
+    }
+    scanned_ += b.scanned_;
+    plans_ += b.plans_;
+    stats_.rounds += u.stats.rounds;
+    stats_.non_delaunay_holes += u.stats.non_delaunay_holes;
   }
 
   // With a window w (level 0, or an exact upper level) errors are exact from the block's window w,
