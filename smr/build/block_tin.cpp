@@ -1036,16 +1036,16 @@ class Builder {
       const MVert &a = verts_[m.v[0]], &b = verts_[m.v[1]], &c = verts_[m.v[2]];
       tris[block_of((a.col + b.col + c.col) / 3.0, (a.row + b.row + c.row) / 3.0)].push_back(t);
     }
-    std::vector<std::size_t> todo;
+    std::vector<std::size_t> with_candidates;
     for (std::size_t k = 0; k < blocks; ++k) {
-      if (!cand[k].empty()) todo.push_back(k);
+      if (!cand[k].empty()) with_candidates.push_back(k);
     }
     if (!spill_) throw_internal("block TIN: an exact level without the samples' scratch copy");
     const unsigned threads = thread_count(opt_.threads);
     ordered_pipeline(
-        todo.size(), threads, threads,
+        with_candidates.size(), threads, threads,
         [&](std::size_t i) {
-          const std::size_t k = todo[i];
+          const std::size_t k = with_candidates[i];
           const int c0 = int(k % std::size_t(nx)) * span, r0 = int(k / std::size_t(nx)) * span;
           auto block = copy_block(level, std::move(tris[k]), cand[k]);
           std::vector<std::uint32_t>().swap(cand[k]);

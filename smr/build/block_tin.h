@@ -27,6 +27,14 @@
 //
 // No-data samples: a leaf block's greedy TIN marks void triangles exactly as build_greedy_tin
 // does; a vertex of a void triangle is never removed, so holes stay exact at every resolution.
+//
+// Memory and threads. Leaf blocks are read in order on the calling thread (the running tolerance
+// and the reader are sequential), built by `threads` workers into records of their own and
+// merged in order; blocks of the exact upper levels are copied out, decimated by workers and
+// merged back in order. Ids are the ones a single pass gives, so the CRMR does not depend on the
+// thread count. The final sweep hands each op to an OpSink as it is made (DatabaseStreamWriter
+// spools it to disk); what stays in memory is the build records of the triangles ever made (an
+// MTri of 64 bytes, compacted to 24 for the sweep) and the vertices.
 #pragma once
 
 #include <cstdint>
