@@ -352,10 +352,12 @@ struct DatabaseStreamWriter::State {
   std::uint64_t pending_at = 0;
 
   void spool_one(Op& op) {
-    // quantize(): snap, track the largest move, recompute the bounds.
-    shift = std::max(shift, snap_vertices(op, grid));
+    // quantize(): snap, track the largest move, recompute the bounds (the builder computed them
+    // from these very positions when nothing moved).
+    const double moved = snap_vertices(op, grid);
+    shift = std::max(shift, moved);
     for (const Vertex& v : op.vertices) header.bounds.add(v.p);
-    compute_op_bounds(op);
+    if (moved != 0.0) compute_op_bounds(op);
     records.add(op);
     // The spooled copy: ROI and subtree cone are the op's own until finish() derives them.
     op.roi = op.box;
