@@ -1,0 +1,112 @@
+// smr/core/parallel.h: results combined in order whatever the thread count, and failures in any
+// stage reach the caller (no deadlock, nothing merged after the failing item).
+#include "smr/core/parallel.h"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <memory>
+#include <numeric>
+#include <stdexcept>
+#include <vector>
+
+namespace smr {
+namespace {
+
+struct Item {
+  std::size_t k = 0;
+  std::uint64_t value = 0;
+};
+
+std::uint64_t slow_hash(std::size_t k) {
+  std::uint64_t h = k + 1;
+  for (int i = 0; i < 2000 + int(k % 7) * 500; ++i)
+    h = h * 6364136223846793005ull + 1442695040888963407ull;
+  return h;
+}
+
+TEST(OrderedPipeline, MergesInOrderWhateverTheThreads) {
+  const std::size_t n = 200;
+  std::vector<std::uint64_t> reference;
+  for (std::size_t k = 0; k < n; ++k) reference.push_back(slow_hash(k));
+  for (unsigned threads : {1u, 2u, 3u, 8u}) {
+    SCOPED_TRACE("threads " + std::to_string(threads));
+    std::vector<std::size_t> made, merged;
+    std::vector<std::uint64_t> values;
+    std::atomic<int> in_flight{0}, most{0};
+    ordered_pipeline(
+        n, threads, 4,
+        [&](std::size_t k) {
+          made.push_back(k);
+          const int now = ++in_flight;
+          most = std::max(most.load(), now);
+          auto item = std::make_unique<Item>();
+          item->k = k;
+          return item;
+        },
+        [&](Item& item) { item.value = slow_hash(item.k); },
+        [&](Item& item, std::size_t k) {
+          --in_flight;
+          EXPECT_EQ(item.k, k);
+          merged.push_back(k);
+          values.push_back(item.value);
+        });
+    std::vector<std::size_t> order(n);
+    std::iota(order.begin(), order.end(), 0);
+    EXPECT_EQ(made, order);
+    EXPECT_EQ(merged, order);
+    EXPECT_EQ(values, reference);
+    EXPECT_LE(most.load(), 4) << "more items in flight than allowed";
+  }
+}
+
+TEST(OrderedPipeline, AFailureInAnyStageReachesTheCaller) {
+  for (unsigned threads : {1u, 2u, 4u}) {
+    for (int stage = 0; stage < 3; ++stage) {
+      SCOPED_TRACE("threads " + std::to_string(threads) + ", stage " + std::to_string(stage));
+      std::size_t last_merged = 0;
+      bool any = false;
+      try {
+        ordered_pipeline(
+            100, threads, 6,
+            [&](std::size_t k) {
+              if (stage == 0 && k == 37) throw std::runtime_error("make 37");
+              auto item = std::make_unique<Item>();
+              item->k = k;
+              return item;
+            },
+            [&](Item& item) {
+              if (stage == 1 && item.k == 37) throw std::runtime_error("work 37");
+              item.value = slow_hash(item.k);
+            },
+            [&](Item& item, std::size_t) {
+              if (stage == 2 && item.k == 37) throw std::runtime_error("merge 37");
+              last_merged = item.k;
+              any = true;
+            });
+        FAIL() << "the failure was swallowed";
+      } catch (const std::runtime_error& e) {
+        EXPECT_NE(std::string(e.what()).find("37"), std::string::npos) << e.what();
+      }
+      EXPECT_TRUE(any);
+      EXPECT_LT(last_merged, 37u) << "an item after the failing one was merged";
+    }
+  }
+}
+
+TEST(ParallelFor, EveryIndexOnceAndTheFirstFailureRethrown) {
+  std::vector<std::atomic<int>> hits(1000);
+  parallel_for(hits.size(), 3, [&](std::size_t i) { ++hits[i]; });
+  for (const auto& h : hits) EXPECT_EQ(h.load(), 1);
+  EXPECT_THROW(parallel_for(1000, 3,
+                            [](std::size_t i) {
+                              if (i == 500) throw std::runtime_error("500");
+                            }),
+               std::runtime_error);
+  std::size_t calls = 0;
+  parallel_for(0, 4, [&](std::size_t) { ++calls; });
+  EXPECT_EQ(calls, 0u);
+}
+
+}  // namespace
+}  // namespace smr
