@@ -327,7 +327,6 @@ struct DatabaseStreamWriter::State {
   WriteOptions options;
   storage::DatabaseWriter writer;
   std::string tmp_dir;
-  std::chrono::steady_clock::time_point t0 = std::chrono::steady_clock::now();
   std::unique_ptr<storage::TempFile> spool;  // the ops, each a one-op raw page, in id order
   std::vector<std::uint64_t> offsets{0};     // op i at [offsets[i], offsets[i+1])
   CrmrInfo header;
@@ -471,6 +470,7 @@ WriteReport DatabaseStreamWriter::finish() {
   if (!s_->begun || s_->finished) throw_internal("database writer: finish() without begin()");
   s_->finished = true;
   State& s = *s_;
+  const auto t0 = std::chrono::steady_clock::now();
   s.hand_over();
   s.drain();
   s.records.derive();
@@ -492,7 +492,7 @@ WriteReport DatabaseStreamWriter::finish() {
       },
       s.options);
   report.spool_bytes = s.offsets.back();
-  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - s.t0).count();
+  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return report;
 }
 

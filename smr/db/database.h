@@ -62,7 +62,7 @@ struct WriteReport {
   std::uint64_t dag_depth = 0;    // longest parent-to-child path from R^0
   std::uint64_t triangles = 0;    // over all fragments
   std::uint64_t spool_bytes = 0;  // DatabaseStreamWriter: ops held in its scratch file
-  double seconds = 0.0;
+  double seconds = 0.0;  // DatabaseStreamWriter: finish() alone (spooling ran during the build)
 };
 
 /// Writes `crmr` to a new database file at `path`, atomically: the meta record is written last
