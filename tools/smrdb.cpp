@@ -268,8 +268,8 @@ struct IngestArgs {
                    "DEMs, --builder blocks: directory for the scratch copy of the samples "
                    "(default: the system's temporary directory)");
     app.add_option("--threads", threads,
-                   "DEMs, --builder blocks: threads building leaf blocks (0 = one per core; the "
-                   "database is the same whatever the number)")
+                   "DEMs, --builder blocks: threads reading, building and writing blocks (0 = one "
+                   "per core; the database is the same whatever the number)")
         ->capture_default_str();
     app.add_option("--codec", codec, "Geometry codec of the pages: draco, zstd or raw")
         ->capture_default_str();
@@ -342,6 +342,33 @@ struct IngestArgs {
   }
 };
 
+// What `--json` reports of a CRMR, counted op by op (in memory, or as the ops stream by).
+struct CrmrCounts {
+  std::uint64_t ops = 0, triangles = 0, finest = 0, base = 0, vertices = 0;
+  double err0 = 0.0, err_final = 0.0;
+  void header(const smr::CrmrInfo& h) {
+    vertices = h.vertex_count;
+    err0 = h.err0;
+    err_final = h.err_final;
+  }
+  void add(const smr::Op& op) {
+    for (const auto& t : op.fragment) finest += !t.killer.valid() && !t.is_void();
+    if (op.id.value == 0) base = op.fragment.size();
+    triangles += op.fragment.size();
+    ++ops;
+  }
+  nlohmann::json json(double build_seconds) const {
+    return {{"ops", ops},
+            {"fragment_triangles", triangles},
+            {"vertices", vertices},
+            {"finest_triangles", finest},
+            {"base_triangles", base},
+            {"err0", err0},
+            {"err_final", err_final},
+            {"build_seconds", build_seconds}};
+  }
+};
+
 smr::WriteOptions write_options(const IngestArgs& a, smr::tools::GdalProgress& progress);
 nlohmann::json database_report(const smr::WriteReport& w, const IngestArgs& a,
                                const std::string& db_path, std::uint64_t vertices);
@@ -397,18 +424,10 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
   // The database names its source by file name only, like describe(): where the input sits
   // must not change the bytes.
   crmr.header.source = std::filesystem::path(a.dem).filename().string();
-  std::uint64_t finest = 0;
-  for (const smr::Op& op : crmr.ops) {
-    for (const auto& t : op.fragment) finest += !t.killer.valid() && !t.is_void();
-  }
-  report["crmr"] = {{"ops", crmr.ops.size()},
-                    {"fragment_triangles", crmr.triangle_count()},
-                    {"vertices", crmr.header.vertex_count},
-                    {"finest_triangles", finest},
-                    {"base_triangles", crmr.ops[0].fragment.size()},
-                    {"err0", crmr.header.err0},
-                    {"err_final", crmr.header.err_final},
-                    {"build_seconds", seconds_since(t0)}};
+  CrmrCounts counts;
+  counts.header(crmr.header);
+  for (const smr::Op& op : crmr.ops) counts.add(op);
+  report["crmr"] = counts.json(seconds_since(t0));
   if (verify) {
     const smr::InvariantReport r = smr::check_crmr(crmr);
     if (!r.ok()) smr::throw_internal("CRMR invariants violated: " + r.summary());
@@ -456,20 +475,14 @@ class IngestTap final : public smr::OpSink {
   void begin(const smr::CrmrInfo& header, std::uint64_t op_count) override {
     smr::CrmrInfo h = header;
     h.source = source_;
-    vertices = h.vertex_count;
-    err0 = h.err0;
-    err_final = h.err_final;
+    counts.header(h);
     inner_.begin(h, op_count);
   }
   void add(smr::Op&& op) override {
-    for (const auto& t : op.fragment) finest += !t.killer.valid() && !t.is_void();
-    if (op.id.value == 0) base = op.fragment.size();
-    triangles += op.fragment.size();
-    ++ops;
+    counts.add(op);
     inner_.add(std::move(op));
   }
-  std::uint64_t ops = 0, triangles = 0, finest = 0, base = 0, vertices = 0;
-  double err0 = 0.0, err_final = 0.0;
+  CrmrCounts counts;
 
  private:
   smr::OpSink& inner_;
@@ -528,15 +541,8 @@ nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
                         {"leaves", st.seconds_leaves},
                         {"upper", st.seconds_upper},
                         {"assemble", st.seconds_assemble}}}};
-  report["crmr"] = {{"ops", tap.ops},
-                    {"fragment_triangles", tap.triangles},
-                    {"vertices", tap.vertices},
-                    {"finest_triangles", tap.finest},
-                    {"base_triangles", tap.base},
-                    {"err0", tap.err0},
-                    {"err_final", tap.err_final},
-                    {"build_seconds", build_seconds}};
-  report["database"] = database_report(w, a, db_path, tap.vertices);
+  report["crmr"] = tap.counts.json(build_seconds);
+  report["database"] = database_report(w, a, db_path, tap.counts.vertices);
   if (verify) {
     // The CRMR never exists in memory: check what was written (checksums, DAG, links, index).
     const smr::VerifyReport r = smr::verify_database(db_path, nullptr);
@@ -824,7 +830,9 @@ int main(int argc, char** argv) {
   ingest_cmd->add_option("-o,--output", db_path, "Database file to create")->required();
   ingest_cmd->add_flag("--json", json, "Print statistics as JSON on stdout");
   ingest_cmd->add_flag("-q,--quiet", quiet, "No progress or summary on stderr");
-  ingest_cmd->add_flag("--verify", verify, "Check the CRMR invariants before writing (slow)");
+  ingest_cmd->add_flag("--verify", verify,
+                       "Check the CRMR invariants before writing (slow); --builder blocks, which "
+                       "never holds the CRMR, checks the written database instead");
 
   CLI::App* extract_cmd = app.add_subcommand(
       "extract", "Extract a selectively refined mesh for an RCF from a database");
