@@ -172,15 +172,19 @@ struct IndexRecords {
     depth.reserve(ops);
   }
 
-  void add(const Op& op) {
+  // `derived`: the op's roi and subtree_cone are final already (a whole CRMR after quantize());
+  // otherwise they start as its own box and cone and derive() finishes them.
+  void add(const Op& op, bool derived) {
     if (op.id.value != entries.size())
       throw_internal("database writer: op " + std::to_string(op.id.value) +
                      " arrived out of id order");
-    entries.push_back(
-        {op.id.value, to_index(op.box), to_index(op.box), op.birth_res, estimated_bytes(op)});
-    cones.push_back(op.cone);
-    for (OpId c : op.children) child_ids.push_back(static_cast<std::uint32_t>(c.value));
-    child_begin.push_back(child_ids.size());
+    entries.push_back({op.id.value, to_index(derived ? op.roi : op.box), to_index(op.box),
+                       op.birth_res, estimated_bytes(op)});
+    cones.push_back(derived ? op.subtree_cone : op.cone);
+    if (!derived) {
+      for (OpId c : op.children) child_ids.push_back(static_cast<std::uint32_t>(c.value));
+      child_begin.push_back(child_ids.size());
+    }
     std::uint32_t d = 0;
     for (OpId p : op.parents) {
       if (p.value < op.id.value) d = std::max(d, depth[p.value] + 1);  // always, in a valid CRMR
@@ -310,10 +314,9 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
   storage::DatabaseWriter writer(path, options.force, options.batch_bytes);
   const QuantGrid grid = choose_grid(crmr.header, options.z_step);
   const double shift = quantize(crmr, grid);
-  IndexRecords records;
+  IndexRecords records;  // with the ROIs and subtree cones quantize() computed
   records.reserve(crmr.ops.size());
-  for (const Op& op : crmr.ops) records.add(op);
-  records.derive();  // the ROIs quantize() computed, for the index entries
+  for (const Op& op : crmr.ops) records.add(op, true);
   WriteReport report = write_tables(
       writer, crmr.header, grid, shift, records,
       [&](std::uint64_t id, std::vector<Op>&) -> const Op* { return &crmr.ops.at(id); }, options);
@@ -347,7 +350,7 @@ struct DatabaseStreamWriter::State {
   bool closing = false;
   std::exception_ptr error;
   std::thread spooler;
-  Bytes pending;  // encoded ops not yet written, from offsets[written_ops]
+  Bytes pending;  // encoded ops not yet written; they start at pending_at
   std::uint64_t pending_at = 0;
 
   void spool_one(Op& op) {
@@ -357,7 +360,7 @@ struct DatabaseStreamWriter::State {
     shift = std::max(shift, moved);
     for (const Vertex& v : op.vertices) header.bounds.add(v.p);
     if (moved != 0.0) compute_op_bounds(op);
-    records.add(op);
+    records.add(op, false);
     // The spooled copy: ROI and subtree cone are the op's own until finish() derives them.
     op.roi = op.box;
     op.subtree_cone = canonical_cone(op.cone);
