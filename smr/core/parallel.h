@@ -52,10 +52,6 @@ void parallel_for(std::size_t n, unsigned threads, F&& f) {
   if (error) std::rethrow_exception(error);
 }
 
-}  // namespace smr
-
-namespace smr {
-
 /// An ordered pipeline for work whose results must be combined in order: for k = 0 .. n-1,
 /// make(k) -> std::unique_ptr<T> runs on the calling thread in order, work(T&) on `threads`
 /// workers, and merge(T&, k) on the calling thread in order, with at most `in_flight` items
