@@ -272,7 +272,9 @@ class Builder {
     // A lossless build needs the DEM's largest |z| before any block (its tolerance decides which
     // errors are zero, on both sides of every border): one pass reads it. With a max error, the
     // tolerance only rounds bounds outward, and each block's own samples raise it as they come.
-    if (levels_ > 0 && exact_window_samples_ > 0) {
+    // The samples' scratch copy serves the Delaunay repair of M^m, level 0 (always exact) and
+    // the exact upper levels.
+    {
       const std::string dir =
           opt_.tmp_dir.empty() ? std::filesystem::temp_directory_path().string() : opt_.tmp_dir;
       spill_ = std::make_unique<SampleSpill>(dir, W_, H_, B_, bw_, bh_);
@@ -296,9 +298,14 @@ class Builder {
     const std::uint64_t cap = dem_.set_cache_bytes(0);
     dem_.set_cache_bytes(opt_.memory_bytes != 0 ? cache_before : cap);
     shared_ = IdMap<std::uint32_t>();
+    make_borders_delaunay();
     finest_vertices_ = verts_.size();
+    lap(stats_.seconds_delaunay);
+    decimate_blocks(0);
+    report(0.7);
+    lap(stats_.seconds_level0);
     for (int level = 1; level <= levels_; ++level) {
-      upper_level(level);
+      decimate_blocks(level);
       report(0.7 + 0.2 * double(level) / double(std::max(1, levels_)));
     }
     lap(stats_.seconds_upper);
@@ -395,8 +402,8 @@ class Builder {
   }
 
   /// Builds a read leaf block into this (empty) builder's records: its greedy TIN from the shared
-  /// border vertices, exact bounds, level-0 decimation. Runs on a worker thread; merge_leaf then
-  /// appends the records to the whole mesh's.
+  /// border vertices and their exact bounds. Runs on a worker thread; merge_leaf then appends the
+  /// records to the whole mesh's.
   void build_leaf(const LeafInput& in) {
     Clock::time_point clock = Clock::now();
     tol_ = in.tol;
@@ -455,7 +462,6 @@ class Builder {
 
     // The final triangles, into the global mesh.
     const std::uint32_t first_tri = static_cast<std::uint32_t>(tris_.size());
-    std::vector<std::uint32_t> block_verts;
     std::vector<std::uint32_t> local(tin.header.vertex_count, kNone);  // greedy vertex id -> ours
     for (const Op& op : tin.ops) {
       for (const FragmentTriangle& t : op.fragment) {
@@ -477,7 +483,6 @@ class Builder {
                              ") that its neighbour does not have");
             }
             ours = global_vertex(c0 + col, r0 + row, static_cast<float>(gv.p.z));
-            block_verts.push_back(ours);
           }
           m.v[k] = ours;
         }
@@ -502,7 +507,7 @@ class Builder {
         }
       }
     }
-    // Exact errors of M^m from the window's samples; then level 0 inside the block.
+    // Exact errors of M^m from the window's samples.
     for (std::uint32_t t = first_tri; t < tris_.size(); ++t) {
       if (tris_[t].is_void) continue;
       TriBound& b = tris_[t].bound;
@@ -516,22 +521,16 @@ class Builder {
     }
     finest_triangles_ += tris_.size() - first_tri;
     stats_.seconds_greedy += since(clock);
-    decimate_level(0, &w, c0, r0, &block_verts);
-    stats_.seconds_level0 += since(clock);
-    // Edges on the block's outer border wait for the neighbour; edges that became internal
-    // in the decimation were removed from open_edges_ as their triangles died.
+    // Edges on the block's outer border wait for the neighbour.
   }
 
   /// Appends a leaf builder's records (built by build_leaf) to this one's, renumbered: vertices
   /// through global_vertex in the leaf's own order (so border vertices are shared and the ids
-  /// are those a single pass would give), triangles, removals and stars after this one's, and
-  /// the leaf's open border edges glued to the earlier blocks' or left open for later ones.
+  /// are those a single pass would give), triangles after this one's, and the leaf's open border
+  /// edges glued to the earlier blocks' or left open for later ones.
   void merge_leaf(Builder& leaf) {
     const std::uint32_t tri_base = static_cast<std::uint32_t>(tris_.size());
-    const std::uint32_t rem_base = static_cast<std::uint32_t>(removals_.size());
-    const std::uint32_t star_base = static_cast<std::uint32_t>(star_ids_.size());
     auto tri = [&](std::uint32_t t) { return t == kNone ? kNone : t + tri_base; };
-    auto rem = [&](std::uint32_t r) { return r == kNone ? kNone : r + rem_base; };
     std::vector<std::uint32_t> vmap(leaf.verts_.size());
     for (std::size_t v = 0; v < leaf.verts_.size(); ++v) {
       const MVert& lv = leaf.verts_[v];
@@ -546,19 +545,8 @@ class Builder {
         m.v[k] = vmap[lt.v[k]];
         m.nbr[k] = tri(lt.nbr[k]);
       }
-      m.creator = rem(lt.creator);
-      m.destroyer = rem(lt.destroyer);
       tris_.push_back(m);
     });
-    for (Removal r : leaf.removals_) {
-      r.vertex = vmap[r.vertex];
-      r.star_begin += star_base;
-      r.star_end += star_base;
-      r.new_begin += tri_base;
-      r.new_end += tri_base;
-      removals_.push_back(r);
-    }
-    leaf.star_ids_.drain([&](std::size_t, std::uint32_t t) { star_ids_.push_back(t + tri_base); });
     leaf.open_edges_.for_each([&](std::uint64_t key, std::uint32_t value) {
       const std::uint32_t a = vmap[key >> 32], b = vmap[key & 0xffffffffu];
       const std::uint32_t t = (value >> 2) + tri_base, e = value & 3;
@@ -575,11 +563,7 @@ class Builder {
     err_final_ = std::max(err_final_, leaf.err_final_);
     finest_triangles_ += leaf.finest_triangles_;
     scanned_ += leaf.scanned_;
-    plans_ += leaf.plans_;
-    stats_.rounds += leaf.stats_.rounds;
-    stats_.non_delaunay_holes += leaf.stats_.non_delaunay_holes;
     stats_.seconds_greedy += leaf.stats_.seconds_greedy;
-    stats_.seconds_level0 += leaf.stats_.seconds_level0;
   }
 
   /// Every leaf block: read in order on this thread, built on `threads` workers, merged in
@@ -607,7 +591,7 @@ class Builder {
         },
         [&](Leaf& leaf, std::size_t k) {
           merge_leaf(*leaf.builder);
-          report(0.7 * double(k + 1) / double(n));
+          report(0.6 * double(k + 1) / double(n));
         });
   }
 
@@ -726,6 +710,211 @@ class Builder {
     }
   }
 
+  // ---- Delaunay across the leaf blocks' borders ----
+  /// Each leaf's greedy TIN is Delaunay, but their union need not be across the border lines
+  /// (each leaf saw only its own vertices). Lawson flips (edges between two data triangles, so the
+  /// voids keep their shape) make M^m Delaunay; a flipped triangle whose exact bound exceeds the
+  /// error gets its worst sample inserted, greedy-insertion style (Brown 7.1.1), and the
+  /// triangles around it are legalised again. The samples on an edge that existed before are
+  /// within the error (its interpolation is unchanged), so that sample lies inside the triangle
+  /// or on a new edge between two data triangles. Vertex removal with Delaunay holes then keeps
+  /// every mesh of the hierarchy Delaunay, so every fragment meets the Delaunay criterion and so
+  /// does every extracted mesh (Brown Theorem 5.1.4).
+  void make_borders_delaunay() {
+    std::vector<EdgeTask> stack;
+    for (std::uint32_t t = 0; t < tris_.size(); ++t) {
+      const MTri& m = tris_[t];
+      for (int k = 0; k < 3; ++k) {
+        const MVert &a = verts_[m.v[k]], &b = verts_[m.v[(k + 1) % 3]];
+        const bool on_line = (a.col == b.col && a.col % B_ == 0 && a.col > 0 && a.col < W_ - 1) ||
+                             (a.row == b.row && a.row % B_ == 0 && a.row > 0 && a.row < H_ - 1);
+        if (on_line && m.nbr[k] != kNone && m.nbr[k] > t)
+          stack.push_back({t, m.v[k], m.v[(k + 1) % 3]});
+      }
+    }
+    std::reverse(stack.begin(), stack.end());  // popped in triangle order
+    std::vector<std::uint32_t> stale;          // triangles whose bound is to be computed
+    legalise(stack, stale);
+    while (!stale.empty()) {
+      std::sort(stale.begin(), stale.end());
+      stale.erase(std::unique(stale.begin(), stale.end()), stale.end());
+      std::uint32_t over = kNone;
+      std::pair<int, int> worst{0, 0};
+      std::vector<std::uint32_t> left;
+      for (std::uint32_t t : stale) {
+        const auto [c0, r0, w] = window_of(tris_[t].v);
+        TriBound& b = tris_[t].bound;
+        b = exact_bound(tris_[t].v, w, c0, r0, false);
+        if (b.err() <= stop_error_) {
+          err_final_ = std::max(err_final_, b.err());
+        } else if (over == kNone) {
+          over = t;
+          worst = worst_sample(tris_[t].v, w, c0, r0);
+        } else {
+          left.push_back(t);  // after this insertion, which may change it
+        }
+      }
+      stale.swap(left);
+      if (over == kNone) break;
+      insert_sample(over, worst.first, worst.second, stack, stale);
+      legalise(stack, stale);
+    }
+  }
+
+  /// An edge to legalise: (a, b) of triangle t, if t still has it (either way round).
+  struct EdgeTask {
+    std::uint32_t t, a, b;
+  };
+
+  /// Lawson's flips until every edge of the stack is locally Delaunay; flipped triangles go to
+  /// `stale`.
+  void legalise(std::vector<EdgeTask>& stack, std::vector<std::uint32_t>& stale) {
+    while (!stack.empty()) {
+      const EdgeTask e = stack.back();
+      stack.pop_back();
+      const std::uint32_t t1 = e.t;
+      int k = -1;
+      for (int i = 0; i < 3; ++i) {
+        const std::uint32_t x = tris_[t1].v[i], y = tris_[t1].v[(i + 1) % 3];
+        if ((x == e.a && y == e.b) || (x == e.b && y == e.a)) k = i;
+      }
+      if (k < 0) continue;  // flipped away since
+      const std::uint32_t t2 = tris_[t1].nbr[k];
+      if (t2 == kNone || tris_[t1].is_void || tris_[t2].is_void) continue;
+      const std::uint32_t a = tris_[t1].v[k], b = tris_[t1].v[(k + 1) % 3],
+                          c = tris_[t1].v[(k + 2) % 3];
+      const int j = index_of(tris_[t2], b);
+      const std::uint32_t d = tris_[t2].v[(j + 2) % 3];
+      if (!in_circle(verts_[a], verts_[b], verts_[c], verts_[d])) continue;
+      // (a, b, c) and (b, a, d) become (c, a, d) and (d, b, c): the quad a, d, b, c is convex.
+      const std::uint32_t n_bc = tris_[t1].nbr[(k + 1) % 3], n_ca = tris_[t1].nbr[(k + 2) % 3];
+      const std::uint32_t n_ad = tris_[t2].nbr[(j + 1) % 3], n_db = tris_[t2].nbr[(j + 2) % 3];
+      set_triangle(t1, {c, a, d}, {n_ca, n_ad, t2});
+      set_triangle(t2, {d, b, c}, {n_db, n_bc, t1});
+      relink(n_ad, d, a, t1);
+      relink(n_bc, c, b, t2);
+      ++stats_.delaunay_flips;
+      stale.push_back(t1);
+      stale.push_back(t2);
+      stack.push_back({t1, c, a});
+      stack.push_back({t1, a, d});
+      stack.push_back({t2, d, b});
+      stack.push_back({t2, b, c});
+    }
+  }
+
+  /// Inserts grid sample (col, row), which lies in triangle t (inside, or on an edge shared with
+  /// another data triangle), splitting t (and that neighbour); the new triangles go to `stale`
+  /// and their outer edges to `stack`.
+  void insert_sample(std::uint32_t t, int col, int row, std::vector<EdgeTask>& stack,
+                     std::vector<std::uint32_t>& stale) {
+    const auto [c0, r0, w] = window_of(tris_[t].v);
+    MVert pv;
+    pv.col = col;
+    pv.row = row;
+    pv.z = w.at(col - c0, row - r0);
+    const auto p = static_cast<std::uint32_t>(verts_.size());
+    verts_.push_back(pv);
+    ++stats_.delaunay_insertions;
+    int k = -1;
+    for (int i = 0; i < 3; ++i) {
+      if (orient(verts_[tris_[t].v[i]], verts_[tris_[t].v[(i + 1) % 3]], pv) == 0) k = i;
+    }
+    const std::uint32_t a = tris_[t].v[k < 0 ? 0 : k], b = tris_[t].v[k < 0 ? 1 : (k + 1) % 3],
+                        c = tris_[t].v[k < 0 ? 2 : (k + 2) % 3];
+    const std::uint32_t n_ab = tris_[t].nbr[k < 0 ? 0 : k], n_bc = tris_[t].nbr[k < 0 ? 1 : (k + 1) % 3],
+                        n_ca = tris_[t].nbr[k < 0 ? 2 : (k + 2) % 3];
+    const auto n1 = static_cast<std::uint32_t>(tris_.size());
+    tris_.push_back(MTri{});
+    if (k < 0) {  // inside: (a, b, p), (b, c, p), (c, a, p)
+      const std::uint32_t n2 = n1 + 1;
+      tris_.push_back(MTri{});
+      set_triangle(t, {a, b, p}, {n_ab, n1, n2});
+      set_triangle(n1, {b, c, p}, {n_bc, n2, t});
+      set_triangle(n2, {c, a, p}, {n_ca, t, n1});
+      relink(n_bc, c, b, n1);
+      relink(n_ca, a, c, n2);
+      stale.insert(stale.end(), {t, n1, n2});
+      stack.insert(stack.end(), {{t, a, b}, {n1, b, c}, {n2, c, a}});
+      finest_triangles_ += 2;
+      return;
+    }
+    // On edge (a, b), shared with u = (b, a, d): (a, p, c), (p, b, c), (b, p, d), (p, a, d).
+    const std::uint32_t u = n_ab;
+    if (u == kNone || tris_[u].is_void)
+      throw_internal("block TIN: a sample over the error lies on an old edge");
+    const int j = index_of(tris_[u], b);
+    const std::uint32_t d = tris_[u].v[(j + 2) % 3];
+    const std::uint32_t n_ad = tris_[u].nbr[(j + 1) % 3], n_db = tris_[u].nbr[(j + 2) % 3];
+    const std::uint32_t n2 = n1 + 1;
+    tris_.push_back(MTri{});
+    set_triangle(t, {a, p, c}, {n2, n1, n_ca});
+    set_triangle(n1, {p, b, c}, {u, n_bc, t});
+    set_triangle(u, {b, p, d}, {n1, n2, n_db});
+    set_triangle(n2, {p, a, d}, {t, n_ad, u});
+    relink(n_bc, c, b, n1);
+    relink(n_ad, d, a, n2);
+    stale.insert(stale.end(), {t, n1, u, n2});
+    stack.insert(stack.end(), {{t, c, a}, {n1, b, c}, {u, d, b}, {n2, a, d}});
+    finest_triangles_ += 2;
+  }
+
+  /// Triangle t of M^m becomes (v, nbr), counter-clockwise; its vertices point at it.
+  void set_triangle(std::uint32_t t, const std::array<std::uint32_t, 3>& v,
+                    const std::array<std::uint32_t, 3>& nbr) {
+    MTri& m = tris_[t];
+    m.v = v;
+    m.nbr = nbr;
+    if (orient(verts_[v[0]], verts_[v[1]], verts_[v[2]]) <= 0)
+      throw_internal("block TIN: a Delaunay repair made a degenerate triangle");
+    for (std::uint32_t x : v) verts_[x].tri = t;
+  }
+  /// The neighbour o's edge (a, b), if o exists, now borders triangle t.
+  void relink(std::uint32_t o, std::uint32_t a, std::uint32_t b, std::uint32_t t) {
+    if (o == kNone) return;
+    MTri& m = tris_[o];
+    for (int j = 0; j < 3; ++j) {
+      if (m.v[j] == a && m.v[(j + 1) % 3] == b) m.nbr[j] = t;
+    }
+  }
+
+  struct SampleWindow {
+    int c0, r0;
+    Heightfield w;
+  };
+  /// The samples of a triangle's bounding box, from the scratch copy.
+  SampleWindow window_of(const std::array<std::uint32_t, 3>& v) const {
+    const MVert &a = verts_[v[0]], &b = verts_[v[1]], &c = verts_[v[2]];
+    const int c0 = std::min({a.col, b.col, c.col}), r0 = std::min({a.row, b.row, c.row});
+    const int c1 = std::max({a.col, b.col, c.col}), r1 = std::max({a.row, b.row, c.row});
+    return {c0, r0, spill_->read(c0, r0, c1 - c0 + 1, r1 - r0 + 1, dem_)};
+  }
+
+  /// The sample of the closed triangle farthest from its plane (the first in row order).
+  std::pair<int, int> worst_sample(const std::array<std::uint32_t, 3>& v, const Heightfield& w,
+                                   int c0, int r0) const {
+    const MVert &a = verts_[v[0]], &b = verts_[v[1]], &c = verts_[v[2]];
+    const Plane pl(a, b, c);
+    const std::int64_t x[3] = {a.col - c0, b.col - c0, c.col - c0};
+    const std::int64_t y[3] = {a.row - r0, b.row - r0, c.row - r0};
+    build::TriangleRows rows(x, y);
+    double best = -1.0;
+    std::pair<int, int> at{a.col, a.row};
+    for (std::int64_t row = rows.ymin(); row <= rows.ymax(); ++row) {
+      std::int64_t xl, xr;
+      rows.next(xl, xr);
+      for (std::int64_t col = xl; col <= xr; ++col) {
+        const double e = std::abs(double(w.at(int(col), int(row))) -
+                                  pl.at(double(col + c0), double(row + r0)));
+        if (e > best) {
+          best = e;
+          at = {int(col + c0), int(row + r0)};
+        }
+      }
+    }
+    return at;
+  }
+
   // ---- locks ----
   bool is_corner(const MVert& v) const {
     return (v.col == 0 || v.col == W_ - 1) && (v.row == 0 || v.row == H_ - 1);
@@ -768,12 +957,16 @@ class Builder {
     p.star.clear();
     p.poly.clear();
     std::uint32_t t = verts_[v].tri, start = t;
+    if (t == kNone) return false;  // its triangles are in another block's copy
     // Clockwise to the first triangle of an open fan (or all the way round).
     std::uint32_t steps = 0;
     for (;;) {
       const int i = index_of(tris_[t], v);
       const std::uint32_t prev = tris_[t].nbr[i];  // across (v, a): the triangle before
       if (prev == kNone) {
+        // A fan is open only at the domain's boundary: elsewhere its star goes on in another
+        // block's copy, and v is not this block's to remove.
+        if (!boundary_edge(verts_[v], verts_[tris_[t].v[(i + 1) % 3]])) return false;
         start = t;
         p.open = true;
         break;
@@ -794,6 +987,7 @@ class Builder {
       if (p.star.size() > opt_.max_degree) return false;
       const std::uint32_t next = m.nbr[(i + 2) % 3];  // across (b, v)
       if (next == kNone) {
+        if (!boundary_edge(verts_[m.v[(i + 2) % 3]], verts_[v])) return false;
         p.poly.push_back(m.v[(i + 2) % 3]);
         break;
       }
@@ -906,6 +1100,12 @@ class Builder {
     for (std::uint32_t t : p.star) {
       if (tris_[t].is_void) return;
     }
+    if (w != nullptr) {  // the hole must lie in the block's window (a Delaunay edge may cross)
+      for (std::uint32_t u : p.poly) {
+        const MVert& m = verts_[u];
+        if (m.col < c0 || m.row < r0 || m.col >= c0 + w->width || m.row >= r0 + w->height) return;
+      }
+    }
     if (p.open && !on_domain_boundary(verts_[v])) return;
     if (!triangulate(p)) return;
     p.bounds.clear();
@@ -999,21 +1199,25 @@ class Builder {
   }
 
   // ---- decimation of one level: stages of growing tolerance, independent-set rounds ----
-  /// Level >= 1: block by block with exact bounds from each block's window while a window fits
-  /// options.exact_window_samples, else over the whole mesh with overlay bounds.
-  void upper_level(int level) {
+  /// Block by block with exact bounds from each block's window: always at level 0 (the leaf
+  /// blocks), above it while a window fits options.exact_window_samples, else over the whole mesh
+  /// with overlay bounds.
+  void decimate_blocks(int level) {
     const int span = B_ << level;
     const int nx = (W_ - 2) / span + 1, ny = (H_ - 2) / span + 1;
     const std::uint64_t window =
         std::uint64_t(std::min(span, W_ - 1) + 1) * std::uint64_t(std::min(span, H_ - 1) + 1);
-    if (window > exact_window_samples_) {
+    if (level > 0 && window > exact_window_samples_) {
       decimate_level(level, nullptr, 0, 0, nullptr);
       return;
     }
-    ++stats_.exact_levels;
-    // Blocks are independent (their borders are locked and no triangle crosses them): each is
-    // copied out for a worker, decimated there with exact bounds from its window, and merged
-    // back in block order, so the records are the ones a single pass over the blocks makes.
+    if (level > 0) ++stats_.exact_levels;
+    // Blocks are independent: each is copied out for a worker, decimated there with exact bounds
+    // from its window, and merged back in block order, so the records are the ones a single pass
+    // over the blocks makes. A triangle goes to the block of its centroid; a vertex is removed
+    // only where its whole star and hole lie in its block's copy and window (a Delaunay edge may
+    // cross a border line), and the border lines' vertices are locked, so no triangle is changed
+    // by two blocks.
     const std::size_t blocks = std::size_t(nx) * std::size_t(ny);
     auto block_of = [&](double col, double row) {
       const int bx = std::min(int(col) / span, nx - 1), by = std::min(int(row) / span, ny - 1);
@@ -1050,7 +1254,8 @@ class Builder {
           block->h = std::min(r0 + span, H_ - 1) - r0 + 1;
           stats_.max_block_samples =
               std::max<std::uint64_t>(stats_.max_block_samples, std::uint64_t(block->w) * block->h);
-          stats_.samples_rescanned += std::uint64_t(block->w) * std::uint64_t(block->h);
+          if (level > 0)
+            stats_.samples_rescanned += std::uint64_t(block->w) * std::uint64_t(block->h);
           return block;
         },
         [&](UpperBlock& block) {
@@ -1112,7 +1317,10 @@ class Builder {
       b.tris_.push_back(m);
     }
     u.cand.reserve(cand.size());
-    for (std::uint32_t g : cand) u.cand.push_back(local_of(u.gverts, g));
+    for (std::uint32_t g : cand) {
+      const std::uint32_t l = local_of(u.gverts, g);
+      if (l != kNone) u.cand.push_back(l);  // none of its triangles is in this copy
+    }
     return block;
   }
 

@@ -7,12 +7,15 @@
 //  1. Each block border line is simplified on its own (1-D, within max_error), so the two blocks
 //     that share it agree on its vertices; each leaf block is then triangulated by greedy
 //     Delaunay insertion (build_greedy_tin) from those border vertices to max_error. The union of
-//     the blocks is the finest mesh M^m, with exact per-triangle errors.
+//     the blocks is made Delaunay across the border lines by Lawson flips, with a greedy
+//     insertion wherever a flipped triangle would exceed max_error: the finest mesh M^m, a
+//     Delaunay triangulation with exact per-triangle errors.
 //  2. Decimation, finest to coarsest, in levels: at level l the blocks are 2^l leaf blocks wide
-//     and the vertices on their borders are locked. Error bounds are guaranteed either way:
-//     - exact: the samples under each new triangle are scanned, from the block's window (level
-//       0: the leaf window already in memory; above: re-read while a block's window holds at
-//       most exact_window_samples);
+//     and the vertices on their border lines are locked, as are those whose star or hole leaves
+//     their block (a flipped edge may cross a line). Error bounds are guaranteed either way:
+//     - exact: the samples under each new triangle are scanned, from the block's window re-read
+//       from a scratch copy of the samples (level 0 always; above while a block's window holds
+//       at most exact_window_samples);
 //     - overlay (levels whose blocks are larger): one-sided bounds source - plane <= up and
 //       plane - source <= down, carried from the old triangles a new one overlaps plus the
 //       largest difference of the two planes over each overlap (both are linear on each piece
@@ -20,7 +23,10 @@
 //     Each level runs stages of growing error tolerance (x sqrt 2, x4 per level); each stage
 //     runs rounds, and a round removes an independent set (no two removed vertices adjacent) of
 //     vertices of degree at most max_degree, cheapest first, re-triangulating each hole by
-//     Delaunay ears. So the DAG height is at most the number of rounds.
+//     Delaunay ears. So the DAG height is at most the number of rounds, and removal from a
+//     Delaunay triangulation with Delaunay holes keeps every mesh of the hierarchy Delaunay:
+//     every fragment meets the Delaunay criterion, so every extracted mesh does (Brown Theorem
+//     5.1.4).
 //  3. Each removal, reversed, is an op: PreF = the hole's triangles, F = the removed vertex's
 //     star. An op's error is its own bound or a child's, whichever is larger, so ordering the ops
 //     by falling error is a topological order and birth_res never decreases (Brown 4.4.3.3).
@@ -30,8 +36,8 @@
 //
 // Memory and threads. Leaf blocks are read in order on the calling thread (the running tolerance
 // and the reader are sequential), built by `threads` workers into records of their own and
-// merged in order; blocks of the exact upper levels are copied out, decimated by workers and
-// merged back in order. Ids are the ones a single pass gives, so the CRMR does not depend on the
+// merged in order; the Delaunay repair runs on the calling thread; blocks of the exact levels
+// are copied out, decimated by workers and merged back in order. Ids are the ones a single pass gives, so the CRMR does not depend on the
 // thread count. The final sweep hands each op to an OpSink as it is made (DatabaseStreamWriter
 // spools it to disk); what stays in memory is the build records of the triangles ever made (an
 // MTri of 64 bytes, compacted to 24 for the sweep) and the vertices.
@@ -64,8 +70,9 @@ struct BlockTinOptions {
   /// Directory of the scratch file holding the samples for the upper levels' re-reads (empty =
   /// the system's temporary directory). Checked for room before any work.
   std::string tmp_dir;
-  /// Threads building leaf blocks (0 = one per core). The output does not depend on it: blocks
-  /// are read and merged in order, only their greedy TINs and first decimation run in parallel.
+  /// Threads building and decimating blocks (0 = one per core). The output does not depend on
+  /// it: blocks are read and merged in order, only their greedy TINs and decimation run in
+  /// parallel.
   unsigned threads = 0;
   /// Progress in [0, 1].
   std::function<void(double)> progress;
@@ -80,19 +87,21 @@ struct BlockTinStats {
   std::uint64_t removals = 0;                               // ops other than R^0
   std::uint64_t rounds = 0;              // independent-set rounds (bounds the DAG height)
   std::uint64_t dag_height = 0;          // longest parent-to-child path from R^0
-  std::uint64_t non_delaunay_holes = 0;  // holes with no Delaunay ear (across old block borders)
+  std::uint64_t non_delaunay_holes = 0;  // holes with no Delaunay ear (none when M^m is Delaunay)
+  std::uint64_t delaunay_flips = 0;      // Lawson flips making M^m Delaunay across block borders
+  std::uint64_t delaunay_insertions = 0;  // samples inserted where a flip exceeded max_error
   std::uint64_t max_block_samples = 0;   // largest window held in memory
   int exact_levels = 0;                  // upper levels decimated with exact bounds
   std::uint64_t samples_rescanned = 0;   // samples re-read for them
   std::uint64_t samples_scanned = 0;     // sample visits of exact bounds
   std::uint64_t plans = 0;               // removals planned (evaluated)
   std::uint64_t temp_bytes = 0;          // written to the scratch file
-  // Seconds: survey pass, leaf windows read, leaf greedy TINs, leaf decimation, upper levels
-  // (with their reads), assembling the CRMR.
-  // Leaf reads are wall time on the reading thread; greedy and level 0 are summed over the
-  // workers (thread time); seconds_leaves is the wall time of the whole leaf pass.
-  double seconds_survey = 0, seconds_read = 0, seconds_greedy = 0, seconds_level0 = 0,
-         seconds_leaves = 0, seconds_upper = 0, seconds_assemble = 0;
+  // Seconds: survey pass, leaf windows read, leaf greedy TINs, the Delaunay repair, level 0,
+  // upper levels (with their reads), assembling the CRMR.
+  // Leaf reads are wall time on the reading thread; greedy is summed over the workers (thread
+  // time); seconds_leaves is the wall time of the whole leaf pass; the others are wall time.
+  double seconds_survey = 0, seconds_read = 0, seconds_greedy = 0, seconds_delaunay = 0,
+         seconds_level0 = 0, seconds_leaves = 0, seconds_upper = 0, seconds_assemble = 0;
 };
 
 /// Builds the CRMR into `sink`, op by op in id order as the final sweep makes them (the ops never

@@ -73,15 +73,33 @@ TEST_P(PerDataset, InvariantsHoldWithSeveralLevels) {
   EXPECT_LE(b.crmr.header.err_final, d.max_error);
   EXPECT_LE(b.stats.dag_height, b.stats.rounds);
   EXPECT_EQ(b.stats.removals + 1, b.crmr.ops.size());
+  EXPECT_EQ(b.stats.non_delaunay_holes, 0u);  // M^m is Delaunay, so every hole has an ear
   std::printf("greedy TIN: %llu vertices\n", (unsigned long long)d.crmr.header.vertex_count);
   std::printf(
       "%s: %dx%d, %llu leaf blocks, %d levels, M^m %llu vertices, R^0 %llu, %llu ops, "
-      "%llu rounds, DAG height %llu, non-Delaunay holes %llu\n",
+      "%llu rounds, DAG height %llu, non-Delaunay holes %llu, border flips %llu, insertions "
+      "%llu\n",
       name().c_str(), d.dem.width, d.dem.height, (unsigned long long)b.stats.leaf_blocks,
       b.stats.levels, (unsigned long long)b.stats.finest_vertices,
       (unsigned long long)b.stats.base_vertices, (unsigned long long)b.stats.removals,
       (unsigned long long)b.stats.rounds, (unsigned long long)b.stats.dag_height,
-      (unsigned long long)b.stats.non_delaunay_holes);
+      (unsigned long long)b.stats.non_delaunay_holes, (unsigned long long)b.stats.delaunay_flips,
+      (unsigned long long)b.stats.delaunay_insertions);
+}
+
+TEST_P(PerDataset, FinestMeshIsDelaunayAcrossBlockBorders) {
+  // Each leaf's greedy TIN is Delaunay on its own; the flips (and insertions) across the border
+  // lines must make the whole finest mesh so, as the in-core greedy TIN is (Brown Theorem 5.1.4
+  // needs every fragment Delaunay).
+  if (std::get<1>(GetParam())) GTEST_SKIP() << "the same finest mesh as the exact configuration";
+  const Built& b = build();
+  const auto fin = test::finest_mesh(b.crmr);
+  const DelaunayReport del = check_delaunay(b.crmr, fin);
+  EXPECT_GT(del.interior_edges, fin.size());
+  EXPECT_EQ(del.non_delaunay_edges, 0u);
+  const InvariantReport tiling = check_tiling(b.crmr, fin);
+  EXPECT_TRUE(tiling.ok()) << tiling.summary();
+  EXPECT_EQ(b.stats.finest_triangles, fin.size());
 }
 
 TEST_P(PerDataset, EveryFragmentTriangleMeetsItsStoredBound) {
@@ -134,6 +152,7 @@ TEST_P(PerDataset, CutsAcrossBlockBordersTileAndMeetTheRcf) {
   std::printf("%s: %llu cuts, %llu interior edges, %llu not Delaunay\n", name().c_str(),
               (unsigned long long)cases, (unsigned long long)edges,
               (unsigned long long)non_delaunay);
+  EXPECT_EQ(non_delaunay, 0u);  // Brown Theorem 5.1.4: Delaunay fragments give Delaunay cuts
 }
 
 TEST_P(PerDataset, UniformErrorCutsAreAboutAsSmallAsTheGreedyTins) {
