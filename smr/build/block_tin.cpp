@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <deque>
 #include <filesystem>
 #include <limits>
 #include <memory>
@@ -182,8 +183,23 @@ class SampleSpill {
     file_.write(at + stride_ * sizeof(float), v.data(), v.size());
   }
 
+  /// Whole tiles kept by one caller (not shared between threads), the oldest dropped first: many
+  /// small windows in one area cost one read of each tile.
+  struct Cache {
+    struct Tile {
+      int tx = -1, ty = -1;
+      std::vector<float> z;
+      std::vector<std::uint8_t> v;
+    };
+    explicit Cache(std::size_t tiles_kept) : capacity(tiles_kept) {}
+    std::size_t capacity;
+    std::deque<Tile> tiles;
+  };
+
   /// Samples [col0, col0 + w) x [row0, row0 + h), as RasterWindows::read; every tile must be put.
-  Heightfield read(int col0, int row0, int w, int h, const RasterWindows& source) const {
+  /// With a cache, whole tiles are read into it; without, only the window's bytes are read.
+  Heightfield read(int col0, int row0, int w, int h, const RasterWindows& source,
+                   Cache* cache = nullptr) const {
     Heightfield out = window_header(source.georef(), source.source(), col0, row0, w, h);
     out.z.resize(std::size_t(w) * std::size_t(h));
     out.valid.resize(out.z.size());
@@ -195,22 +211,42 @@ class SampleSpill {
     for (int ty = ty0; ty <= ty1; ++ty) {
       for (int tx = tx0; tx <= tx1; ++tx) {
         const auto [cw, rh] = owned(tx, ty);
-        z.resize(std::size_t(cw) * std::size_t(rh));
-        v.resize(z.size());
-        const std::uint64_t at = offset(tx, ty);
-        file_.read(at, z.data(), z.size() * sizeof(float));
-        file_.read(at + stride_ * sizeof(float), v.data(), v.size());
         const int c_lo = std::max(col0, tx * B_), c_hi = std::min(col0 + w, tx * B_ + cw);
         const int r_lo = std::max(row0, ty * B_), r_hi = std::min(row0 + h, ty * B_ + rh);
-        for (int r = r_lo; r < r_hi; ++r) {
-          for (int c = c_lo; c < c_hi; ++c) {
-            const std::size_t i =
-                std::size_t(r - ty * B_) * std::size_t(cw) + std::size_t(c - tx * B_);
-            const std::size_t o = out.index(c - col0, r - row0);
-            out.z[o] = z[i];
-            out.valid[o] = v[i];
-            any_invalid |= v[i] == 0;
+        // The rows [r_lo, r_hi) of the tile, whole (one read) when the window spans its width,
+        // else each row's columns [c_lo, c_hi) (a small window costs its own bytes only).
+        const std::size_t n = std::size_t(c_hi - c_lo);
+        const std::size_t rows = std::size_t(r_hi - r_lo);
+        const float* zs = nullptr;
+        const std::uint8_t* vs = nullptr;
+        std::size_t pitch = n;  // of zs and vs, whose (0, 0) is (c_lo, r_lo)
+        if (cache != nullptr) {
+          const Cache::Tile& tile = cached(*cache, tx, ty);
+          pitch = std::size_t(cw);
+          const std::size_t first =
+              std::size_t(r_lo - ty * B_) * pitch + std::size_t(c_lo - tx * B_);
+          zs = tile.z.data() + first;
+          vs = tile.v.data() + first;
+        } else {
+          const bool whole_rows = c_lo == tx * B_ && c_hi == tx * B_ + cw;
+          z.resize(n * rows);
+          v.resize(z.size());
+          const std::uint64_t at = offset(tx, ty);
+          for (std::size_t r = 0; r < rows; r += whole_rows ? rows : 1) {
+            const std::uint64_t first = std::uint64_t(r_lo - ty * B_ + int(r)) * std::uint64_t(cw) +
+                                        std::uint64_t(c_lo - tx * B_);
+            const std::size_t count = whole_rows ? n * rows : n;
+            file_.read(at + first * sizeof(float), z.data() + r * n, count * sizeof(float));
+            file_.read(at + stride_ * sizeof(float) + first, v.data() + r * n, count);
           }
+          zs = z.data();
+          vs = v.data();
+        }
+        for (std::size_t r = 0; r < rows; ++r) {
+          const std::size_t o = out.index(c_lo - col0, r_lo - row0 + int(r));
+          std::memcpy(out.z.data() + o, zs + r * pitch, n * sizeof(float));
+          std::memcpy(out.valid.data() + o, vs + r * pitch, n);
+          for (std::size_t i = 0; i < n; ++i) any_invalid |= vs[r * pitch + i] == 0;
         }
       }
     }
@@ -220,6 +256,26 @@ class SampleSpill {
   std::uint64_t bytes() const { return file_.bytes_written(); }
 
  private:
+  const Cache::Tile& cached(Cache& cache, int tx, int ty) const {
+    for (const auto& t : cache.tiles) {
+      if (t.tx == tx && t.ty == ty) return t;
+    }
+    Cache::Tile reused;  // the oldest tile's buffers: no new pages to fault in and clear
+    if (cache.tiles.size() >= cache.capacity) {
+      reused = std::move(cache.tiles.front());
+      cache.tiles.pop_front();
+    }
+    auto& t = cache.tiles.emplace_back(std::move(reused));
+    t.tx = tx;
+    t.ty = ty;
+    const auto [cw, rh] = owned(tx, ty);
+    t.z.resize(std::size_t(cw) * std::size_t(rh));
+    t.v.resize(t.z.size());
+    const std::uint64_t at = offset(tx, ty);
+    file_.read(at, t.z.data(), t.z.size() * sizeof(float));
+    file_.read(at + stride_ * sizeof(float), t.v.data(), t.v.size());
+    return t;
+  }
   std::pair<int, int> owned(int tx, int ty) const {
     return {tx == nx_ - 1 ? W_ - tx * B_ : B_, ty == ny_ - 1 ? H_ - ty * B_ : B_};
   }
@@ -733,31 +789,39 @@ class Builder {
       }
     }
     std::reverse(stack.begin(), stack.end());  // popped in triangle order
-    std::vector<std::uint32_t> stale;          // triangles whose bound is to be computed
+    // Triangles whose bound is to be computed, in waves sorted by place (so the tile cache
+    // reads each tile about once): a triangle changed after its turn goes to the next wave, so
+    // the last computation of each is of its final shape.
+    std::vector<std::uint32_t> stale, wave;
     legalise(stack, stale);
+    const std::size_t tiles_kept = std::min<std::size_t>(2 * std::size_t(bw_) + 4, 64);
+    SampleSpill::Cache tiles(tiles_kept);
     while (!stale.empty()) {
-      std::sort(stale.begin(), stale.end());
-      stale.erase(std::unique(stale.begin(), stale.end()), stale.end());
-      std::uint32_t over = kNone;
-      std::pair<int, int> worst{0, 0};
-      std::vector<std::uint32_t> left;
-      for (std::uint32_t t : stale) {
-        const auto [c0, r0, w] = window_of(tris_[t].v);
+      wave.swap(stale);
+      stale.clear();
+      std::vector<std::pair<std::uint64_t, std::uint32_t>> order;
+      for (std::uint32_t t : wave) {
+        const MTri& m = tris_[t];
+        const int col = std::min({verts_[m.v[0]].col, verts_[m.v[1]].col, verts_[m.v[2]].col});
+        const int row = std::min({verts_[m.v[0]].row, verts_[m.v[1]].row, verts_[m.v[2]].row});
+        order.push_back(
+            {(std::uint64_t(row / B_) * std::uint64_t(bw_) + std::uint64_t(col / B_)) << 32 | t,
+             t});
+      }
+      std::sort(order.begin(), order.end());
+      order.erase(std::unique(order.begin(), order.end()), order.end());
+      for (const auto& [key, t] : order) {
+        const auto [c0, r0, w] = window_of(tris_[t].v, tiles);
         TriBound& b = tris_[t].bound;
         b = exact_bound(tris_[t].v, w, c0, r0, false);
         if (b.err() <= stop_error_) {
           err_final_ = std::max(err_final_, b.err());
-        } else if (over == kNone) {
-          over = t;
-          worst = worst_sample(tris_[t].v, w, c0, r0);
-        } else {
-          left.push_back(t);  // after this insertion, which may change it
+          continue;
         }
+        const auto [col, row] = worst_sample(tris_[t].v, w, c0, r0);
+        insert_sample(t, col, row, w.at(col - c0, row - r0), stack, stale);
+        legalise(stack, stale);
       }
-      stale.swap(left);
-      if (over == kNone) break;
-      insert_sample(over, worst.first, worst.second, stack, stale);
-      legalise(stack, stale);
     }
   }
 
@@ -803,16 +867,15 @@ class Builder {
     }
   }
 
-  /// Inserts grid sample (col, row), which lies in triangle t (inside, or on an edge shared with
-  /// another data triangle), splitting t (and that neighbour); the new triangles go to `stale`
-  /// and their outer edges to `stack`.
-  void insert_sample(std::uint32_t t, int col, int row, std::vector<EdgeTask>& stack,
+  /// Inserts grid sample (col, row) of height z, which lies in triangle t (inside, or on an edge
+  /// shared with another data triangle), splitting t (and that neighbour); the new triangles go to
+  /// `stale` and their outer edges to `stack`.
+  void insert_sample(std::uint32_t t, int col, int row, float z, std::vector<EdgeTask>& stack,
                      std::vector<std::uint32_t>& stale) {
-    const auto [c0, r0, w] = window_of(tris_[t].v);
     MVert pv;
     pv.col = col;
     pv.row = row;
-    pv.z = w.at(col - c0, row - r0);
+    pv.z = z;
     const auto p = static_cast<std::uint32_t>(verts_.size());
     verts_.push_back(pv);
     ++stats_.delaunay_insertions;
@@ -822,7 +885,8 @@ class Builder {
     }
     const std::uint32_t a = tris_[t].v[k < 0 ? 0 : k], b = tris_[t].v[k < 0 ? 1 : (k + 1) % 3],
                         c = tris_[t].v[k < 0 ? 2 : (k + 2) % 3];
-    const std::uint32_t n_ab = tris_[t].nbr[k < 0 ? 0 : k], n_bc = tris_[t].nbr[k < 0 ? 1 : (k + 1) % 3],
+    const std::uint32_t n_ab = tris_[t].nbr[k < 0 ? 0 : k],
+                        n_bc = tris_[t].nbr[k < 0 ? 1 : (k + 1) % 3],
                         n_ca = tris_[t].nbr[k < 0 ? 2 : (k + 2) % 3];
     const auto n1 = static_cast<std::uint32_t>(tris_.size());
     tris_.push_back(MTri{});
@@ -882,12 +946,12 @@ class Builder {
     int c0, r0;
     Heightfield w;
   };
-  /// The samples of a triangle's bounding box, from the scratch copy.
-  SampleWindow window_of(const std::array<std::uint32_t, 3>& v) const {
+  /// The samples of a triangle's bounding box, from the scratch copy through a tile cache.
+  SampleWindow window_of(const std::array<std::uint32_t, 3>& v, SampleSpill::Cache& tiles) const {
     const MVert &a = verts_[v[0]], &b = verts_[v[1]], &c = verts_[v[2]];
     const int c0 = std::min({a.col, b.col, c.col}), r0 = std::min({a.row, b.row, c.row});
     const int c1 = std::max({a.col, b.col, c.col}), r1 = std::max({a.row, b.row, c.row});
-    return {c0, r0, spill_->read(c0, r0, c1 - c0 + 1, r1 - r0 + 1, dem_)};
+    return {c0, r0, spill_->read(c0, r0, c1 - c0 + 1, r1 - r0 + 1, dem_, &tiles)};
   }
 
   /// The sample of the closed triangle farthest from its plane (the first in row order).
@@ -904,8 +968,8 @@ class Builder {
       std::int64_t xl, xr;
       rows.next(xl, xr);
       for (std::int64_t col = xl; col <= xr; ++col) {
-        const double e = std::abs(double(w.at(int(col), int(row))) -
-                                  pl.at(double(col + c0), double(row + r0)));
+        const double e =
+            std::abs(double(w.at(int(col), int(row))) - pl.at(double(col + c0), double(row + r0)));
         if (e > best) {
           best = e;
           at = {int(col + c0), int(row + r0)};
