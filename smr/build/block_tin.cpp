@@ -31,6 +31,13 @@ namespace {
 
 constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
 constexpr double kInfeasible = std::numeric_limits<double>::infinity();
+/// Items between a level-0 block's copy and its merge in the interleaved leaf pass (and the most
+/// the pass holds in flight).
+constexpr std::size_t kLevel0Lag = 8;
+
+/// Thrown by the Delaunay repair of an interleaved leaf pass when it reaches a triangle already
+/// handed to a level-0 block: the build starts again without interleaving.
+struct LeafConflict {};
 
 struct MVert {
   std::int32_t col = 0, row = 0;
@@ -56,6 +63,7 @@ struct MTri {
   std::uint32_t creator = kNone;    // removal whose hole it fills; kNone = M^m
   std::uint32_t destroyer = kNone;  // removal whose star it is in; kNone = alive
   bool is_void = false;
+  bool copied = false;  // handed to a level-0 block while leaves were still being merged
 };
 
 /// What the assembly needs of a triangle (MTri less its adjacency and bounds): a third the size.
@@ -152,9 +160,10 @@ std::vector<int> simplify_line(const std::vector<float>& z, const std::vector<st
 }
 
 /// The DEM's samples, copied block by block to a scratch file as the leaf pass reads them, so the
-/// upper levels re-read their windows from it (page cache, plain floats) instead of decoding the
-/// source again. Tile (tx, ty) holds the samples the leaf block (tx, ty) owns: columns
-/// [tx * B, tx * B + B), the last tile column and row up to the raster's edge (B + 1).
+/// later passes re-read their windows from it (page cache, plain floats) instead of decoding the
+/// source again. Tile (tx, ty) holds the leaf block (tx, ty)'s whole window: columns
+/// [tx * B, min(tx * B + B, W - 1)], rows likewise, so its closing column and row (shared with
+/// the next tiles) are there too and a window inside the blocks stored so far reads no other.
 class SampleSpill {
  public:
   SampleSpill(const std::string& dir, int width, int height, int b, int nx, int ny)
@@ -164,23 +173,24 @@ class SampleSpill {
         nx_(nx),
         ny_(ny),
         stride_(std::uint64_t(b + 1) * std::uint64_t(b + 1)),
+        stored_(std::size_t(nx) * std::size_t(ny), 0),
         file_(dir, std::uint64_t(nx) * std::uint64_t(ny) * stride_ * 5) {}
 
   /// Stores tile (tx, ty) from window w, whose sample (0, 0) is grid (c0, r0).
   void put(int tx, int ty, const Heightfield& w, int c0, int r0) {
-    const auto [cw, rh] = owned(tx, ty);
+    const auto [cw, rh] = extent(tx, ty);
     std::vector<float> z(static_cast<std::size_t>(cw) * static_cast<std::size_t>(rh));
     std::vector<std::uint8_t> v(z.size(), 1);
     for (int r = 0; r < rh; ++r) {
-      for (int c = 0; c < cw; ++c) {
-        const std::size_t i = std::size_t(r) * std::size_t(cw) + std::size_t(c);
-        z[i] = w.at(tx * B_ - c0 + c, ty * B_ - r0 + r);
-        v[i] = w.has_data(tx * B_ - c0 + c, ty * B_ - r0 + r) ? 1 : 0;
-      }
+      const std::size_t from = w.index(tx * B_ - c0, ty * B_ - r0 + r);
+      const std::size_t to = std::size_t(r) * std::size_t(cw);
+      std::memcpy(z.data() + to, w.z.data() + from, std::size_t(cw) * sizeof(float));
+      if (!w.valid.empty()) std::memcpy(v.data() + to, w.valid.data() + from, std::size_t(cw));
     }
     const std::uint64_t at = offset(tx, ty);
     file_.write(at, z.data(), z.size() * sizeof(float));
     file_.write(at + stride_ * sizeof(float), v.data(), v.size());
+    stored_[std::size_t(ty) * std::size_t(nx_) + std::size_t(tx)] = 1;
   }
 
   /// Whole tiles kept by one caller (not shared between threads), the oldest dropped first: many
@@ -196,41 +206,53 @@ class SampleSpill {
     std::deque<Tile> tiles;
   };
 
-  /// Samples [col0, col0 + w) x [row0, row0 + h), as RasterWindows::read; every tile must be put.
-  /// With a cache, whole tiles are read into it; without, only the window's bytes are read.
+  /// Samples [col0, col0 + w) x [row0, row0 + h), as RasterWindows::read, from the tiles that
+  /// hold them (a window's last column and row come from the tile before, where it has one); a
+  /// tile not stored yet reads as no data. With a cache, whole tiles are read into it; without,
+  /// only the window's bytes are read.
   Heightfield read(int col0, int row0, int w, int h, const RasterWindows& source,
                    Cache* cache = nullptr) const {
     Heightfield out = window_header(source.georef(), source.source(), col0, row0, w, h);
     out.z.resize(std::size_t(w) * std::size_t(h));
     out.valid.resize(out.z.size());
-    std::vector<float> z;
-    std::vector<std::uint8_t> v;
-    const int tx0 = tile_of(col0, nx_), tx1 = tile_of(col0 + w - 1, nx_);
-    const int ty0 = tile_of(row0, ny_), ty1 = tile_of(row0 + h - 1, ny_);
-    bool any_invalid = false;
+    const int tx0 = tile_of(col0, nx_), tx1 = tile_of(std::max(col0, col0 + w - 2), nx_);
+    const int ty0 = tile_of(row0, ny_), ty1 = tile_of(std::max(row0, row0 + h - 2), ny_);
     for (int ty = ty0; ty <= ty1; ++ty) {
       for (int tx = tx0; tx <= tx1; ++tx) {
-        const auto [cw, rh] = owned(tx, ty);
-        const int c_lo = std::max(col0, tx * B_), c_hi = std::min(col0 + w, tx * B_ + cw);
-        const int r_lo = std::max(row0, ty * B_), r_hi = std::min(row0 + h, ty * B_ + rh);
-        // The rows [r_lo, r_hi) of the tile, whole (one read) when the window spans its width,
-        // else each row's columns [c_lo, c_hi) (a small window costs its own bytes only).
+        const auto [cw, rh] = extent(tx, ty);
+        const int c_lo = std::max(col0, tx * B_);
+        const int c_hi = tx == tx1 ? col0 + w : std::min(col0 + w, tx * B_ + B_);
+        const int r_lo = std::max(row0, ty * B_);
+        const int r_hi = ty == ty1 ? row0 + h : std::min(row0 + h, ty * B_ + B_);
         const std::size_t n = std::size_t(c_hi - c_lo);
         const std::size_t rows = std::size_t(r_hi - r_lo);
-        const float* zs = nullptr;
-        const std::uint8_t* vs = nullptr;
-        std::size_t pitch = n;  // of zs and vs, whose (0, 0) is (c_lo, r_lo)
+        if (stored_[std::size_t(ty) * std::size_t(nx_) + std::size_t(tx)] == 0) {
+          for (std::size_t r = 0; r < rows; ++r) {
+            const std::size_t o = out.index(c_lo - col0, r_lo - row0 + int(r));
+            std::fill_n(out.valid.begin() + std::ptrdiff_t(o), n, std::uint8_t{0});
+          }
+          continue;
+        }
         if (cache != nullptr) {
           const Cache::Tile& tile = cached(*cache, tx, ty);
-          pitch = std::size_t(cw);
+          const std::size_t pitch = std::size_t(cw);
           const std::size_t first =
               std::size_t(r_lo - ty * B_) * pitch + std::size_t(c_lo - tx * B_);
-          zs = tile.z.data() + first;
-          vs = tile.v.data() + first;
+          for (std::size_t r = 0; r < rows; ++r) {
+            const std::size_t o = out.index(c_lo - col0, r_lo - row0 + int(r));
+            std::memcpy(out.z.data() + o, tile.z.data() + first + r * pitch, n * sizeof(float));
+            std::memcpy(out.valid.data() + o, tile.v.data() + first + r * pitch, n);
+          }
         } else {
+          // Whole rows in one read when the window spans the tile's width, else row by row,
+          // through buffers each thread keeps (no fresh pages to fault in per window).
+          thread_local std::vector<float> z;
+          thread_local std::vector<std::uint8_t> v;
           const bool whole_rows = c_lo == tx * B_ && c_hi == tx * B_ + cw;
-          z.resize(n * rows);
-          v.resize(z.size());
+          if (z.size() < n * rows) {
+            z.resize(n * rows);
+            v.resize(n * rows);
+          }
           const std::uint64_t at = offset(tx, ty);
           for (std::size_t r = 0; r < rows; r += whole_rows ? rows : 1) {
             const std::uint64_t first = std::uint64_t(r_lo - ty * B_ + int(r)) * std::uint64_t(cw) +
@@ -239,17 +261,16 @@ class SampleSpill {
             file_.read(at + first * sizeof(float), z.data() + r * n, count * sizeof(float));
             file_.read(at + stride_ * sizeof(float) + first, v.data() + r * n, count);
           }
-          zs = z.data();
-          vs = v.data();
-        }
-        for (std::size_t r = 0; r < rows; ++r) {
-          const std::size_t o = out.index(c_lo - col0, r_lo - row0 + int(r));
-          std::memcpy(out.z.data() + o, zs + r * pitch, n * sizeof(float));
-          std::memcpy(out.valid.data() + o, vs + r * pitch, n);
-          for (std::size_t i = 0; i < n; ++i) any_invalid |= vs[r * pitch + i] == 0;
+          for (std::size_t r = 0; r < rows; ++r) {
+            const std::size_t o = out.index(c_lo - col0, r_lo - row0 + int(r));
+            std::memcpy(out.z.data() + o, z.data() + r * n, n * sizeof(float));
+            std::memcpy(out.valid.data() + o, v.data() + r * n, n);
+          }
         }
       }
     }
+    const bool any_invalid =
+        std::find(out.valid.begin(), out.valid.end(), std::uint8_t{0}) != out.valid.end();
     if (!any_invalid) out.valid.clear();
     return out;
   }
@@ -268,7 +289,7 @@ class SampleSpill {
     auto& t = cache.tiles.emplace_back(std::move(reused));
     t.tx = tx;
     t.ty = ty;
-    const auto [cw, rh] = owned(tx, ty);
+    const auto [cw, rh] = extent(tx, ty);
     t.z.resize(std::size_t(cw) * std::size_t(rh));
     t.v.resize(t.z.size());
     const std::uint64_t at = offset(tx, ty);
@@ -276,8 +297,10 @@ class SampleSpill {
     file_.read(at + stride_ * sizeof(float), t.v.data(), t.v.size());
     return t;
   }
-  std::pair<int, int> owned(int tx, int ty) const {
-    return {tx == nx_ - 1 ? W_ - tx * B_ : B_, ty == ny_ - 1 ? H_ - ty * B_ : B_};
+  /// Columns and rows of tile (tx, ty): its leaf block's window.
+  std::pair<int, int> extent(int tx, int ty) const {
+    return {std::min(tx * B_ + B_, W_ - 1) - tx * B_ + 1,
+            std::min(ty * B_ + B_, H_ - 1) - ty * B_ + 1};
   }
   int tile_of(int x, int n) const { return std::min(x / B_, n - 1); }
   std::uint64_t offset(int tx, int ty) const {
@@ -285,10 +308,14 @@ class SampleSpill {
   }
   int W_, H_, B_, nx_, ny_;
   std::uint64_t stride_;
+  std::vector<std::uint8_t> stored_;  // tile -> put yet
   storage::TempFile file_;
 };
 
 class Builder {
+  struct EdgeTask;
+  struct UpperBlock;
+
  public:
   Builder(const RasterWindows& dem, const BlockTinOptions& opt, BlockTinStats& stats)
       : dem_(dem), opt_(opt), stats_(stats), W_(dem.width()), H_(dem.height()) {
@@ -347,6 +374,7 @@ class Builder {
     // raster: reads took 116 s of a 193 s ingest).
     const std::uint64_t cache_before =
         opt_.memory_bytes != 0 ? dem_.set_cache_bytes(opt_.memory_bytes / 8) : 0;
+    repair_tiles_.capacity = std::min<std::size_t>(2 * std::size_t(bw_) + 4, 64);
     leaf_pass();
     lap(stats_.seconds_leaves);
     if (valid_samples_ == 0) throw_input(dem_.source() + ": every sample is no data");
@@ -354,12 +382,14 @@ class Builder {
     const std::uint64_t cap = dem_.set_cache_bytes(0);
     dem_.set_cache_bytes(opt_.memory_bytes != 0 ? cache_before : cap);
     shared_ = IdMap<std::uint32_t>();
-    make_borders_delaunay();
+    if (!level0_done_) {
+      make_borders_delaunay();
+      lap(stats_.seconds_delaunay);
+      decimate_blocks(0);
+      lap(stats_.seconds_level0);
+    }
     finest_vertices_ = verts_.size();
-    lap(stats_.seconds_delaunay);
-    decimate_blocks(0);
     report(0.7);
-    lap(stats_.seconds_level0);
     for (int level = 1; level <= levels_; ++level) {
       decimate_blocks(level);
       report(0.7 + 0.2 * double(level) / double(std::max(1, levels_)));
@@ -451,6 +481,7 @@ class Builder {
     }
     if (opt_.max_error != 0.0) tol_ = std::max(tol_, 1e-9);
     in.tol = tol_;
+    leaf_tol_.push_back(tol_);
     ++stats_.leaf_blocks;
     stats_.samples += w.z.size();
     stats_.seconds_read += std::chrono::duration<double>(Clock::now() - t0).count();
@@ -584,7 +615,9 @@ class Builder {
   /// through global_vertex in the leaf's own order (so border vertices are shared and the ids
   /// are those a single pass would give), triangles after this one's, and the leaf's open border
   /// edges glued to the earlier blocks' or left open for later ones.
-  void merge_leaf(Builder& leaf) {
+  /// With `glued`, the edges glued to earlier leaves are listed there and the leaf's vertices
+  /// kept as leaf_vertices_[leaf_index] (the interleaved pass).
+  void merge_leaf(Builder& leaf, std::vector<EdgeTask>* glued, std::size_t leaf_index) {
     const std::uint32_t tri_base = static_cast<std::uint32_t>(tris_.size());
     auto tri = [&](std::uint32_t t) { return t == kNone ? kNone : t + tri_base; };
     std::vector<std::uint32_t> vmap(leaf.verts_.size());
@@ -595,6 +628,7 @@ class Builder {
       verts_[g].tri = tri(lv.tri);  // the leaf wrote it last, as a single pass would
       verts_[g].sticky = verts_[g].sticky || lv.sticky;
     }
+    if (glued != nullptr) leaf_vertices_[leaf_index] = vmap;
     leaf.tris_.drain([&](std::size_t, const MTri& lt) {
       MTri m = lt;
       for (int k = 0; k < 3; ++k) {
@@ -612,10 +646,15 @@ class Builder {
         tris_[t].nbr[e] = other;
         tris_[other].nbr[oe] = t;
         open_edges_.erase(back);
+        if (glued != nullptr) glued->push_back({t, a, b});
       } else {
         open_edges_[edge_key(a, b)] = (t << 2) | e;
       }
     });
+    if (glued != nullptr)
+      std::sort(glued->begin(), glued->end(), [](const EdgeTask& x, const EdgeTask& y) {
+        return std::tie(x.t, x.a, x.b) < std::tie(y.t, y.a, y.b);
+      });
     err_final_ = std::max(err_final_, leaf.err_final_);
     finest_triangles_ += leaf.finest_triangles_;
     scanned_ += leaf.scanned_;
@@ -623,32 +662,133 @@ class Builder {
   }
 
   /// Every leaf block: read in order on this thread, built on `threads` workers, merged in
-  /// order, so the records (and the database) do not depend on the number of threads. At most
-  /// 2 x threads blocks are in flight.
+  /// order, so the records (and the database) do not depend on the number of threads.
+  ///
+  /// Interleaved (options.interleave_level0), each merge also repairs the Delaunay property
+  /// across the borders the new leaf shares with earlier ones, and a leaf's level-0 block is
+  /// copied out as soon as its last neighbour (the one below and to the right) is merged and
+  /// repaired; it is decimated by the workers alongside later leaves and merged back kLevel0Lag
+  /// items later. A later repair that would touch a triangle handed out so throws LeafConflict,
+  /// and the build starts again in the plain order (every leaf, the whole repair, level 0). Every
+  /// step is on the merge sequence, so the output does not depend on the thread count.
   void leaf_pass() {
     const std::size_t n = std::size_t(bw_) * std::size_t(bh_);
-    struct Leaf {
+    struct Item {
       LeafInput in;
       BlockTinStats stats;
-      std::unique_ptr<Builder> builder;
+      std::unique_ptr<Builder> builder;   // the leaf's TIN
+      std::unique_ptr<UpperBlock> block;  // a level-0 block
     };
     const unsigned threads = thread_count(opt_.threads);
+    const bool interleave = opt_.interleave_level0 && levels_ > 0;
+    // Item k + kLevel0Lag carries the block copied when leaf k was merged, so the pipeline holds
+    // at most kLevel0Lag items (whatever the thread count) and item k + kLevel0Lag is made after
+    // merge k.
+    const std::size_t in_flight = std::min<std::size_t>(2 * std::size_t(threads), kLevel0Lag);
+    const std::size_t items = interleave ? n + std::size_t(bw_) + 1 + kLevel0Lag : n;
+    std::deque<std::unique_ptr<UpperBlock>> ready;  // copied at merges, waiting for their item
+    if (interleave) leaf_vertices_.assign(n, {});
     ordered_pipeline(
-        n, threads, 2 * std::size_t(threads),
+        items, threads, in_flight,
         [&](std::size_t k) {
-          auto leaf = std::make_unique<Leaf>();
-          leaf->in = read_leaf(int(k % std::size_t(bw_)), int(k / std::size_t(bw_)));
-          leaf->builder = make_worker(leaf->stats);
-          return leaf;
+          auto item = std::make_unique<Item>();
+          if (k < n) {
+            item->in = read_leaf(int(k % std::size_t(bw_)), int(k / std::size_t(bw_)));
+            item->builder = make_worker(item->stats);
+          }
+          if (interleave && k >= kLevel0Lag) {
+            item->block = std::move(ready.front());
+            ready.pop_front();
+          }
+          return item;
         },
-        [](Leaf& leaf) {
-          leaf.builder->build_leaf(leaf.in);
-          leaf.in = LeafInput{};  // the samples are done with
+        [this](Item& item) {
+          if (item.builder) {
+            item.builder->build_leaf(item.in);
+            item.in = LeafInput{};  // the samples are done with
+          }
+          if (item.block) decimate_block(*item.block);
         },
-        [&](Leaf& leaf, std::size_t k) {
-          merge_leaf(*leaf.builder);
-          report(0.6 * double(k + 1) / double(n));
+        [&](Item& item, std::size_t k) {
+          if (item.builder) {
+            std::vector<EdgeTask> glued;
+            merge_leaf(*item.builder, interleave ? &glued : nullptr, k);
+            if (interleave) {
+              std::reverse(glued.begin(), glued.end());
+              repair(glued);
+            }
+          }
+          if (item.block) merge_block(*item.block);
+          if (interleave) {
+            // Leaf k - bw - 1's last neighbour is merged: its block goes out (none before).
+            const std::size_t j = k - std::size_t(bw_) - 1;
+            ready.push_back(k >= std::size_t(bw_) + 1 && j < n ? level0_block(j) : nullptr);
+          }
+          report(0.7 * double(std::min(k + 1, n)) / double(n));
         });
+    leaf_vertices_ = {};
+    level0_done_ = interleave;
+    stats_.level0_interleaved = interleave;
+  }
+
+  /// Leaf j's level-0 block, copied out (the interleaved leaf pass): the live triangles around
+  /// its vertices whose centroid is in it and that no other block has, its unlocked vertices.
+  std::unique_ptr<UpperBlock> level0_block(std::size_t j) {
+    const int bx = int(j % std::size_t(bw_)), by = int(j / std::size_t(bw_));
+    const int c0 = block_col0(bx), r0 = block_row0(by);
+    const int c1 = block_col1(bx), r1 = block_row1(by);
+    auto in_leaf = [&](double col, double row) {
+      return std::min(int(col) / B_, bw_ - 1) == bx && std::min(int(row) / B_, bh_ - 1) == by;
+    };
+    std::vector<std::uint32_t> tris, cand;
+    for (std::uint32_t v : leaf_vertices_[j]) {
+      const MVert& m = verts_[v];
+      if (m.tri == kNone || m.col < c0 || m.col > c1 || m.row < r0 || m.row > r1) continue;
+      if (in_leaf(m.col, m.row) && !locked(m, 0)) cand.push_back(v);
+      for_each_incident(v, [&](std::uint32_t t) {
+        const MTri& tm = tris_[t];
+        if (handed_out(t)) return;
+        const MVert &a = verts_[tm.v[0]], &b = verts_[tm.v[1]], &c = verts_[tm.v[2]];
+        if (in_leaf((a.col + b.col + c.col) / 3.0, (a.row + b.row + c.row) / 3.0))
+          tris.push_back(t);
+      });
+    }
+    std::vector<std::uint32_t>().swap(leaf_vertices_[j]);
+    if (cand.empty()) return nullptr;
+    std::sort(tris.begin(), tris.end());
+    tris.erase(std::unique(tris.begin(), tris.end()), tris.end());
+    std::sort(cand.begin(), cand.end());
+    cand.erase(std::unique(cand.begin(), cand.end()), cand.end());
+    for (std::uint32_t t : tris) tris_[t].copied = true;
+    auto block = setup_block(0, c0, r0, B_, std::move(tris), cand);
+    // The running tolerance as of the leaf whose merge copies this block (not of however many
+    // leaves the reader is ahead by): it covers this block's samples, and does not depend on
+    // the thread count.
+    block->builder->tol_ = leaf_tol_[std::min(j + std::size_t(bw_) + 1, leaf_tol_.size() - 1)];
+    return block;
+  }
+
+  /// f(t) for every live triangle having vertex v (each once).
+  template <class F>
+  void for_each_incident(std::uint32_t v, F&& f) const {
+    const std::uint32_t start = verts_[v].tri;
+    auto at = [&](std::uint32_t t) {
+      const int i = index_of(tris_[t], v);
+      if (i < 0) throw_internal("block TIN: a vertex's fan is broken");
+      return i;
+    };
+    std::uint32_t t = start;
+    for (;;) {  // counter-clockwise, across (b, v), until back or open
+      f(t);
+      t = tris_[t].nbr[(at(t) + 2) % 3];
+      if (t == start) return;
+      if (t == kNone) break;
+    }
+    for (t = start;;) {  // then clockwise from the start, across (v, a)
+      t = tris_[t].nbr[at(t)];
+      if (t == kNone) return;
+      f(t);
+    }
   }
 
   /// An empty builder for one block's work on a worker thread, with this one's settings.
@@ -789,13 +929,17 @@ class Builder {
       }
     }
     std::reverse(stack.begin(), stack.end());  // popped in triangle order
-    // Triangles whose bound is to be computed, in waves sorted by place (so the tile cache
-    // reads each tile about once): a triangle changed after its turn goes to the next wave, so
-    // the last computation of each is of its final shape.
+    repair(stack);
+  }
+
+  /// Legalises the edges of `stack` and bounds the flipped triangles, inserting samples where
+  /// they exceed the error. Triangles whose bound is to be computed go in waves sorted by place
+  /// (so the tile cache reads each tile about once): a triangle changed after its turn goes to
+  /// the next wave, so the last computation of each is of its final shape.
+  void repair(std::vector<EdgeTask>& stack) {
     std::vector<std::uint32_t> stale, wave;
     legalise(stack, stale);
-    const std::size_t tiles_kept = std::min<std::size_t>(2 * std::size_t(bw_) + 4, 64);
-    SampleSpill::Cache tiles(tiles_kept);
+    SampleSpill::Cache& tiles = repair_tiles_;
     while (!stale.empty()) {
       wave.swap(stale);
       stale.clear();
@@ -825,6 +969,13 @@ class Builder {
     }
   }
 
+  /// A triangle the Delaunay repair of an interleaved leaf pass may no longer look at: given to
+  /// a level-0 block, or made or replaced by one.
+  bool handed_out(std::uint32_t t) const {
+    const MTri& m = tris_[t];
+    return m.copied || m.creator != kNone || m.destroyer != kNone;
+  }
+
   /// An edge to legalise: (a, b) of triangle t, if t still has it (either way round).
   struct EdgeTask {
     std::uint32_t t, a, b;
@@ -845,6 +996,7 @@ class Builder {
       if (k < 0) continue;  // flipped away since
       const std::uint32_t t2 = tris_[t1].nbr[k];
       if (t2 == kNone || tris_[t1].is_void || tris_[t2].is_void) continue;
+      if (handed_out(t1) || handed_out(t2)) throw LeafConflict{};
       const std::uint32_t a = tris_[t1].v[k], b = tris_[t1].v[(k + 1) % 3],
                           c = tris_[t1].v[(k + 2) % 3];
       const int j = index_of(tris_[t2], b);
@@ -878,6 +1030,11 @@ class Builder {
     pv.z = z;
     const auto p = static_cast<std::uint32_t>(verts_.size());
     verts_.push_back(pv);
+    if (!leaf_vertices_.empty()) {  // the interleaved leaf pass: a candidate of its leaf's block
+      leaf_vertices_[std::size_t(std::min(row / B_, bh_ - 1)) * std::size_t(bw_) +
+                     std::size_t(std::min(col / B_, bw_ - 1))]
+          .push_back(p);
+    }
     ++stats_.delaunay_insertions;
     int k = -1;
     for (int i = 0; i < 3; ++i) {
@@ -931,7 +1088,12 @@ class Builder {
     m.nbr = nbr;
     if (orient(verts_[v[0]], verts_[v[1]], verts_[v[2]]) <= 0)
       throw_internal("block TIN: a Delaunay repair made a degenerate triangle");
-    for (std::uint32_t x : v) verts_[x].tri = t;
+    for (int k = 0; k < 3; ++k) {
+      verts_[v[k]].tri = t;
+      // An edge waiting for a later leaf (the interleaved pass) may have moved to this slot.
+      if (nbr[k] == kNone && !boundary_edge(verts_[v[k]], verts_[v[(k + 1) % 3]]))
+        open_edges_[edge_key(v[k], v[(k + 1) % 3])] = (t << 2) | std::uint32_t(k);
+    }
   }
   /// The neighbour o's edge (a, b), if o exists, now borders triangle t.
   void relink(std::uint32_t o, std::uint32_t a, std::uint32_t b, std::uint32_t t) {
@@ -1310,23 +1472,34 @@ class Builder {
         [&](std::size_t i) {
           const std::size_t k = with_candidates[i];
           const int c0 = int(k % std::size_t(nx)) * span, r0 = int(k / std::size_t(nx)) * span;
-          auto block = copy_block(level, std::move(tris[k]), cand[k]);
+          auto block = setup_block(level, c0, r0, span, std::move(tris[k]), cand[k]);
           std::vector<std::uint32_t>().swap(cand[k]);
-          block->c0 = c0;
-          block->r0 = r0;
-          block->w = std::min(c0 + span, W_ - 1) - c0 + 1;
-          block->h = std::min(r0 + span, H_ - 1) - r0 + 1;
-          stats_.max_block_samples =
-              std::max<std::uint64_t>(stats_.max_block_samples, std::uint64_t(block->w) * block->h);
-          if (level > 0)
-            stats_.samples_rescanned += std::uint64_t(block->w) * std::uint64_t(block->h);
           return block;
         },
-        [&](UpperBlock& block) {
-          const Heightfield w = spill_->read(block.c0, block.r0, block.w, block.h, dem_);
-          block.builder->decimate_level(block.level, &w, block.c0, block.r0, &block.cand);
-        },
+        [&](UpperBlock& block) { decimate_block(block); },
         [&](UpperBlock& block, std::size_t) { merge_block(block); });
+  }
+
+  /// The block of `level` whose window starts at grid (c0, r0), copied out: `tris` and the
+  /// candidates `cand` (whole-mesh ids).
+  std::unique_ptr<UpperBlock> setup_block(int level, int c0, int r0, int span,
+                                          std::vector<std::uint32_t>&& tris,
+                                          const std::vector<std::uint32_t>& cand) {
+    auto block = copy_block(level, std::move(tris), cand);
+    block->c0 = c0;
+    block->r0 = r0;
+    block->w = std::min(c0 + span, W_ - 1) - c0 + 1;
+    block->h = std::min(r0 + span, H_ - 1) - r0 + 1;
+    stats_.max_block_samples =
+        std::max<std::uint64_t>(stats_.max_block_samples, std::uint64_t(block->w) * block->h);
+    if (level > 0) stats_.samples_rescanned += std::uint64_t(block->w) * std::uint64_t(block->h);
+    return block;
+  }
+
+  /// A copied block's decimation (a worker thread), exact bounds from its window.
+  void decimate_block(UpperBlock& block) const {
+    const Heightfield w = spill_->read(block.c0, block.r0, block.w, block.h, dem_);
+    block.builder->decimate_level(block.level, &w, block.c0, block.r0, &block.cand);
   }
 
   /// A block of an exact upper level copied out of the whole mesh for a worker: its live
@@ -1808,6 +1981,10 @@ class Builder {
   std::uint64_t exact_window_samples_ = 0;
   std::uint64_t valid_samples_ = 0;
   std::unique_ptr<SampleSpill> spill_;
+  SampleSpill::Cache repair_tiles_{1};  // the Delaunay repair's tiles (it works along borders)
+  std::vector<std::vector<std::uint32_t>> leaf_vertices_;  // interleaved pass: per leaf block
+  bool level0_done_ = false;                               // by the interleaved leaf pass
+  std::vector<double> leaf_tol_;  // the running tolerance after each leaf's read
   double tol_ = 0.0, range_ = 0.0, stop_error_ = 0.0, eps0_ = 0.0, err_final_ = 0.0;
   std::uint64_t finest_vertices_ = 0, finest_triangles_ = 0;
   std::vector<MVert> verts_;
@@ -1836,7 +2013,17 @@ class Builder {
 void build_block_tin(const RasterWindows& dem, OpSink& sink, const BlockTinOptions& options,
                      BlockTinStats* stats) {
   BlockTinStats local;
-  Builder(dem, options, stats != nullptr ? *stats : local).run(sink);
+  BlockTinStats& st = stats != nullptr ? *stats : local;
+  try {
+    Builder(dem, options, st).run(sink);
+  } catch (const LeafConflict&) {
+    // Nothing reached the sink (ops are made after every level): start again, plain order.
+    BlockTinOptions plain = options;
+    plain.interleave_level0 = false;
+    st = BlockTinStats{};
+    st.level0_restarts = 1;
+    Builder(dem, plain, st).run(sink);
+  }
 }
 
 Crmr build_block_tin(const RasterWindows& dem, const BlockTinOptions& options,

@@ -37,10 +37,11 @@
 // Memory and threads. Leaf blocks are read in order on the calling thread (the running tolerance
 // and the reader are sequential), built by `threads` workers into records of their own and
 // merged in order; the Delaunay repair runs on the calling thread; blocks of the exact levels
-// are copied out, decimated by workers and merged back in order. Ids are the ones a single pass gives, so the CRMR does not depend on the
-// thread count. The final sweep hands each op to an OpSink as it is made (DatabaseStreamWriter
-// spools it to disk); what stays in memory is the build records of the triangles ever made (an
-// MTri of 64 bytes, compacted to 24 for the sweep) and the vertices.
+// are copied out, decimated by workers and merged back in order. Ids are the ones a single pass
+// gives, so the CRMR does not depend on the thread count. The final sweep hands each op to an
+// OpSink as it is made (DatabaseStreamWriter spools it to disk); what stays in memory is the build
+// records of the triangles ever made (an MTri of 64 bytes, compacted to 24 for the sweep) and the
+// vertices.
 #pragma once
 
 #include <cstdint>
@@ -74,6 +75,11 @@ struct BlockTinOptions {
   /// it: blocks are read and merged in order, only their greedy TINs and decimation run in
   /// parallel.
   unsigned threads = 0;
+  /// Decimate each leaf block's level 0 during the leaf pass, as soon as the leaves around it are
+  /// merged and their borders made Delaunay (overlapping the reading), rather than after every
+  /// leaf. In the rare case that a later border's repair reaches such a block, the build starts
+  /// again without. The output does not depend on the thread count either way.
+  bool interleave_level0 = true;
   /// Progress in [0, 1].
   std::function<void(double)> progress;
 };
@@ -85,17 +91,19 @@ struct BlockTinStats {
   std::uint64_t finest_vertices = 0, finest_triangles = 0;  // M^m
   std::uint64_t base_vertices = 0, base_triangles = 0;      // R^0
   std::uint64_t removals = 0;                               // ops other than R^0
-  std::uint64_t rounds = 0;              // independent-set rounds (bounds the DAG height)
-  std::uint64_t dag_height = 0;          // longest parent-to-child path from R^0
-  std::uint64_t non_delaunay_holes = 0;  // holes with no Delaunay ear (none when M^m is Delaunay)
-  std::uint64_t delaunay_flips = 0;      // Lawson flips making M^m Delaunay across block borders
+  std::uint64_t rounds = 0;               // independent-set rounds (bounds the DAG height)
+  std::uint64_t dag_height = 0;           // longest parent-to-child path from R^0
+  std::uint64_t non_delaunay_holes = 0;   // holes with no Delaunay ear (none when M^m is Delaunay)
+  std::uint64_t delaunay_flips = 0;       // Lawson flips making M^m Delaunay across block borders
   std::uint64_t delaunay_insertions = 0;  // samples inserted where a flip exceeded max_error
-  std::uint64_t max_block_samples = 0;   // largest window held in memory
-  int exact_levels = 0;                  // upper levels decimated with exact bounds
-  std::uint64_t samples_rescanned = 0;   // samples re-read for them
-  std::uint64_t samples_scanned = 0;     // sample visits of exact bounds
-  std::uint64_t plans = 0;               // removals planned (evaluated)
-  std::uint64_t temp_bytes = 0;          // written to the scratch file
+  bool level0_interleaved = false;        // level 0 ran during the leaf pass
+  int level0_restarts = 0;                // builds started again without interleaving
+  std::uint64_t max_block_samples = 0;    // largest window held in memory
+  int exact_levels = 0;                   // upper levels decimated with exact bounds
+  std::uint64_t samples_rescanned = 0;    // samples re-read for them
+  std::uint64_t samples_scanned = 0;      // sample visits of exact bounds
+  std::uint64_t plans = 0;                // removals planned (evaluated)
+  std::uint64_t temp_bytes = 0;           // written to the scratch file
   // Seconds: survey pass, leaf windows read, leaf greedy TINs, the Delaunay repair, level 0,
   // upper levels (with their reads), assembling the CRMR.
   // Leaf reads are wall time on the reading thread; greedy is summed over the workers (thread

@@ -78,13 +78,14 @@ TEST_P(PerDataset, InvariantsHoldWithSeveralLevels) {
   std::printf(
       "%s: %dx%d, %llu leaf blocks, %d levels, M^m %llu vertices, R^0 %llu, %llu ops, "
       "%llu rounds, DAG height %llu, non-Delaunay holes %llu, border flips %llu, insertions "
-      "%llu\n",
+      "%llu, level 0 interleaved %d, restarts %d\n",
       name().c_str(), d.dem.width, d.dem.height, (unsigned long long)b.stats.leaf_blocks,
       b.stats.levels, (unsigned long long)b.stats.finest_vertices,
       (unsigned long long)b.stats.base_vertices, (unsigned long long)b.stats.removals,
       (unsigned long long)b.stats.rounds, (unsigned long long)b.stats.dag_height,
       (unsigned long long)b.stats.non_delaunay_holes, (unsigned long long)b.stats.delaunay_flips,
-      (unsigned long long)b.stats.delaunay_insertions);
+      (unsigned long long)b.stats.delaunay_insertions, int(b.stats.level0_interleaved),
+      b.stats.level0_restarts);
 }
 
 TEST_P(PerDataset, FinestMeshIsDelaunayAcrossBlockBorders) {
@@ -199,6 +200,29 @@ TEST_P(PerDataset, BuildIsDeterministic) {
       ASSERT_TRUE(again.ops[i] == first.ops[i]) << "op " << i << " differs";
     }
   }
+}
+
+TEST_P(PerDataset, PlainLevel0OrderMeetsTheSameInvariants) {
+  // Level 0 after every leaf and the whole Delaunay repair: the order the build falls back to
+  // when an interleaved repair reaches a block already handed out (no dataset here does; the
+  // default build above is interleaved).
+  if (std::get<1>(GetParam())) GTEST_SKIP() << "level 0 is exact in both configurations";
+  const test::Dataset& d = data();
+  EXPECT_TRUE(build().stats.level0_interleaved);
+  EXPECT_EQ(build().stats.level0_restarts, 0);
+  BlockTinOptions opt = options(d, false);
+  opt.interleave_level0 = false;
+  BlockTinStats stats;
+  const Crmr m = build_block_tin(HeightfieldWindows(d.dem), opt, &stats);
+  EXPECT_FALSE(stats.level0_interleaved);
+  const InvariantReport r = check_crmr(m);
+  EXPECT_TRUE(r.ok()) << r.summary();
+  EXPECT_LE(m.header.err_final, d.max_error);
+  const auto fin = test::finest_mesh(m);
+  EXPECT_EQ(check_delaunay(m, fin).non_delaunay_edges, 0u);
+  const test::OracleResult bound = test::check_error_bound(m, fin, d.dem);
+  EXPECT_TRUE(bound.ok()) << bound.first_failure;
+  EXPECT_GT(stats.delaunay_flips, 0u);
 }
 
 INSTANTIATE_TEST_SUITE_P(Dems, PerDataset,
