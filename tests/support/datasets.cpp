@@ -7,11 +7,15 @@
 #include "smr/build/greedy_tin.h"
 #include "smr/io/dem_reader.h"
 #include "smr/io/synthetic.h"
+#include "tests/support/sanitized.h"
 #include "tests/support/test_data.h"
 
 namespace smr::test {
 
 std::vector<std::string> dataset_names() {
+  // jacksboro (403 x 344) and fbm257, the largest, were 30 % of the sanitizer run's time; the
+  // other real DEMs (topobathy, elev with its no-data) and fbm129 cover the same code there.
+  if (kSanitized) return {"topobathy", "elev", "fbm129"};
   return {"jacksboro", "topobathy", "elev", "fbm129", "fbm257"};
 }
 
