@@ -68,8 +68,9 @@ struct BlockTinOptions {
   /// costs 5 bytes a sample, and its copy) and sets the reader's block cache to an 8th, which
   /// is emptied once the leaf blocks are read.
   std::uint64_t memory_bytes = 0;
-  /// Directory of the scratch file holding the samples for the upper levels' re-reads (empty =
-  /// the system's temporary directory). Checked for room before any work.
+  /// Directory of the scratch file holding the samples for the later passes' re-reads (the
+  /// Delaunay repair, level 0, the exact upper levels; empty = the system's temporary directory).
+  /// Checked for room before any work.
   std::string tmp_dir;
   /// Threads building and decimating blocks (0 = one per core). The output does not depend on
   /// it: blocks are read and merged in order, only their greedy TINs and decimation run in
@@ -107,7 +108,8 @@ struct BlockTinStats {
   // Seconds: survey pass, leaf windows read, leaf greedy TINs, the Delaunay repair, level 0,
   // upper levels (with their reads), assembling the CRMR.
   // Leaf reads are wall time on the reading thread; greedy is summed over the workers (thread
-  // time); seconds_leaves is the wall time of the whole leaf pass; the others are wall time.
+  // time); seconds_leaves is the wall time of the whole leaf pass, which includes the repair and
+  // level 0 when level0_interleaved (their own figures are then 0); the others are wall time.
   double seconds_survey = 0, seconds_read = 0, seconds_greedy = 0, seconds_delaunay = 0,
          seconds_level0 = 0, seconds_leaves = 0, seconds_upper = 0, seconds_assemble = 0;
 };
