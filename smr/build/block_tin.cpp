@@ -179,8 +179,11 @@ class SampleSpill {
   /// Stores tile (tx, ty) from window w, whose sample (0, 0) is grid (c0, r0).
   void put(int tx, int ty, const Heightfield& w, int c0, int r0) {
     const auto [cw, rh] = extent(tx, ty);
-    std::vector<float> z(static_cast<std::size_t>(cw) * static_cast<std::size_t>(rh));
-    std::vector<std::uint8_t> v(z.size(), 1);
+    // Buffers kept across tiles (one caller, the reading thread): no fresh pages per tile.
+    std::vector<float>& z = put_z_;
+    std::vector<std::uint8_t>& v = put_v_;
+    z.resize(static_cast<std::size_t>(cw) * static_cast<std::size_t>(rh));
+    v.assign(z.size(), 1);
     for (int r = 0; r < rh; ++r) {
       const std::size_t from = w.index(tx * B_ - c0, ty * B_ - r0 + r);
       const std::size_t to = std::size_t(r) * std::size_t(cw);
@@ -309,6 +312,8 @@ class SampleSpill {
   int W_, H_, B_, nx_, ny_;
   std::uint64_t stride_;
   std::vector<std::uint8_t> stored_;  // tile -> put yet
+  std::vector<float> put_z_;          // put's buffers
+  std::vector<std::uint8_t> put_v_;
   storage::TempFile file_;
 };
 
