@@ -215,7 +215,20 @@ class SampleSpill {
   /// only the window's bytes are read.
   Heightfield read(int col0, int row0, int w, int h, const RasterWindows& source,
                    Cache* cache = nullptr) const {
-    Heightfield out = window_header(source.georef(), source.source(), col0, row0, w, h);
+    Heightfield out;
+    read_into(out, col0, row0, w, h, source, cache);
+    return out;
+  }
+
+  /// The same into `out`, reusing its buffers (a thread's windows one after another fault in no
+  /// fresh pages; every sample is written).
+  void read_into(Heightfield& out, int col0, int row0, int w, int h, const RasterWindows& source,
+                 Cache* cache = nullptr) const {
+    std::vector<float> zbuf = std::move(out.z);
+    std::vector<std::uint8_t> vbuf = std::move(out.valid);
+    out = window_header(source.georef(), source.source(), col0, row0, w, h);
+    out.z = std::move(zbuf);
+    out.valid = std::move(vbuf);
     out.z.resize(std::size_t(w) * std::size_t(h));
     out.valid.resize(out.z.size());
     const int tx0 = tile_of(col0, nx_), tx1 = tile_of(std::max(col0, col0 + w - 2), nx_);
@@ -275,7 +288,6 @@ class SampleSpill {
     const bool any_invalid =
         std::find(out.valid.begin(), out.valid.end(), std::uint8_t{0}) != out.valid.end();
     if (!any_invalid) out.valid.clear();
-    return out;
   }
   std::uint64_t bytes() const { return file_.bytes_written(); }
 
@@ -1503,7 +1515,8 @@ class Builder {
 
   /// A copied block's decimation (a worker thread), exact bounds from its window.
   void decimate_block(UpperBlock& block) const {
-    const Heightfield w = spill_->read(block.c0, block.r0, block.w, block.h, dem_);
+    thread_local Heightfield w;  // this worker's last window's buffers, reused
+    spill_->read_into(w, block.c0, block.r0, block.w, block.h, dem_);
     block.builder->decimate_level(block.level, &w, block.c0, block.r0, &block.cand);
   }
 
