@@ -242,10 +242,23 @@ class SampleSpill {
         const int r_hi = ty == ty1 ? row0 + h : std::min(row0 + h, ty * B_ + B_);
         const std::size_t n = std::size_t(c_hi - c_lo);
         const std::size_t rows = std::size_t(r_hi - r_lo);
-        if (stored_[std::size_t(ty) * std::size_t(nx_) + std::size_t(tx)] == 0) {
+        if (!stored(tx, ty)) {
           for (std::size_t r = 0; r < rows; ++r) {
             const std::size_t o = out.index(c_lo - col0, r_lo - row0 + int(r));
             std::fill_n(out.valid.begin() + std::ptrdiff_t(o), n, std::uint8_t{0});
+          }
+          // Its first column and row are also the closing ones of the tiles before it: take them
+          // from there (a corner of the blocks read so far, whichever tile the window's range
+          // gave it to).
+          for (int r = r_lo; r < r_hi; ++r) {
+            for (int c = c_lo; c < c_hi; ++c) {
+              if (c != tx * B_ && r != ty * B_) continue;
+              const int sx = c == tx * B_ && tx > 0 ? tx - 1 : tx;
+              const int sy = r == ty * B_ && ty > 0 ? ty - 1 : ty;
+              if ((sx == tx && sy == ty) || !stored(sx, sy)) continue;
+              const std::size_t o = out.index(c - col0, r - row0);
+              sample(sx, sy, c, r, cache, out.z[o], out.valid[o]);
+            }
           }
           continue;
         }
@@ -292,6 +305,25 @@ class SampleSpill {
   std::uint64_t bytes() const { return file_.bytes_written(); }
 
  private:
+  bool stored(int tx, int ty) const {
+    return stored_[std::size_t(ty) * std::size_t(nx_) + std::size_t(tx)] != 0;
+  }
+
+  /// Sample (c, r) of stored tile (tx, ty), which holds it.
+  void sample(int tx, int ty, int c, int r, Cache* cache, float& z, std::uint8_t& v) const {
+    const std::size_t i =
+        std::size_t(r - ty * B_) * std::size_t(extent(tx, ty).first) + std::size_t(c - tx * B_);
+    if (cache != nullptr) {
+      const Cache::Tile& tile = cached(*cache, tx, ty);
+      z = tile.z[i];
+      v = tile.v[i];
+      return;
+    }
+    const std::uint64_t at = offset(tx, ty);
+    file_.read(at + i * sizeof(float), &z, sizeof z);
+    file_.read(at + stride_ * sizeof(float) + i, &v, 1);
+  }
+
   const Cache::Tile& cached(Cache& cache, int tx, int ty) const {
     for (const auto& t : cache.tiles) {
       if (t.tx == tx && t.ty == ty) return t;
@@ -744,6 +776,7 @@ class Builder {
           report(0.7 * double(std::min(k + 1, n)) / double(n));
         });
     leaf_vertices_ = {};
+    window_buffer() = Heightfield{};
     level0_done_ = interleave;
     stats_.level0_interleaved = interleave;
   }
@@ -1495,6 +1528,7 @@ class Builder {
         },
         [&](UpperBlock& block) { decimate_block(block); },
         [&](UpperBlock& block, std::size_t) { merge_block(block); });
+    window_buffer() = Heightfield{};
   }
 
   /// The block of `level` whose window starts at grid (c0, r0), copied out: `tris` and the
@@ -1515,9 +1549,16 @@ class Builder {
 
   /// A copied block's decimation (a worker thread), exact bounds from its window.
   void decimate_block(UpperBlock& block) const {
-    thread_local Heightfield w;  // this worker's last window's buffers, reused
+    Heightfield& w = window_buffer();
     spill_->read_into(w, block.c0, block.r0, block.w, block.h, dem_);
     block.builder->decimate_level(block.level, &w, block.c0, block.r0, &block.cand);
+  }
+
+  /// This thread's last block window, whose buffers the next one reuses. A worker's goes with its
+  /// thread; the calling thread's (it works inline with one thread) is freed after each pass.
+  static Heightfield& window_buffer() {
+    thread_local Heightfield w;
+    return w;
   }
 
   /// A block of an exact upper level copied out of the whole mesh for a worker: its live
