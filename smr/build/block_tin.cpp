@@ -700,9 +700,9 @@ class Builder {
         open_edges_[edge_key(a, b)] = (t << 2) | e;
       }
     });
-    if (glued != nullptr)
+    if (glued != nullptr)  // last first: repair pops them in triangle order
       std::sort(glued->begin(), glued->end(), [](const EdgeTask& x, const EdgeTask& y) {
-        return std::tie(x.t, x.a, x.b) < std::tie(y.t, y.a, y.b);
+        return std::tie(x.t, x.a, x.b) > std::tie(y.t, y.a, y.b);
       });
     err_final_ = std::max(err_final_, leaf.err_final_);
     finest_triangles_ += leaf.finest_triangles_;
@@ -762,10 +762,7 @@ class Builder {
           if (item.builder) {
             std::vector<EdgeTask> glued;
             merge_leaf(*item.builder, interleave ? &glued : nullptr, k);
-            if (interleave) {
-              std::reverse(glued.begin(), glued.end());
-              repair(glued);
-            }
+            if (interleave) repair(glued);
           }
           if (item.block) merge_block(*item.block);
           if (interleave) {
@@ -1447,10 +1444,7 @@ class Builder {
           const std::uint32_t o = it->second;
           tris_[t].nbr[k] = o;
           if (o != kNone) {
-            MTri& om = tris_[o];
-            for (int j = 0; j < 3; ++j) {
-              if (om.v[j] == b && om.v[(j + 1) % 3] == a) om.nbr[j] = t;
-            }
+            relink(o, b, a, t);
           } else if (!boundary_edge(verts_[a], verts_[b])) {
             open_edges_[edge_key(a, b)] = (t << 2) | std::uint32_t(k);
           }
@@ -1672,10 +1666,7 @@ class Builder {
       const MTri& s = tris_[*owner];
       const std::uint32_t o = s.nbr[index_of(s, a)];
       tris_[t].nbr[e] = o;
-      MTri& om = tris_[o];
-      for (int j = 0; j < 3; ++j) {
-        if (om.v[j] == c && om.v[(j + 1) % 3] == a) om.nbr[j] = t;
-      }
+      relink(o, c, a, t);
     });
     for (std::size_t v = 0; v < b.verts_.size(); ++v) {
       if (b.verts_[v].tri != u.first_tri[v]) verts_[u.gverts[v]].tri = tri(b.verts_[v].tri);
