@@ -12,6 +12,10 @@
 
 namespace smr::storage {
 
+std::string scratch_dir(const std::string& dir) {
+  return dir.empty() ? std::filesystem::temp_directory_path().string() : dir;
+}
+
 TempFile::TempFile(const std::string& dir, std::uint64_t expected_bytes) : dir_(dir) {
   std::error_code ec;
   if (!std::filesystem::is_directory(dir, ec)) {

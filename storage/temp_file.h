@@ -9,6 +9,9 @@
 
 namespace smr::storage {
 
+/// `dir`, or the system's temporary directory when `dir` is empty.
+std::string scratch_dir(const std::string& dir);
+
 class TempFile {
  public:
   /// Creates the file in `dir`. Throws smr::Error (kInvalidInput) naming `dir` when it does not

@@ -407,8 +407,7 @@ class Builder {
     // The samples' scratch copy serves the Delaunay repair of M^m, level 0 (always exact) and
     // the exact upper levels.
     {
-      const std::string dir =
-          opt_.tmp_dir.empty() ? std::filesystem::temp_directory_path().string() : opt_.tmp_dir;
+      const std::string dir = storage::scratch_dir(opt_.tmp_dir);
       spill_ = std::make_unique<SampleSpill>(dir, W_, H_, B_, bw_, bh_);
     }
     if (opt_.max_error == 0.0) {

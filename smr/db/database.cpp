@@ -440,8 +440,7 @@ struct DatabaseStreamWriter::State {
 DatabaseStreamWriter::DatabaseStreamWriter(const std::string& path, const WriteOptions& options,
                                            const std::string& tmp_dir)
     : s_(std::make_unique<State>(path, options, tmp_dir)) {
-  const std::string dir =
-      tmp_dir.empty() ? std::filesystem::temp_directory_path().string() : tmp_dir;
+  const std::string dir = storage::scratch_dir(tmp_dir);
   s_->spool = std::make_unique<storage::TempFile>(dir, 0);
 }
 
