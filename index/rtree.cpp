@@ -121,9 +121,91 @@ std::uint64_t Plan::node_count() const {
   return n;
 }
 
-Plan plan(std::vector<Entry> entries, const BuildOptions& options) {
+EntryOrder::EntryOrder(const BuildOptions& options)
+    : options_(options), present_(kMaxClass + 1, false), reversed_(kMaxClass + 1, false) {
   check_options(options);
-  for (const Entry& e : entries) check_entry(e);
+  const int bands = static_cast<int>(options.bands_per_octave);
+  thresholds_.resize(kMaxBandsPerOctave + 1);
+  for (int j = 0; j <= bands; ++j) {
+    thresholds_[static_cast<std::size_t>(j)] = std::exp2(1.0 - static_cast<double>(j) / bands);
+  }
+}
+
+void EntryOrder::observe(const Entry& e) {
+  check_entry(e);
+  if (side_ >= 0) throw_internal("R-tree order: observe() after key()");
+  world_.add(e.roi);
+  // A size class needs the cube's side: presence is taken at the first key() for those.
+  if (options_.order == BuildOptions::Order::kResolutionBands) {
+    present_[static_cast<std::size_t>(class_of(e))] = true;
+  }
+}
+
+int EntryOrder::class_of(const Entry& e) const {
+  switch (options_.order) {
+    case BuildOptions::Order::kResolutionBands: {
+      std::array<double, kMaxBandsPerOctave + 1> t{};
+      std::copy(thresholds_.begin(), thresholds_.end(), t.begin());
+      return resolution_band(e.res, t, static_cast<int>(options_.bands_per_octave));
+    }
+    case BuildOptions::Order::kSizeClasses:
+      return size_class(e.box, side_, options_.order_dims);
+    case BuildOptions::Order::kSpatial:
+      break;
+  }
+  return 0;
+}
+
+OrderKey EntryOrder::key(const Entry& e) const {
+  const int dims = options_.order_dims;
+  if (side_ < 0) {
+    side_ = 0;
+    for (int a = 0; a < dims; ++a) side_ = std::max(side_, world_.hi[a] - world_.lo[a]);
+    // Serpentine: the rank of a class among the classes present decides its direction.
+    std::vector<bool> present = present_;
+    if (options_.order == BuildOptions::Order::kSizeClasses) {
+      // Every class from 0 to the finest is taken as present: the order of a class must not
+      // depend on the entries of other classes, which a single pass cannot see.
+      std::fill(present.begin(), present.end(), true);
+    } else if (options_.order == BuildOptions::Order::kSpatial) {
+      present[0] = true;
+    }
+    for (int c = 0, rank = 0; c <= kMaxClass; ++c) {
+      if (present[static_cast<std::size_t>(c)]) reversed_[static_cast<std::size_t>(c)] = rank++ % 2;
+    }
+  }
+  const int cls = class_of(e);
+  const int bits = hilbert_bits(dims);
+  const double cells = std::ldexp(1.0, bits);
+  const auto max_cell = static_cast<std::uint32_t>((std::uint64_t{1} << bits) - 1);
+  std::array<std::uint32_t, 3> cell{};
+  for (int a = 0; a < dims; ++a) {
+    if (!(side_ > 0)) break;
+    const double centre = e.box.lo[a] / 2 + e.box.hi[a] / 2;
+    const double t = std::floor((centre - world_.lo[a]) / side_ * cells);
+    cell[a] = t <= 0 ? 0 : (t >= max_cell ? max_cell : static_cast<std::uint32_t>(t));
+  }
+  std::uint64_t curve = hilbert_index(cell, dims);
+  if (reversed_[static_cast<std::size_t>(cls)]) curve = ~curve;
+  return {cls, curve, e.id};
+}
+
+bool LeafPacker::starts_leaf(std::uint32_t weight) {
+  const bool start = !any_ || (entries_ > 0 && (weight_ + weight > options_.leaf_weight ||
+                                                entries_ >= options_.max_leaf_entries));
+  if (start) {
+    weight_ = 0;
+    entries_ = 0;
+  }
+  any_ = true;
+  weight_ += weight;
+  ++entries_;
+  return start;
+}
+
+Plan plan(std::vector<Entry> entries, const BuildOptions& options) {
+  EntryOrder order(options);
+  for (const Entry& e : entries) order.observe(e);
   {
     std::vector<std::uint64_t> ids(entries.size());
     for (std::size_t i = 0; i < entries.size(); ++i) ids[i] = entries[i].id;
@@ -131,86 +213,91 @@ Plan plan(std::vector<Entry> entries, const BuildOptions& options) {
     const auto dup = std::adjacent_find(ids.begin(), ids.end());
     if (dup != ids.end()) throw_input("R-tree: duplicate entry id " + std::to_string(*dup));
   }
-  const int dims = options.order_dims;
-
-  Box world;
-  for (const Entry& e : entries) world.add(e.roi);
-  double side = 0;  // the ordering cube's side
-  for (int a = 0; a < dims; ++a) side = std::max(side, world.hi[a] - world.lo[a]);
-
-  const int bands = static_cast<int>(options.bands_per_octave);
-  std::array<double, kMaxBandsPerOctave + 1> thresholds{};
-  for (int j = 0; j <= bands; ++j) {
-    thresholds[static_cast<std::size_t>(j)] = std::exp2(1.0 - static_cast<double>(j) / bands);
-  }
-  std::vector<int> classes(entries.size(), 0);
-  for (std::size_t i = 0; i < entries.size(); ++i) {
-    switch (options.order) {
-      case BuildOptions::Order::kResolutionBands:
-        classes[i] = resolution_band(entries[i].res, thresholds, bands);
-        break;
-      case BuildOptions::Order::kSizeClasses:
-        classes[i] = size_class(entries[i].box, side, dims);
-        break;
-      case BuildOptions::Order::kSpatial:
-        break;
-    }
-  }
-  // Serpentine: the rank of a class among the classes present decides its direction.
-  std::vector<bool> present(kMaxClass + 1, false);
-  for (int c : classes) present[static_cast<std::size_t>(c)] = true;
-  std::vector<bool> reversed(kMaxClass + 1, false);
-  for (int c = 0, rank = 0; c <= kMaxClass; ++c) {
-    if (present[static_cast<std::size_t>(c)]) reversed[static_cast<std::size_t>(c)] = rank++ % 2;
-  }
-
-  const int bits = hilbert_bits(dims);
-  const double cells = std::ldexp(1.0, bits);
-  const auto max_cell = static_cast<std::uint32_t>((std::uint64_t{1} << bits) - 1);
-  struct Key {
-    int cls;
-    std::uint64_t curve;
-    std::uint64_t id;
-    std::size_t index;
-  };
-  std::vector<Key> keys(entries.size());
-  for (std::size_t i = 0; i < entries.size(); ++i) {
-    const Entry& e = entries[i];
-    std::array<std::uint32_t, 3> cell{};
-    for (int a = 0; a < dims; ++a) {
-      if (!(side > 0)) break;
-      const double centre = e.box.lo[a] / 2 + e.box.hi[a] / 2;
-      const double t = std::floor((centre - world.lo[a]) / side * cells);
-      cell[a] = t <= 0 ? 0 : (t >= max_cell ? max_cell : static_cast<std::uint32_t>(t));
-    }
-    std::uint64_t curve = hilbert_index(cell, dims);
-    if (reversed[static_cast<std::size_t>(classes[i])]) curve = ~curve;
-    keys[i] = {classes[i], curve, e.id, i};
-  }
-  std::sort(keys.begin(), keys.end(), [](const Key& x, const Key& y) {
-    return std::tie(x.cls, x.curve, x.id) < std::tie(y.cls, y.curve, y.id);
-  });
+  std::vector<std::pair<OrderKey, std::size_t>> keys(entries.size());
+  for (std::size_t i = 0; i < entries.size(); ++i) keys[i] = {order.key(entries[i]), i};
+  std::sort(keys.begin(), keys.end());
   Plan p;
-  std::uint64_t weight = 0;
-  for (const Key& k : keys) {
-    const Entry& e = entries[k.index];
-    if (!p.leaves.empty() && !p.leaves.back().empty() &&
-        (weight + e.weight > options.leaf_weight ||
-         p.leaves.back().size() >= options.max_leaf_entries)) {
-      p.leaf_weights.push_back(weight);
+  LeafPacker packer(options);
+  for (const auto& [key, index] : keys) {
+    const Entry& e = entries[index];
+    const std::uint64_t before = packer.weight();
+    if (packer.starts_leaf(e.weight)) {
+      if (!p.leaves.empty()) p.leaf_weights.push_back(before);
       p.leaves.emplace_back();
-      weight = 0;
     }
-    if (p.leaves.empty()) p.leaves.emplace_back();
     p.leaves.back().push_back(e.id);
-    weight += e.weight;
   }
-  if (!p.leaves.empty()) p.leaf_weights.push_back(weight);
+  if (!p.leaves.empty()) p.leaf_weights.push_back(packer.weight());
   if (p.leaves.size() > std::numeric_limits<std::uint32_t>::max()) {
     throw_input("R-tree: more than 2^32 leaves");
   }
   p.level_sizes = level_sizes_for(p.leaves.size(), options.fanout);
   return p;
+}
+
+TreeWriter::TreeWriter(const BuildOptions& options,
+                       std::function<void(std::uint64_t node_id, ByteView node)> put)
+    : options_(options), put_(std::move(put)) {
+  check_options(options);
+}
+
+Summary TreeWriter::emit(const detail::Node& node) {
+  payload_.clear();
+  const detail::Node stored = detail::encode_node(node, payload_);
+  sealed_.clear();
+  storage::seal_into(payload_, sealed_);
+  put_(node_id_++, sealed_);
+  return summarize(stored);
+}
+
+void TreeWriter::add_leaf(std::span<const Entry> leaf) {
+  if (leaf.empty()) throw_internal("R-tree write: an empty leaf");
+  if (leaves_.size() >= std::numeric_limits<std::uint32_t>::max()) {
+    throw_input("R-tree: more than 2^32 leaves");
+  }
+  detail::Node node;
+  node.items.reserve(leaf.size());
+  for (const Entry& e : leaf) {
+    check_entry(e);
+    node.items.push_back({e.roi, e.box, e.res, e.id});
+  }
+  entries_ += leaf.size();
+  leaves_.push_back(emit(node));
+}
+
+Bytes TreeWriter::finish() {
+  const std::vector<std::uint64_t> level_sizes = level_sizes_for(leaves_.size(), options_.fanout);
+  std::vector<Summary> level = std::move(leaves_);
+  for (std::uint64_t lvl = 1; lvl < level_sizes.size(); ++lvl) {
+    const std::uint64_t first_of_level_below = node_id_ - level.size();
+    std::vector<Summary> above;
+    for (std::size_t g = 0; g < level.size(); g += options_.fanout) {
+      detail::Node node;
+      node.level = lvl;
+      node.first_child = first_of_level_below + g;
+      const std::size_t end = std::min(level.size(), g + options_.fanout);
+      for (std::size_t c = g; c < end; ++c) node.items.push_back(as_item(level[c]));
+      above.push_back(emit(node));
+    }
+    level = std::move(above);
+  }
+
+  Bytes header;
+  storage::ByteWriter w(header);
+  w.u32(kHeaderMagic);
+  w.varint(kFormatVersion);
+  w.varint(entries_);
+  w.varint(level_sizes.size());
+  for (std::uint64_t s : level_sizes) w.varint(s);
+  if (!level.empty()) {
+    const Summary& root = level.front();
+    for (int a = 0; a < 3; ++a) w.f64(root.roi.lo[a]);
+    for (int a = 0; a < 3; ++a) w.f64(root.roi.hi[a]);
+    for (int a = 0; a < 3; ++a) w.f64(root.box.lo[a]);
+    for (int a = 0; a < 3; ++a) w.f64(root.box.hi[a]);
+    w.f64(root.min_res);
+  }
+  return storage::seal(header);
 }
 
 Bytes write(const Plan& plan, std::span<const Entry> entries, const BuildOptions& options,
@@ -243,59 +330,14 @@ Bytes write(const Plan& plan, std::span<const Entry> entries, const BuildOptions
   }
   if (total != entries.size()) throw_internal("R-tree write: the plan does not hold every entry");
 
-  std::uint64_t node_id = 0;
-  Bytes payload;
-  Bytes sealed;
-  auto emit = [&](const detail::Node& node) {
-    payload.clear();
-    detail::Node stored = detail::encode_node(node, payload);
-    sealed.clear();
-    storage::seal_into(payload, sealed);
-    put(node_id++, sealed);
-    return summarize(stored);
-  };
-
-  std::vector<Summary> level;  // summaries of the level just written
-  level.reserve(plan.leaves.size());
+  TreeWriter writer(options, put);
+  std::vector<Entry> leaf_entries;
   for (const auto& leaf : plan.leaves) {
-    detail::Node node;
-    node.items.reserve(leaf.size());
-    for (std::uint64_t id : leaf) {
-      const Entry& e = entries[where.at(id)];
-      node.items.push_back({e.roi, e.box, e.res, e.id});
-    }
-    level.push_back(emit(node));
+    leaf_entries.clear();
+    for (std::uint64_t id : leaf) leaf_entries.push_back(entries[where.at(id)]);
+    writer.add_leaf(leaf_entries);
   }
-  for (std::uint64_t lvl = 1; lvl < plan.level_sizes.size(); ++lvl) {
-    const std::uint64_t first_of_level_below = node_id - level.size();
-    std::vector<Summary> above;
-    for (std::size_t g = 0; g < level.size(); g += options.fanout) {
-      detail::Node node;
-      node.level = lvl;
-      node.first_child = first_of_level_below + g;
-      const std::size_t end = std::min(level.size(), g + options.fanout);
-      for (std::size_t c = g; c < end; ++c) node.items.push_back(as_item(level[c]));
-      above.push_back(emit(node));
-    }
-    level = std::move(above);
-  }
-
-  Bytes header;
-  storage::ByteWriter w(header);
-  w.u32(kHeaderMagic);
-  w.varint(kFormatVersion);
-  w.varint(entries.size());
-  w.varint(plan.level_sizes.size());
-  for (std::uint64_t s : plan.level_sizes) w.varint(s);
-  if (!level.empty()) {
-    const Summary& root = level.front();
-    for (int a = 0; a < 3; ++a) w.f64(root.roi.lo[a]);
-    for (int a = 0; a < 3; ++a) w.f64(root.roi.hi[a]);
-    for (int a = 0; a < 3; ++a) w.f64(root.box.lo[a]);
-    for (int a = 0; a < 3; ++a) w.f64(root.box.hi[a]);
-    w.f64(root.min_res);
-  }
-  return storage::seal(header);
+  return writer.finish();
 }
 
 struct RTree::Node : detail::Node {};

@@ -60,6 +60,10 @@
 
 namespace smr::index {
 
+namespace detail {
+struct Node;
+}
+
 using storage::Bytes;
 using storage::ByteView;
 
@@ -104,6 +108,67 @@ struct Plan {
   std::vector<std::uint64_t> leaf_weights;         // total weight of each leaf
   std::vector<std::uint64_t> level_sizes;  // nodes per level, leaves first; empty when no entries
   std::uint64_t node_count() const;
+};
+
+// The order of the header comment, one entry at a time, for entries that do not fit in memory:
+// observe() every entry first (the ordering cube is around all ROIs; serpentine needs the classes
+// present), then key() gives each entry's place; entries sorted by key are in leaf order.
+struct OrderKey {
+  int cls = 0;
+  std::uint64_t curve = 0;
+  std::uint64_t id = 0;
+  friend auto operator<=>(const OrderKey&, const OrderKey&) = default;
+};
+class EntryOrder {
+ public:
+  // Throws kInvalidInput on options out of range.
+  explicit EntryOrder(const BuildOptions& options);
+  // Throws kInvalidInput on an empty or non-finite box, a roi not containing its box, a NaN res.
+  void observe(const Entry& e);
+  OrderKey key(const Entry& e) const;  // after every observe()
+
+ private:
+  int class_of(const Entry& e) const;
+  BuildOptions options_;
+  Box world_;
+  mutable double side_ = -1;  // fixed by the first key()
+  std::vector<double> thresholds_;
+  std::vector<bool> present_;
+  mutable std::vector<bool> reversed_;
+};
+
+// Cuts entries, in leaf order, into leaves of at most leaf_weight bytes and max_leaf_entries.
+class LeafPacker {
+ public:
+  explicit LeafPacker(const BuildOptions& options) : options_(options) {}
+  // True when an entry of `weight` starts a new leaf (the first entry always does); counts it.
+  bool starts_leaf(std::uint32_t weight);
+  std::uint64_t weight() const { return weight_; }  // of the current leaf, with the entry
+
+ private:
+  BuildOptions options_;
+  std::uint64_t weight_ = 0, entries_ = 0;
+  bool any_ = false;
+};
+
+// Serialises a tree leaf by leaf, in order, then its internal levels from the leaves' summaries
+// (held in memory: a few dozen bytes a leaf). Nodes go to `put` as in write().
+class TreeWriter {
+ public:
+  TreeWriter(const BuildOptions& options,
+             std::function<void(std::uint64_t node_id, ByteView node)> put);
+  // Throws kInvalidInput on an entry check_entry rejects, kInternal on an empty leaf.
+  void add_leaf(std::span<const Entry> leaf);
+  // Writes the internal levels; returns the sealed header (as write()).
+  Bytes finish();
+
+ private:
+  Summary emit(const detail::Node& node);
+  BuildOptions options_;
+  std::function<void(std::uint64_t, ByteView)> put_;
+  std::vector<Summary> leaves_;
+  std::uint64_t node_id_ = 0, entries_ = 0;
+  Bytes payload_, sealed_;
 };
 
 // Orders and packs `entries` (see the header comment). Deterministic: the same set of entries in
