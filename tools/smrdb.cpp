@@ -505,7 +505,11 @@ nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
   opt.progress = [&](double f) { progress.update(0.8 * f); };
   smr::BlockTinStats st;
   smr::WriteOptions wo = write_options(a, progress);
-  if (opt.memory_bytes != 0) wo.batch_bytes = opt.memory_bytes / 16;
+  if (opt.memory_bytes != 0) {
+    wo.batch_bytes = opt.memory_bytes / 16;
+    // finish() runs once the builder has freed its records: its sorts take a quarter.
+    wo.memory_bytes = opt.memory_bytes / 4;
+  }
   smr::DatabaseStreamWriter writer(db_path, wo, a.tmp_dir);
   IngestTap tap(writer, std::filesystem::path(a.dem).filename().string());
   smr::build_block_tin(*dem, tap, opt, &st);
@@ -536,7 +540,7 @@ nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
                       {"samples_rescanned", st.samples_rescanned},
                       {"samples_scanned", st.samples_scanned},
                       {"plans", st.plans},
-                      {"temp_bytes", st.temp_bytes + w.spool_bytes},
+                      {"temp_bytes", st.temp_bytes + w.spool_bytes + w.scratch_bytes},
                       {"seconds",
                        {{"survey", st.seconds_survey},
                         {"read", st.seconds_read},

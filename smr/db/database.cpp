@@ -20,6 +20,7 @@
 #include "smr/db/page.h"
 #include "storage/checksum.h"
 #include "storage/error.h"
+#include "storage/external_sort.h"
 #include "storage/temp_file.h"
 
 namespace smr {
@@ -150,132 +151,153 @@ auto naming_file(const std::string& path, F&& f) -> decltype(f()) {
 }  // namespace
 
 // ------------------------------------------------------------------------------------ writing
+//
+// Both writers end in write_tables, which takes the ops' index records through external sorts
+// (storage/external_sort.h) under WriteOptions::memory_bytes: the R-tree order (index::EntryOrder)
+// and the locators' id order. The stream writer derives ROIs and subtree cones by a backward
+// sweep over its records on disk, children sending theirs to their parents through an
+// ExternalQueue (time-forward processing, Chiang et al. 1995). What stays in memory is the
+// budget, one summary per data page (the R-tree's upper levels) and a window of pages.
 
 namespace {
 
-// What the index and the meta record need of every op, in id order (~200 bytes an op): the
-// R-tree entry (ROI derived at the end), the op's normal cone (its subtree cone once derived),
-// its children, and counts. Both writers fill it from ops already snapped to the grid.
-struct IndexRecords {
-  std::vector<index::Entry> entries;
-  std::vector<NormalCone> cones;
-  std::vector<std::uint32_t> child_ids;  // children of op i: [child_begin[i], child_begin[i+1])
-  std::vector<std::uint64_t> child_begin{0};
-  std::vector<std::uint32_t> depth;  // longest parent chain from R^0 (parents have smaller ids)
-  std::uint32_t dag_depth = 0;
-  std::uint64_t triangles = 0;
-
-  void reserve(std::uint64_t ops) {
-    entries.reserve(ops);
-    cones.reserve(ops);
-    child_begin.reserve(ops + 1);
-    depth.reserve(ops);
-  }
-
-  // `derived`: the op's roi and subtree_cone are final already (a whole CRMR after quantize());
-  // otherwise they start as its own box and cone and derive() finishes them.
-  void add(const Op& op, bool derived) {
-    if (op.id.value != entries.size())
-      throw_internal("database writer: op " + std::to_string(op.id.value) +
-                     " arrived out of id order");
-    entries.push_back({op.id.value, to_index(derived ? op.roi : op.box), to_index(op.box),
-                       op.birth_res, estimated_bytes(op)});
-    cones.push_back(derived ? op.subtree_cone : op.cone);
-    if (!derived) {
-      for (OpId c : op.children) child_ids.push_back(static_cast<std::uint32_t>(c.value));
-      child_begin.push_back(child_ids.size());
-    }
-    std::uint32_t d = 0;
-    for (OpId p : op.parents) {
-      if (p.value < op.id.value) d = std::max(d, depth[p.value] + 1);  // always, in a valid CRMR
-    }
-    depth.push_back(d);
-    dag_depth = std::max(dag_depth, d);
-    triangles += op.fragment.size();
-  }
-
-  // ROI = own box united with the children's ROIs; subtree cone likewise (compute_rois' rule).
-  // Children have larger ids, so one backward pass finishes every child before its parents.
-  void derive() {
-    for (std::size_t i = entries.size(); i-- > 0;) {
-      NormalCone cone = cones[i];
-      for (std::uint64_t k = child_begin[i]; k < child_begin[i + 1]; ++k) {
-        const std::uint32_t c = child_ids[k];
-        if (c <= i || c >= entries.size())
-          throw_internal("database writer: op " + std::to_string(i) + " has a child out of order");
-        entries[i].roi.add(entries[c].roi);
-        cone = cone_union(cone, cones[c]);
-      }
-      cones[i] = canonical_cone(cone);
-    }
-    std::vector<std::uint32_t>().swap(child_ids);
-    std::vector<std::uint64_t>().swap(child_begin);
-  }
+// What the index and a data page need of an op; fixed size, so the sorts can spill it.
+struct OpEntry {
+  std::uint64_t id = 0;
+  index::Box roi, box;
+  double res = 0.0;
+  std::uint32_t weight = 0;      // estimated page bytes
+  std::uint32_t spool_size = 0;  // stream writer: the op's bytes in the spool
+  std::uint64_t spool_at = 0;    //                and where they start
+  NormalCone cone;               // the subtree cone once derived
+  index::Entry index_entry() const { return {id, roi, box, res, weight}; }
 };
 
-// Writes pages (in R-tree leaf order), locators, the R-tree and the meta record (last), then
-// commits. `op_of(id, held)` returns op `id` as the page must hold it (snapped, ROI, subtree cone,
-// error shifted), either one that outlives the call or one it appends to `held` (one per page,
-// with room reserved for the page's ops, so earlier pointers stay valid). It is called from
-// several threads at once.
+struct SortedEntry {
+  index::OrderKey key;
+  OpEntry entry;
+  bool operator<(const SortedEntry& o) const { return key < o.key; }
+};
+
+struct Locator {
+  std::uint64_t id = 0, page = 0;
+  std::uint32_t slot = 0;
+  bool operator<(const Locator& o) const { return id < o.id; }
+};
+
+using EntrySorter = storage::ExternalSorter<SortedEntry>;
+
+index::BuildOptions rtree_options(const CrmrInfo& header, const WriteOptions& options) {
+  index::BuildOptions bo;
+  bo.leaf_weight = options.page_bytes;
+  bo.fanout = options.rtree_fanout;
+  bo.order_dims = header.kind == ModelKind::kTerrain ? 2 : 3;
+  return bo;
+}
+
+// Shares of WriteOptions::memory_bytes: the entry sort holds half, the backward sweep's queue and
+// the locator sort (never alive together) a quarter each.
+std::uint64_t entry_sort_bytes(const WriteOptions& o) {
+  return o.memory_bytes / 2;
+}
+std::uint64_t side_sort_bytes(const WriteOptions& o) {
+  return o.memory_bytes / 4;
+}
+
+// Writes pages (in R-tree leaf order, with the R-tree's leaves), locators, the R-tree's upper
+// levels and the meta record (last), then commits. `sorted` holds every op's entry; `op_of(entry,
+// held)` returns the op as the page must hold it (snapped, ROI, subtree cone, error shifted),
+// either one that outlives the call or one it appends to `held` (one per page, with room reserved
+// for the page's ops, so earlier pointers stay valid). It is called from several threads at once.
+struct TableCounts {
+  std::uint64_t ops = 0, triangles = 0, dag_depth = 0;
+};
 WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header,
-                         const QuantGrid& grid, double z_shift, IndexRecords& records,
-                         const std::function<const Op*(std::uint64_t, std::vector<Op>&)>& op_of,
-                         const WriteOptions& options) {
+                         const QuantGrid& grid, double z_shift, EntrySorter& sorted,
+                         const TableCounts& counts,
+                         const std::function<const Op*(const OpEntry&, std::vector<Op>&)>& op_of,
+                         const WriteOptions& options, const std::string& tmp_dir) {
   auto progress = [&](double f) {
     if (options.progress) options.progress(f);
   };
   WriteReport report;
   report.grid = grid;
   report.z_shift = z_shift;
-  report.ops = records.entries.size();
-  index::BuildOptions bo;
-  bo.leaf_weight = options.page_bytes;
-  bo.fanout = options.rtree_fanout;
-  bo.order_dims = header.kind == ModelKind::kTerrain ? 2 : 3;
-  const index::Plan plan = index::plan(records.entries, bo);
-  report.pages = plan.leaves.size();
-
-  // Data pages, in leaf order; remember where each op went. Pages are encoded on every core, a
-  // window of them at a time, and appended in order.
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> where(report.ops, {~0ull, 0u});
-  const unsigned threads = thread_count(options.threads);
-  const std::size_t window = 8 * std::size_t(threads);
-  std::vector<Bytes> pages(window);
-  for (std::size_t first = 0; first < plan.leaves.size(); first += window) {
-    const std::size_t count = std::min(window, plan.leaves.size() - first);
-    parallel_for(count, threads, [&](std::size_t j) {
-      const std::uint64_t leaf = first + j;
-      std::vector<Op> held;
-      held.reserve(plan.leaves[leaf].size());
-      std::vector<const Op*> page_ops;
-      for (std::uint64_t id : plan.leaves[leaf]) {
-        where.at(id) = {leaf, std::uint32_t(page_ops.size())};
-        page_ops.push_back(op_of(id, held));
-      }
-      pages[j] = storage::seal(encode_page(page_ops, grid, options.codec));
-    });
-    for (std::size_t j = 0; j < count; ++j) {
-      report.page_bytes += pages[j].size();
-      writer.append(Table::kPages, first + j, pages[j]);
-    }
-    progress(0.9 * double(first + count) / double(plan.leaves.size()));
-  }
-  // Locators.
-  for (std::uint64_t block = 0; block * kOpsPerLocatorBlock < where.size(); ++block) {
-    const std::size_t begin = block * kOpsPerLocatorBlock;
-    const std::size_t end = std::min(where.size(), begin + kOpsPerLocatorBlock);
-    const Bytes sealed = storage::seal(encode_locators({where.data() + begin, end - begin}));
-    report.node_bytes += sealed.size();
-    writer.append(Table::kNodes, block, sealed);
-  }
-  // The R-tree, then its header.
-  const Bytes tree = index::write(plan, records.entries, bo, [&](std::uint64_t id, ByteView node) {
+  report.ops = counts.ops;
+  const index::BuildOptions bo = rtree_options(header, options);
+  index::TreeWriter tree(bo, [&](std::uint64_t id, ByteView node) {
     report.rtree_bytes += node.size();
     ++report.rtree_nodes;
     writer.append(Table::kRtree, id, node);
   });
-  writer.append(Table::kRtree, kRtreeHeaderKey, tree);
+  storage::ExternalSorter<Locator> locators(tmp_dir, side_sort_bytes(options));
+
+  // Leaves, a window of them at a time: their pages are encoded on every core and appended in
+  // order, with their R-tree leaves.
+  const unsigned threads = thread_count(options.threads);
+  const std::size_t window = 8 * std::size_t(threads);
+  std::vector<std::vector<OpEntry>> leaves;
+  std::vector<Bytes> pages(window);
+  std::vector<index::Entry> leaf_entries;
+  std::uint64_t placed = 0;
+  auto write_window = [&] {
+    parallel_for(leaves.size(), threads, [&](std::size_t j) {
+      std::vector<Op> held;
+      held.reserve(leaves[j].size());
+      std::vector<const Op*> page_ops;
+      for (const OpEntry& e : leaves[j]) page_ops.push_back(op_of(e, held));
+      pages[j] = storage::seal(encode_page(page_ops, grid, options.codec));
+    });
+    for (std::size_t j = 0; j < leaves.size(); ++j) {
+      const std::uint64_t page = report.pages++;
+      report.page_bytes += pages[j].size();
+      writer.append(Table::kPages, page, pages[j]);
+      leaf_entries.clear();
+      for (std::uint32_t slot = 0; slot < leaves[j].size(); ++slot) {
+        locators.add({leaves[j][slot].id, page, slot});
+        leaf_entries.push_back(leaves[j][slot].index_entry());
+      }
+      tree.add_leaf(leaf_entries);
+      placed += leaves[j].size();
+    }
+    leaves.clear();
+    progress(0.9 * double(placed) / double(std::max<std::uint64_t>(1, counts.ops)));
+  };
+  index::LeafPacker packer(bo);
+  SortedEntry s;
+  while (sorted.next(s)) {
+    if (packer.starts_leaf(s.entry.weight)) {
+      if (leaves.size() == window) write_window();
+      leaves.emplace_back();
+    }
+    leaves.back().push_back(s.entry);
+  }
+  write_window();
+  if (placed != counts.ops)
+    throw_internal("database writer: " + std::to_string(placed) + " ops reached the pages, not " +
+                   std::to_string(counts.ops));
+
+  // Locators, in id order: every id from 0 exactly once.
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> block;
+  std::uint64_t expected = 0;
+  auto write_block = [&] {
+    const Bytes sealed = storage::seal(encode_locators(block));
+    report.node_bytes += sealed.size();
+    writer.append(Table::kNodes, (expected - 1) / kOpsPerLocatorBlock, sealed);
+    block.clear();
+  };
+  Locator loc;
+  while (locators.next(loc)) {
+    if (loc.id != expected)
+      throw_internal("database writer: op " + std::to_string(expected) +
+                     (loc.id < expected ? " is placed twice" : " is missing"));
+    block.push_back({loc.page, loc.slot});
+    ++expected;
+    if (block.size() == kOpsPerLocatorBlock) write_block();
+  }
+  if (!block.empty()) write_block();
+  // The R-tree's upper levels, then its header.
+  writer.append(Table::kRtree, kRtreeHeaderKey, tree.finish());
   progress(0.95);
 
   json meta = {
@@ -288,10 +310,10 @@ WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header
       {"z_shift", z_shift},
       {"counts",
        {{"ops", report.ops},
-        {"triangles", records.triangles},
-        {"pages", plan.leaves.size()},
+        {"triangles", counts.triangles},
+        {"pages", report.pages},
         {"rtree_nodes", report.rtree_nodes},
-        {"dag_depth", records.dag_depth}}},
+        {"dag_depth", counts.dag_depth}}},
       {"bytes",
        {{"pages", report.page_bytes}, {"nodes", report.node_bytes}, {"rtree", report.rtree_bytes}}},
       {"page_bytes_target", options.page_bytes},
@@ -300,10 +322,22 @@ WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header
   writer.put(Table::kMeta, "meta", storage::seal(storage::as_bytes(text)));  // last
   writer.finish();
   report.file_bytes = storage::Env::open_read_only(writer.path()).file_bytes();
-  report.dag_depth = records.dag_depth;
-  report.triangles = records.triangles;
+  report.dag_depth = counts.dag_depth;
+  report.triangles = counts.triangles;
+  report.scratch_bytes += sorted.spilled_bytes() + locators.spilled_bytes();
   progress(1.0);
   return report;
+}
+
+OpEntry entry_of(const Op& op, const Box3& roi, const NormalCone& cone) {
+  OpEntry e;
+  e.id = op.id.value;
+  e.roi = to_index(roi);
+  e.box = to_index(op.box);
+  e.res = op.birth_res;
+  e.weight = estimated_bytes(op);
+  e.cone = cone;
+  return e;
 }
 
 }  // namespace
@@ -313,29 +347,104 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
   // Opening the writer first checks the path (exists without --force) before any work.
   storage::DatabaseWriter writer(path, options.force, options.batch_bytes);
   const QuantGrid grid = choose_grid(crmr.header, options.z_step);
-  const double shift = quantize(crmr, grid);
-  IndexRecords records;  // with the ROIs and subtree cones quantize() computed
-  records.reserve(crmr.ops.size());
-  for (const Op& op : crmr.ops) records.add(op, true);
+  const double shift = quantize(crmr, grid);  // ROIs and subtree cones derived too
+  const std::string tmp_dir = storage::scratch_dir("");
+  TableCounts counts;
+  counts.ops = crmr.ops.size();
+  index::EntryOrder order(rtree_options(crmr.header, options));
+  std::vector<std::uint32_t> depth(crmr.ops.size(), 0);  // longest parent chain from R^0
+  for (const Op& op : crmr.ops) {
+    if (op.id.value >= crmr.ops.size() || &op != &crmr.ops[op.id.value])
+      throw_internal("database writer: op " + std::to_string(op.id.value) + " is out of place");
+    order.observe(entry_of(op, op.roi, op.subtree_cone).index_entry());
+    std::uint32_t& d = depth[op.id.value];
+    for (OpId p : op.parents) {
+      if (p.value < op.id.value) d = std::max(d, depth[p.value] + 1);  // always, in a valid CRMR
+    }
+    counts.dag_depth = std::max<std::uint64_t>(counts.dag_depth, d);
+    counts.triangles += op.fragment.size();
+  }
+  EntrySorter sorted(tmp_dir, entry_sort_bytes(options));
+  for (const Op& op : crmr.ops) {
+    const OpEntry e = entry_of(op, op.roi, op.subtree_cone);
+    sorted.add({order.key(e.index_entry()), e});
+  }
   WriteReport report = write_tables(
-      writer, crmr.header, grid, shift, records,
-      [&](std::uint64_t id, std::vector<Op>&) -> const Op* { return &crmr.ops.at(id); }, options);
+      writer, crmr.header, grid, shift, sorted, counts,
+      [&](const OpEntry& e, std::vector<Op>&) -> const Op* { return &crmr.ops.at(e.id); }, options,
+      tmp_dir);
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return report;
 }
 
+namespace {
+
+// An op as add() leaves it for finish(): its own box and cone, and where its parents are.
+struct OpRecord {
+  OpEntry entry;                 // roi == box and cone == the op's own until the backward sweep
+  std::uint64_t parents_at = 0;  // first of its parents' ids in the parents file
+  std::uint32_t parent_count = 0;
+};
+
+// A child's ROI, subtree cone and height, on its way to a parent (the backward sweep).
+struct Message {
+  std::uint64_t to = 0, from = 0;
+  index::Box roi;
+  NormalCone cone;
+  std::uint64_t height = 0;
+  bool operator<(const Message& o) const { return to < o.to; }
+};
+
+// Sequential records in a scratch file, written through a buffer.
+template <class T>
+class RecordFile {
+ public:
+  explicit RecordFile(const std::string& dir) : file_(dir, 0) {}
+  void push(const T& r) {
+    buffer_.push_back(r);
+    if (buffer_.size() * sizeof(T) >= kFlushBytes) flush();
+  }
+  void flush() {
+    file_.write(count_ * sizeof(T), buffer_.data(), buffer_.size() * sizeof(T));
+    count_ += buffer_.size();
+    buffer_.clear();
+  }
+  std::uint64_t count() const { return count_ + buffer_.size(); }
+  // Records [first, first + out.size()) (after flush()).
+  void read(std::uint64_t first, std::vector<T>& out) const {
+    file_.read(first * sizeof(T), out.data(), out.size() * sizeof(T));
+  }
+  std::uint64_t bytes() const { return count() * sizeof(T); }
+
+ private:
+  static constexpr std::size_t kFlushBytes = std::size_t{1} << 20;
+  storage::TempFile file_;
+  std::vector<T> buffer_;
+  std::uint64_t count_ = 0;
+};
+
+}  // namespace
+
 struct DatabaseStreamWriter::State {
   State(const std::string& path, const WriteOptions& o, const std::string& tmp)
-      : options(o), writer(path, o.force, o.batch_bytes), tmp_dir(tmp) {}
+      : options(o),
+        writer(path, o.force, o.batch_bytes),
+        tmp_dir(storage::scratch_dir(tmp)),
+        spool(tmp_dir, 0),
+        records(tmp_dir),
+        parents(tmp_dir) {}
   WriteOptions options;
   storage::DatabaseWriter writer;
   std::string tmp_dir;
-  std::unique_ptr<storage::TempFile> spool;  // the ops, each a one-op raw page, in id order
-  std::vector<std::uint64_t> offsets{0};     // op i at [offsets[i], offsets[i+1])
+  storage::TempFile spool;  // the ops, each a one-op raw page, in id order
+  std::uint64_t spool_end = 0;
+  RecordFile<OpRecord> records;       // one per op, in id order
+  RecordFile<std::uint64_t> parents;  // every op's parents, in id order
+  std::unique_ptr<index::EntryOrder> order;
   CrmrInfo header;
   QuantGrid grid;
   double shift = 0.0;
-  IndexRecords records;
+  std::uint64_t triangles = 0;
   bool begun = false, finished = false;
   std::uint64_t next_id = 0;
 
@@ -360,18 +469,27 @@ struct DatabaseStreamWriter::State {
     shift = std::max(shift, moved);
     for (const Vertex& v : op.vertices) header.bounds.add(v.p);
     if (moved != 0.0) compute_op_bounds(op);
-    records.add(op, false);
     // The spooled copy: ROI and subtree cone are the op's own until finish() derives them.
     op.roi = op.box;
     op.subtree_cone = canonical_cone(op.cone);
     const Op* one[] = {&op};
     const Bytes bytes = encode_page(one, grid, storage::CodecId::kRaw, false);
+    OpRecord r;
+    r.entry = entry_of(op, op.box, op.cone);
+    r.entry.spool_at = spool_end;
+    r.entry.spool_size = static_cast<std::uint32_t>(bytes.size());
+    r.parents_at = parents.count();
+    r.parent_count = static_cast<std::uint32_t>(op.parents.size());
+    for (OpId p : op.parents) parents.push(p.value);
+    records.push(r);
+    order->observe(r.entry.index_entry());
+    triangles += op.fragment.size();
     pending.insert(pending.end(), bytes.begin(), bytes.end());
-    offsets.push_back(offsets.back() + bytes.size());
+    spool_end += bytes.size();
     if (pending.size() >= kWriteBytes) flush();
   }
   void flush() {
-    spool->write(pending_at, pending.data(), pending.size());
+    spool.write(pending_at, pending.data(), pending.size());
     pending_at += pending.size();
     pending.clear();
   }
@@ -423,6 +541,64 @@ struct DatabaseStreamWriter::State {
     }
     if (error) std::rethrow_exception(error);
     if (!pending.empty()) flush();
+    records.flush();
+    parents.flush();
+  }
+  // The backward sweep: ROI = own box united with the children's ROIs, subtree cone likewise
+  // (compute_rois' rule, children folded in id order), height = the longest path down. Children
+  // have larger ids, so going from the last op to the first finishes every child before its
+  // parents; each op's finished entry goes to `sorted` under its R-tree key. Returns the DAG
+  // depth (the longest path from an op without parents: R^0 in a valid CRMR).
+  std::uint64_t sweep(EntrySorter& sorted, std::uint64_t* scratch_bytes) {
+    storage::ExternalQueue<Message> messages(tmp_dir, side_sort_bytes(options));
+    constexpr std::uint64_t kChunk = 4096;
+    const std::uint64_t n = records.count();
+    std::vector<OpRecord> chunk;
+    std::vector<std::uint64_t> parent_ids;
+    std::vector<Message> inbox;
+    std::uint64_t dag_depth = 0;
+    for (std::uint64_t end = n; end > 0;) {
+      const std::uint64_t first = end > kChunk ? end - kChunk : 0;
+      chunk.resize(end - first);
+      records.read(first, chunk);
+      const std::uint64_t p0 = chunk.front().parents_at;
+      parent_ids.resize(chunk.back().parents_at + chunk.back().parent_count - p0);
+      parents.read(p0, parent_ids);
+      for (std::size_t k = chunk.size(); k-- > 0;) {
+        OpRecord& r = chunk[k];
+        const std::uint64_t id = first + k;
+        inbox.clear();
+        while (!messages.empty() && messages.top().to >= id) {
+          if (messages.top().to != id)
+            throw_internal("database writer: a message for op " +
+                           std::to_string(messages.top().to) + " was left behind");
+          inbox.push_back(messages.top());
+          messages.pop();
+        }
+        std::sort(inbox.begin(), inbox.end(),
+                  [](const Message& a, const Message& b) { return a.from < b.from; });
+        NormalCone cone = r.entry.cone;
+        std::uint64_t height = 0;
+        for (const Message& m : inbox) {
+          r.entry.roi.add(m.roi);
+          cone = cone_union(cone, m.cone);
+          height = std::max(height, m.height + 1);
+        }
+        r.entry.cone = canonical_cone(cone);
+        if (r.parent_count == 0) dag_depth = std::max(dag_depth, height);
+        for (std::uint32_t j = 0; j < r.parent_count; ++j) {
+          const std::uint64_t p = parent_ids[r.parents_at - p0 + j];
+          if (p >= id)
+            throw_internal("database writer: op " + std::to_string(id) + " has parent " +
+                           std::to_string(p) + ", not an earlier op");
+          messages.push({p, id, r.entry.roi, r.entry.cone, height});
+        }
+        sorted.add({order->key(r.entry.index_entry()), r.entry});
+      }
+      end = first;
+    }
+    *scratch_bytes += messages.spilled_bytes();
+    return dag_depth;
   }
   ~State() {
     if (spooler.joinable()) {
@@ -439,21 +615,17 @@ struct DatabaseStreamWriter::State {
 
 DatabaseStreamWriter::DatabaseStreamWriter(const std::string& path, const WriteOptions& options,
                                            const std::string& tmp_dir)
-    : s_(std::make_unique<State>(path, options, tmp_dir)) {
-  const std::string dir = storage::scratch_dir(tmp_dir);
-  s_->spool = std::make_unique<storage::TempFile>(dir, 0);
-}
+    : s_(std::make_unique<State>(path, options, tmp_dir)) {}
 
 DatabaseStreamWriter::~DatabaseStreamWriter() = default;
 
-void DatabaseStreamWriter::begin(const CrmrInfo& header, std::uint64_t op_count) {
+void DatabaseStreamWriter::begin(const CrmrInfo& header, std::uint64_t /*op_count*/) {
   if (s_->begun) throw_internal("database writer: begin() called twice");
   s_->begun = true;
   s_->header = header;
   s_->grid = choose_grid(header, s_->options.z_step);
   s_->header.bounds = Box3{};  // of the snapped vertices, as quantize() does
-  s_->records.reserve(op_count);
-  s_->offsets.reserve(op_count + 1);
+  s_->order = std::make_unique<index::EntryOrder>(rtree_options(header, s_->options));
   s_->spooler = std::thread([s = s_.get()] { s->run(); });
 }
 
@@ -475,25 +647,31 @@ WriteReport DatabaseStreamWriter::finish() {
   const auto t0 = std::chrono::steady_clock::now();
   s.hand_over();
   s.drain();
-  s.records.derive();
+  std::uint64_t scratch = 0;
+  EntrySorter sorted(s.tmp_dir, entry_sort_bytes(s.options));
+  TableCounts counts;
+  counts.ops = s.records.count();
+  counts.triangles = s.triangles;
+  counts.dag_depth = s.sweep(sorted, &scratch);
   s.header.err0 += s.shift;
   s.header.err_final += s.shift;
   WriteReport report = write_tables(
-      s.writer, s.header, s.grid, s.shift, s.records,
-      [&](std::uint64_t id, std::vector<Op>& held) -> const Op* {
-        Bytes buffer(s.offsets.at(id + 1) - s.offsets[id]);
-        s.spool->read(s.offsets[id], buffer.data(), buffer.size());
-        std::vector<Op> one = decode_page(buffer, s.grid, "scratch op " + std::to_string(id));
-        if (one.size() != 1 || one[0].id.value != id)
-          throw_internal("database writer: the scratch file lost op " + std::to_string(id));
+      s.writer, s.header, s.grid, s.shift, sorted, counts,
+      [&](const OpEntry& e, std::vector<Op>& held) -> const Op* {
+        Bytes buffer(e.spool_size);
+        s.spool.read(e.spool_at, buffer.data(), buffer.size());
+        std::vector<Op> one = decode_page(buffer, s.grid, "scratch op " + std::to_string(e.id));
+        if (one.size() != 1 || one[0].id.value != e.id)
+          throw_internal("database writer: the scratch file lost op " + std::to_string(e.id));
         Op& op = held.emplace_back(std::move(one[0]));
-        op.roi = from_index(s.records.entries[id].roi);
-        op.subtree_cone = s.records.cones[id];
+        op.roi = from_index(e.roi);
+        op.subtree_cone = e.cone;
         op.error += s.shift;
         return &op;
       },
-      s.options);
-  report.spool_bytes = s.offsets.back();
+      s.options, s.tmp_dir);
+  report.spool_bytes = s.spool_end;
+  report.scratch_bytes += scratch + s.records.bytes() + s.parents.bytes();
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return report;
 }

@@ -49,6 +49,9 @@ struct WriteOptions {
   unsigned threads = 0;
   // Bytes of values buffered before each LMDB commit (memory held while writing).
   std::uint64_t batch_bytes = std::uint64_t{64} << 20;
+  // Memory for the writer's external sorts (the R-tree order, the locators) and, in
+  // DatabaseStreamWriter, the queue deriving ROIs: beyond it they spill to scratch files.
+  std::uint64_t memory_bytes = std::uint64_t{128} << 20;
   std::string parameters;                // free text recorded in meta (the command line, say)
   std::function<void(double)> progress;  // fraction done, from 0 to 1
 };
@@ -59,9 +62,10 @@ struct WriteReport {
   std::uint64_t ops = 0, pages = 0, rtree_nodes = 0;
   std::uint64_t page_bytes = 0, node_bytes = 0, rtree_bytes = 0;  // value bytes per table
   std::uint64_t file_bytes = 0;
-  std::uint64_t dag_depth = 0;    // longest parent-to-child path from R^0
-  std::uint64_t triangles = 0;    // over all fragments
-  std::uint64_t spool_bytes = 0;  // DatabaseStreamWriter: ops held in its scratch file
+  std::uint64_t dag_depth = 0;      // longest parent-to-child path from R^0
+  std::uint64_t triangles = 0;      // over all fragments
+  std::uint64_t spool_bytes = 0;    // DatabaseStreamWriter: ops held in its scratch file
+  std::uint64_t scratch_bytes = 0;  // other scratch data: index records, sort runs
   double seconds = 0.0;  // DatabaseStreamWriter: finish() alone (spooling ran during the build)
 };
 
@@ -74,13 +78,16 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
 /// Writes a database from ops streamed in id order (an OpSink: a builder hands each op over as it
 /// makes it and never holds the whole CRMR). Each op is snapped to the grid (choose_grid on the
 /// header given to begin()) and spooled, as a one-op raw page, to an anonymous scratch file in
-/// `tmp_dir` (storage::TempFile: gone with the process however it ends); memory keeps only what
-/// the index needs, ~200 bytes an op. finish() derives ROIs and subtree cones (children first),
-/// plans the R-tree and writes the pages in leaf order, re-reading their ops from the scratch
-/// file, then the locators, the R-tree and the meta record, last. The same ops give the same
-/// bytes as write_database on the Crmr they make up. Ops are spooled on a thread of the writer's
-/// own, handed over in batches of 256 (up to 8 waiting), so the builder goes on making the next
-/// ones meanwhile.
+/// `tmp_dir` (storage::TempFile: gone with the process however it ends), with a fixed-size
+/// index record and its parents' ids in two more. Memory holds no per-op data: finish() derives
+/// ROIs and subtree cones by a backward sweep over the records (children send theirs to their
+/// parents through an external queue), orders the R-tree entries by an external sort, writes the
+/// pages in leaf order (re-reading their ops from the spool) with the R-tree's leaves, then the
+/// locators (another external sort), the R-tree's upper levels and the meta record, last; the
+/// sorts and the queue stay within options.memory_bytes and spill beyond. The same ops give the
+/// same bytes as write_database on the Crmr they make up. Ops are spooled on a thread of the
+/// writer's own, handed over in batches of 256 (up to 8 waiting), so the builder goes on making
+/// the next ones meanwhile.
 class DatabaseStreamWriter final : public OpSink {
  public:
   /// Opens the output at once: an existing `path` without options.force throws before any work.

@@ -243,6 +243,29 @@ TEST(DatabaseStreamWriter, WritesTheBytesOfTheWholeCrmr) {
   }
 }
 
+// Under the smallest memory budget the writer's sorts and its ROI queue spill into many runs
+// (1024 records each) and must give the same bytes as with everything in memory.
+TEST(DatabaseStreamWriter, SpillingSortsGiveTheSameBytes) {
+  const Crmr& crmr = test::dataset("jacksboro").crmr;
+  ASSERT_GT(crmr.ops.size(), 8 * 1024u) << "too few ops to spill";
+  TempDir dir;
+  std::uint64_t scratch[2] = {0, 0};
+  for (int tight = 0; tight < 2; ++tight) {
+    WriteOptions o;
+    o.memory_bytes = tight ? 0 : std::uint64_t{1} << 30;
+    const std::string path = dir.file(tight ? "tight.smrdb" : "roomy.smrdb");
+    DatabaseStreamWriter w(path, o, dir.path().string());
+    w.begin(crmr.header, crmr.ops.size());
+    for (const Op& op : crmr.ops) w.add(Op(op));
+    scratch[tight] = w.finish().scratch_bytes;
+  }
+  EXPECT_TRUE(read_file(dir.file("tight.smrdb")) == read_file(dir.file("roomy.smrdb")));
+  EXPECT_GT(scratch[1], scratch[0]) << "the tight budget should have spilled sort runs";
+  Crmr whole = crmr;
+  write_database(whole, dir.file("whole.smrdb"), {});
+  EXPECT_TRUE(read_file(dir.file("whole.smrdb")) == read_file(dir.file("tight.smrdb")));
+}
+
 // The block builder streams straight into the writer (the way `smrdb ingest --builder blocks`
 // runs): the same file as collecting its CRMR and writing it whole, and the DAG depth both report.
 TEST(DatabaseStreamWriter, TheBlockBuilderStreamsIntoIt) {
