@@ -11,9 +11,10 @@
 //    last popped, as in a backward sweep that sends messages to earlier items. It may be pushed
 //    and popped in any interleaving under that rule; equal records come out in push order.
 //
-// Records must be trivially copyable (they are written as bytes). With B the buffer's records
-// and R the runs, reading holds R run buffers of max(B / R, 4 KiB worth) records: a single merge
-// pass, so the scratch data is written once and read once.
+// Records must be trivially copyable (they are written as bytes). Half the memory budget holds
+// records (a run is at most that), the other half the runs' read buffers: the sorter reads R runs
+// through buffers of max(budget / 2R, 4 KiB), one merge pass, so its data is written and read
+// once; the queue's buffers are a 64th of that, and every 64 runs it merges them into one.
 #pragma once
 
 #include <algorithm>
@@ -51,13 +52,20 @@ struct ItemBefore {
   }
 };
 
-// Runs of items in one scratch file, each sorted in leaving order and read back through a buffer
-// of its own; a heap of the runs' heads gives the next item of all runs.
+// Runs of items in a scratch file, each sorted in leaving order and read back through a buffer
+// of its own; a heap of the runs' heads gives the next item of all runs. A run is first read
+// when the heads are first asked for, so its buffer is sized by the runs there are then: the
+// buffers share `memory_bytes` (each at least 4 KiB). With `max_runs` set (a queue, whose runs
+// keep coming while it is read), reaching it merges the runs into one, in a new file.
 template <class T, class Before>
 class Runs {
  public:
-  Runs(std::string dir, std::uint64_t memory_bytes, ItemBefore<T, Before> before)
-      : dir_(std::move(dir)), memory_bytes_(memory_bytes), before_(std::move(before)) {}
+  Runs(std::string dir, std::uint64_t memory_bytes, std::size_t max_runs,
+       ItemBefore<T, Before> before)
+      : dir_(std::move(dir)),
+        memory_bytes_(memory_bytes),
+        max_runs_(max_runs),
+        before_(std::move(before)) {}
 
   // Appends `n` items as one run (already in leaving order).
   void write(const Item<T>* data, std::size_t n) {
@@ -65,13 +73,19 @@ class Runs {
     if (!file_) file_ = std::make_unique<TempFile>(dir_, 0);
     file_->write(end_ * sizeof(Item<T>), data, n * sizeof(Item<T>));
     runs_.push_back({end_, end_ + n, {}, 0});
+    unread_.push_back(runs_.size() - 1);
     end_ += n;
-    push_run(runs_.size() - 1);
+    written_ += n * sizeof(Item<T>);
+    ++made_;
+    if (max_runs_ != 0 && heap_.size() + unread_.size() >= max_runs_) merge();
   }
-  std::size_t count() const { return runs_.size(); }
-  std::uint64_t bytes() const { return end_ * sizeof(Item<T>); }
+  std::size_t count() const { return made_; }       // runs made, merged ones included
+  std::uint64_t bytes() const { return written_; }  // written to scratch files in all
   // The first item of all runs (nullptr when they are done); pop() removes it.
-  const Item<T>* top() const { return heap_.empty() ? nullptr : head(heap_.front()); }
+  const Item<T>* top() {
+    start();
+    return heap_.empty() ? nullptr : head(heap_.front());
+  }
   void pop() {
     const std::size_t r = heap_.front();
     std::pop_heap(heap_.begin(), heap_.end(), run_after());
@@ -87,6 +101,10 @@ class Runs {
     std::size_t pos;
   };
   const Item<T>* head(std::size_t r) const { return &runs_[r].buffer[runs_[r].pos]; }
+  void start() {
+    for (std::size_t r : unread_) push_run(r);
+    unread_.clear();
+  }
   // Refills run r's buffer when needed and puts the run back in the heap unless it is done.
   void push_run(std::size_t r) {
     Run& run = runs_[r];
@@ -106,28 +124,60 @@ class Runs {
     heap_.push_back(r);
     std::push_heap(heap_.begin(), heap_.end(), run_after());
   }
+  // Every item left, in leaving order, as the one run of a new file.
+  void merge() {
+    auto merged = std::make_unique<TempFile>(dir_, 0);
+    std::vector<Item<T>> out;
+    out.reserve(buffer_items());
+    std::uint64_t n = 0;
+    auto flush = [&] {
+      merged->write(n * sizeof(Item<T>), out.data(), out.size() * sizeof(Item<T>));
+      n += out.size();
+      written_ += out.size() * sizeof(Item<T>);
+      out.clear();
+    };
+    for (const Item<T>* h; (h = top()) != nullptr; pop()) {
+      out.push_back(*h);
+      if (out.size() == out.capacity()) flush();
+    }
+    flush();
+    file_ = std::move(merged);
+    runs_.clear();
+    heap_.clear();
+    runs_.push_back({0, n, {}, 0});
+    unread_.assign(1, 0);
+    end_ = n;
+  }
   auto run_after() const {
     return [this](std::size_t a, std::size_t b) { return before_(*head(b), *head(a)); };
   }
   std::size_t buffer_items() const {
     const std::size_t floor = std::max<std::size_t>(1, 4096 / sizeof(Item<T>));
-    const std::uint64_t share = memory_bytes_ / sizeof(Item<T>) / runs_.size();
+    const std::size_t runs =
+        std::max<std::size_t>({std::size_t{1}, max_runs_, heap_.size() + unread_.size()});
+    const std::uint64_t share = memory_bytes_ / sizeof(Item<T>) / runs;
     return std::max<std::size_t>(floor, static_cast<std::size_t>(share));
   }
 
   std::string dir_;
   std::uint64_t memory_bytes_;
+  std::size_t max_runs_;
   ItemBefore<T, Before> before_;
   std::unique_ptr<TempFile> file_;
-  std::uint64_t end_ = 0;
+  std::uint64_t end_ = 0, written_ = 0;
+  std::size_t made_ = 0;
   std::vector<Run> runs_;
-  std::vector<std::size_t> heap_;  // runs with items left, by their heads
+  std::vector<std::size_t> heap_;    // runs with items left, by their heads
+  std::vector<std::size_t> unread_;  // runs not read yet
 };
 
+// The in-memory records take half of the budget (at least 1024), the run buffers the other half.
 template <class T>
 std::size_t buffer_capacity(std::uint64_t memory_bytes) {
-  return static_cast<std::size_t>(std::max<std::uint64_t>(1024, memory_bytes / sizeof(Item<T>)));
+  return static_cast<std::size_t>(
+      std::max<std::uint64_t>(1024, memory_bytes / 2 / sizeof(Item<T>)));
 }
+inline constexpr std::size_t kQueueMaxRuns = 64;
 
 // b < a under `less`: the queue's leaving order (largest first).
 template <class Less>
@@ -146,11 +196,11 @@ class ExternalSorter {
   static_assert(std::is_trivially_copyable_v<T>, "records are written to disk as bytes");
 
  public:
-  /// `tmp_dir`: where runs go (empty = the system's temporary directory); `memory_bytes`: the
-  /// buffer's size (at least 1024 records).
+  /// `tmp_dir`: where runs go (empty = the system's temporary directory); `memory_bytes`: half
+  /// for records in memory (at least 1024), half for the runs' read buffers.
   ExternalSorter(const std::string& tmp_dir, std::uint64_t memory_bytes, Less less = {})
       : before_{less},
-        runs_(scratch_dir(tmp_dir), memory_bytes, before_),
+        runs_(scratch_dir(tmp_dir), memory_bytes / 2, 0, before_),
         capacity_(detail::buffer_capacity<T>(memory_bytes)) {}
 
   void add(const T& record) {
@@ -202,7 +252,7 @@ class ExternalQueue {
  public:
   ExternalQueue(const std::string& tmp_dir, std::uint64_t memory_bytes, Less less = {})
       : before_{Before{less}},
-        runs_(scratch_dir(tmp_dir), memory_bytes, before_),
+        runs_(scratch_dir(tmp_dir), memory_bytes / 2, detail::kQueueMaxRuns, before_),
         capacity_(detail::buffer_capacity<T>(memory_bytes)) {}
 
   /// Adds a record; it must not be larger than the last one popped.
@@ -215,7 +265,7 @@ class ExternalQueue {
   bool empty() const { return size_ == 0; }
   std::uint64_t size() const { return size_; }
   /// The largest record (the earliest pushed of equal ones); the queue must not be empty.
-  const T& top() const {
+  const T& top() {
     const detail::Item<T>* run = runs_.top();
     if (!heap_.empty() && (run == nullptr || before_(heap_.front(), *run)))
       return heap_.front().record;
