@@ -7,6 +7,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <iostream>
 #include <optional>
@@ -41,11 +43,38 @@ double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
+// The process's peak resident set before the last reset_peak_rss() (MiB).
+double g_peak_before_reset_mb = 0.0;
+
 // The process's peak resident set so far (getrusage: kilobytes on Linux), in MiB.
 double peak_rss_mb() {
   rusage u{};
   getrusage(RUSAGE_SELF, &u);
-  return double(u.ru_maxrss) / 1024.0;
+  return std::max(g_peak_before_reset_mb, double(u.ru_maxrss) / 1024.0);
+}
+
+// Starts measuring a phase's own peak resident set (Linux: clear_refs 5 resets VmHWM); false if
+// the kernel does not allow it. peak_rss_mb() still reports the whole run's peak.
+bool reset_peak_rss() {
+  g_peak_before_reset_mb = peak_rss_mb();
+  malloc_trim(0);  // the phase before may have freed much that glibc still holds
+  std::FILE* f = std::fopen("/proc/self/clear_refs", "w");
+  if (f == nullptr) return false;
+  const bool ok = std::fputs("5", f) >= 0;
+  return std::fclose(f) == 0 && ok;
+}
+
+// The resident set's peak since reset_peak_rss() (VmHWM), in MiB; 0 if unknown.
+double phase_peak_rss_mb() {
+  std::FILE* f = std::fopen("/proc/self/status", "r");
+  if (f == nullptr) return 0.0;
+  char line[256];
+  double kb = 0.0;
+  while (std::fgets(line, sizeof line, f) != nullptr) {
+    if (std::strncmp(line, "VmHWM:", 6) == 0) kb = std::strtod(line + 6, nullptr);
+  }
+  std::fclose(f);
+  return kb / 1024.0;
 }
 
 // "256M", "2G", "1.5G", "512K" or a plain number of bytes (binary units: M = 2^20).
@@ -514,7 +543,19 @@ nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
   IngestTap tap(writer, std::filesystem::path(a.dem).filename().string());
   smr::build_block_tin(*dem, tap, opt, &st);
   const double build_seconds = seconds_since(t0);
+  if (opt.memory_bytes != 0 && st.record_bytes > opt.memory_bytes / 2) {
+    // The finest mesh's records are not budgeted yet (issue 5): say so rather than overrun
+    // --memory silently.
+    std::fprintf(stderr,
+                 "smrdb: warning: the block builder's records took %.0f MiB (%llu triangles made "
+                 "at --max-error %g), more than half of --memory %s: they are not paged out yet; "
+                 "a larger --max-error makes fewer\n",
+                 double(st.record_bytes) / double(1 << 20),
+                 static_cast<unsigned long long>(st.triangles_made), a.max_error, a.memory.c_str());
+  }
+  const bool phase_rss = reset_peak_rss();
   const smr::WriteReport w = writer.finish();
+  const double finish_rss = phase_rss ? phase_peak_rss_mb() : 0.0;
   progress.done();
   report["input"] = {{"path", a.dem},
                      {"kind", "terrain"},
@@ -541,6 +582,8 @@ nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
                       {"samples_scanned", st.samples_scanned},
                       {"plans", st.plans},
                       {"temp_bytes", st.temp_bytes + w.spool_bytes + w.scratch_bytes},
+                      {"triangles_made", st.triangles_made},
+                      {"record_mb", double(st.record_bytes) / double(1 << 20)},
                       {"seconds",
                        {{"survey", st.seconds_survey},
                         {"read", st.seconds_read},
@@ -552,6 +595,8 @@ nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
                         {"assemble", st.seconds_assemble}}}};
   report["crmr"] = tap.counts.json(build_seconds);
   report["database"] = database_report(w, a, db_path, tap.counts.vertices);
+  // The writer's own peak (its finish(): sorts, sweep, pages), the builder's memory given back.
+  if (phase_rss) report["database"]["finish_peak_rss_mb"] = finish_rss;
   if (verify) {
     // The CRMR never exists in memory: check what was written (checksums, DAG, links, index).
     const smr::VerifyReport r = smr::verify_database(db_path, nullptr);

@@ -443,6 +443,11 @@ class Builder {
       report(0.7 + 0.2 * double(level) / double(std::max(1, levels_)));
     }
     lap(stats_.seconds_upper);
+    // The build records at their largest: every triangle ever made stays for the final sweep.
+    stats_.triangles_made = tris_.size();
+    stats_.record_bytes = tris_.size() * sizeof(MTri) + verts_.size() * sizeof(MVert) +
+                          removals_.size() * sizeof(Removal) +
+                          star_ids_.size() * sizeof(std::uint32_t);
     assemble(sink);
     lap(stats_.seconds_assemble);
   }

@@ -105,6 +105,10 @@ struct BlockTinStats {
   std::uint64_t samples_scanned = 0;      // sample visits of exact bounds
   std::uint64_t plans = 0;                // removals planned (evaluated)
   std::uint64_t temp_bytes = 0;           // written to the scratch file
+  // Triangles ever made, and the bytes of the build records (triangles, vertices, removals)
+  // before the final sweep: they stay in memory, outside `memory_bytes`, and grow with the
+  // finest mesh (~64 bytes a triangle made, ~3 triangles made per finest-mesh triangle).
+  std::uint64_t triangles_made = 0, record_bytes = 0;
   // Seconds: survey pass, leaf windows read, leaf greedy TINs, the Delaunay repair, level 0,
   // upper levels (with their reads), assembling the CRMR.
   // Leaf reads are wall time on the reading thread; greedy is summed over the workers (thread
