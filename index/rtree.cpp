@@ -125,7 +125,7 @@ EntryOrder::EntryOrder(const BuildOptions& options)
     : options_(options), present_(kMaxClass + 1, false), reversed_(kMaxClass + 1, false) {
   check_options(options);
   const int bands = static_cast<int>(options.bands_per_octave);
-  thresholds_.resize(kMaxBandsPerOctave + 1);
+  static_assert(std::tuple_size_v<decltype(thresholds_)> == kMaxBandsPerOctave + 1);
   for (int j = 0; j <= bands; ++j) {
     thresholds_[static_cast<std::size_t>(j)] = std::exp2(1.0 - static_cast<double>(j) / bands);
   }
@@ -143,11 +143,8 @@ void EntryOrder::observe(const Entry& e) {
 
 int EntryOrder::class_of(const Entry& e) const {
   switch (options_.order) {
-    case BuildOptions::Order::kResolutionBands: {
-      std::array<double, kMaxBandsPerOctave + 1> t{};
-      std::copy(thresholds_.begin(), thresholds_.end(), t.begin());
-      return resolution_band(e.res, t, static_cast<int>(options_.bands_per_octave));
-    }
+    case BuildOptions::Order::kResolutionBands:
+      return resolution_band(e.res, thresholds_, static_cast<int>(options_.bands_per_octave));
     case BuildOptions::Order::kSizeClasses:
       return size_class(e.box, side_, options_.order_dims);
     case BuildOptions::Order::kSpatial:

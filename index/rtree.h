@@ -50,6 +50,7 @@
 // exactly the entries a brute-force scan of the stored entries would accept.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <span>
@@ -131,8 +132,8 @@ class EntryOrder {
   int class_of(const Entry& e) const;
   BuildOptions options_;
   Box world_;
-  mutable double side_ = -1;  // fixed by the first key()
-  std::vector<double> thresholds_;
+  mutable double side_ = -1;            // fixed by the first key()
+  std::array<double, 9> thresholds_{};  // resolution bands: 1 + the most bands per octave
   std::vector<bool> present_;
   mutable std::vector<bool> reversed_;
 };

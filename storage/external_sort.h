@@ -67,6 +67,12 @@ class Runs {
         max_runs_(max_runs),
         before_(std::move(before)) {}
 
+  // Sorts `items` into leaving order and appends them as one run; empties `items`.
+  void spill(std::vector<Item<T>>& items) {
+    std::sort(items.begin(), items.end(), before_);
+    write(items.data(), items.size());
+    items.clear();
+  }
   // Appends `n` items as one run (already in leaving order).
   void write(const Item<T>* data, std::size_t n) {
     if (n == 0) return;
@@ -205,7 +211,7 @@ class ExternalSorter {
 
   void add(const T& record) {
     if (reading_) throw_internal("ExternalSorter: add() after next()");
-    if (buffer_.size() == capacity_) spill();
+    if (buffer_.size() == capacity_) runs_.spill(buffer_);
     buffer_.push_back({record, size_++});
   }
   /// The next record in order; false once all are out. The first call ends the adding.
@@ -229,12 +235,6 @@ class ExternalSorter {
   std::uint64_t spilled_bytes() const { return runs_.bytes(); }
 
  private:
-  void spill() {
-    std::sort(buffer_.begin(), buffer_.end(), before_);
-    runs_.write(buffer_.data(), buffer_.size());
-    buffer_.clear();
-  }
-
   detail::ItemBefore<T, Less> before_;
   detail::Runs<T, Less> runs_;
   std::size_t capacity_;
@@ -257,7 +257,7 @@ class ExternalQueue {
 
   /// Adds a record; it must not be larger than the last one popped.
   void push(const T& record) {
-    if (heap_.size() == capacity_) spill();
+    if (heap_.size() == capacity_) runs_.spill(heap_);
     heap_.push_back({record, seq_++});
     std::push_heap(heap_.begin(), heap_.end(), after());
     ++size_;
@@ -265,15 +265,9 @@ class ExternalQueue {
   bool empty() const { return size_ == 0; }
   std::uint64_t size() const { return size_; }
   /// The largest record (the earliest pushed of equal ones); the queue must not be empty.
-  const T& top() {
-    const detail::Item<T>* run = runs_.top();
-    if (!heap_.empty() && (run == nullptr || before_(heap_.front(), *run)))
-      return heap_.front().record;
-    return run->record;
-  }
+  const T& top() { return heap_first() ? heap_.front().record : runs_.top()->record; }
   void pop() {
-    const detail::Item<T>* run = runs_.top();
-    if (!heap_.empty() && (run == nullptr || before_(heap_.front(), *run))) {
+    if (heap_first()) {
       std::pop_heap(heap_.begin(), heap_.end(), after());
       heap_.pop_back();
     } else {
@@ -285,13 +279,13 @@ class ExternalQueue {
   std::uint64_t spilled_bytes() const { return runs_.bytes(); }
 
  private:
+  // Whether the largest record is in memory rather than at the head of a run.
+  bool heap_first() {
+    const detail::Item<T>* run = runs_.top();
+    return !heap_.empty() && (run == nullptr || before_(heap_.front(), *run));
+  }
   auto after() const {
     return [this](const detail::Item<T>& a, const detail::Item<T>& b) { return before_(b, a); };
-  }
-  void spill() {
-    std::sort(heap_.begin(), heap_.end(), before_);
-    runs_.write(heap_.data(), heap_.size());
-    heap_.clear();
   }
 
   detail::ItemBefore<T, Before> before_;

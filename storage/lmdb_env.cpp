@@ -6,7 +6,6 @@
 #include <atomic>
 #include <cerrno>
 #include <chrono>
-#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <thread>
@@ -17,7 +16,6 @@
 #include <lmdb.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
-#include <sys/sysmacros.h>
 #include <unistd.h>
 
 #include "storage/error.h"
@@ -867,32 +865,23 @@ void DatabaseWriter::flush() {
   arena_.clear();
 }
 
-namespace {
-
-// The process's mappings of `path` (LMDB's map of it): ranges of /proc/self/maps whose device and
-// inode are the file's. LMDB does not say where it mapped a file opened without MDB_FIXEDMAP.
-std::vector<std::pair<void*, std::size_t>> mappings_of(const std::string& path) {
-  std::vector<std::pair<void*, std::size_t>> out;
+const std::uint8_t* DatabaseWriter::mapping_of_written() const {
+  // Advisory (only the trimming depends on it): any failure means no trimming.
   struct stat st {};
-  if (::stat(path.c_str(), &st) != 0) return out;
-  std::FILE* f = std::fopen("/proc/self/maps", "r");
-  if (f == nullptr) return out;
-  char line[4096];
-  while (std::fgets(line, sizeof line, f) != nullptr) {
-    unsigned long lo = 0, hi = 0, offset = 0, inode = 0;
-    unsigned major = 0, minor = 0;
-    char perms[8] = {};
-    if (std::sscanf(line, "%lx-%lx %7s %lx %x:%x %lu", &lo, &hi, perms, &offset, &major, &minor,
-                    &inode) == 7 &&
-        inode == st.st_ino && makedev(major, minor) == st.st_dev) {
-      out.emplace_back(reinterpret_cast<void*>(lo), static_cast<std::size_t>(hi - lo));
-    }
+  if (::stat(tmp_path_.c_str(), &st) != 0) return nullptr;
+  MDB_txn* txn = nullptr;
+  if (mdb_txn_begin(static_cast<MDB_env*>(env_), nullptr, MDB_RDONLY, &txn) != MDB_SUCCESS)
+    return nullptr;
+  const std::uint8_t* map = nullptr;
+  try {
+    map = find_mapping(txn, check_before_open(tmp_path_, static_cast<std::uint64_t>(st.st_size)),
+                       tmp_path_);
+  } catch (const Error&) {
+    map = nullptr;
   }
-  std::fclose(f);
-  return out;
+  mdb_txn_abort(txn);
+  return map;
 }
-
-}  // namespace
 
 void DatabaseWriter::finish() {
   if (finished_ || env_ == nullptr) throw_internal(path_ + ": finish() called twice");
@@ -904,11 +893,11 @@ void DatabaseWriter::finish() {
   // process's resident set: a 2.6 GB database would show as 2.6 GB of RSS. While it runs, a
   // thread drops the map's pages every 20 ms (they are clean file pages, faulted back in from
   // the page cache if read again), so the writer's memory stays what its buffers hold.
-  const std::vector<std::pair<void*, std::size_t>> maps = mappings_of(tmp_path_);
+  const std::uint8_t* map = mapping_of_written();
   std::atomic<bool> copying{true};
   std::thread trimmer([&] {
-    while (copying.load()) {
-      for (const auto& [at, bytes] : maps) (void)::madvise(at, bytes, MADV_DONTNEED);
+    while (copying.load() && map != nullptr) {
+      (void)::madvise(const_cast<std::uint8_t*>(map), map_bytes_, MADV_DONTNEED);
       std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
   });

@@ -128,6 +128,8 @@ class DatabaseWriter {
     std::size_t key_offset, key_size, value_offset, value_size;
   };
   void add(Table table, ByteView key, ByteView value, bool append);
+  // Where LMDB mapped the file written so far (after a commit), or nullptr if it cannot tell.
+  const std::uint8_t* mapping_of_written() const;
   void flush();
   void cleanup() noexcept;
 

@@ -395,13 +395,14 @@ struct Message {
   bool operator<(const Message& o) const { return to < o.to; }
 };
 
-// Sequential records in a scratch file, written through a buffer.
+// Sequential records in a scratch file, written through a buffer of 4 MiB.
 template <class T>
 class RecordFile {
  public:
   explicit RecordFile(const std::string& dir) : file_(dir, 0) {}
-  void push(const T& r) {
-    buffer_.push_back(r);
+  void push(const T& r) { append(&r, 1); }
+  void append(const T* r, std::size_t n) {
+    buffer_.insert(buffer_.end(), r, r + n);
     if (buffer_.size() * sizeof(T) >= kFlushBytes) flush();
   }
   void flush() {
@@ -417,7 +418,7 @@ class RecordFile {
   std::uint64_t bytes() const { return count() * sizeof(T); }
 
  private:
-  static constexpr std::size_t kFlushBytes = std::size_t{1} << 20;
+  static constexpr std::size_t kFlushBytes = std::size_t{4} << 20;
   storage::TempFile file_;
   std::vector<T> buffer_;
   std::uint64_t count_ = 0;
@@ -430,14 +431,13 @@ struct DatabaseStreamWriter::State {
       : options(o),
         writer(path, o.force, o.batch_bytes),
         tmp_dir(storage::scratch_dir(tmp)),
-        spool(tmp_dir, 0),
+        spool(tmp_dir),
         records(tmp_dir),
         parents(tmp_dir) {}
   WriteOptions options;
   storage::DatabaseWriter writer;
   std::string tmp_dir;
-  storage::TempFile spool;  // the ops, each a one-op raw page, in id order
-  std::uint64_t spool_end = 0;
+  RecordFile<std::uint8_t> spool;     // the ops, each a one-op raw page, in id order
   RecordFile<OpRecord> records;       // one per op, in id order
   RecordFile<std::uint64_t> parents;  // every op's parents, in id order
   std::unique_ptr<index::EntryOrder> order;
@@ -451,7 +451,7 @@ struct DatabaseStreamWriter::State {
   // Spooling runs on its own thread, in id order, while the builder makes the next ops. Ops are
   // handed over in batches (one lock and one wake-up per batch, not per op) and the scratch file
   // is written in large pieces.
-  static constexpr std::size_t kBatch = 256, kBatches = 8, kWriteBytes = std::size_t{4} << 20;
+  static constexpr std::size_t kBatch = 256, kBatches = 8;
   std::mutex mu;
   std::condition_variable cv;
   std::vector<Op> filling;  // the builder's side, not shared
@@ -459,8 +459,6 @@ struct DatabaseStreamWriter::State {
   bool closing = false;
   std::exception_ptr error;
   std::thread spooler;
-  Bytes pending;  // encoded ops not yet written; they start at pending_at
-  std::uint64_t pending_at = 0;
 
   void spool_one(Op& op) {
     // quantize(): snap, track the largest move, recompute the bounds (the builder computed them
@@ -476,7 +474,7 @@ struct DatabaseStreamWriter::State {
     const Bytes bytes = encode_page(one, grid, storage::CodecId::kRaw, false);
     OpRecord r;
     r.entry = entry_of(op, op.box, op.cone);
-    r.entry.spool_at = spool_end;
+    r.entry.spool_at = spool.count();
     r.entry.spool_size = static_cast<std::uint32_t>(bytes.size());
     r.parents_at = parents.count();
     r.parent_count = static_cast<std::uint32_t>(op.parents.size());
@@ -484,14 +482,7 @@ struct DatabaseStreamWriter::State {
     records.push(r);
     order->observe(r.entry.index_entry());
     triangles += op.fragment.size();
-    pending.insert(pending.end(), bytes.begin(), bytes.end());
-    spool_end += bytes.size();
-    if (pending.size() >= kWriteBytes) flush();
-  }
-  void flush() {
-    spool.write(pending_at, pending.data(), pending.size());
-    pending_at += pending.size();
-    pending.clear();
+    spool.append(bytes.data(), bytes.size());
   }
   void run() {
     for (;;) {
@@ -540,7 +531,7 @@ struct DatabaseStreamWriter::State {
       spooler.join();
     }
     if (error) std::rethrow_exception(error);
-    if (!pending.empty()) flush();
+    spool.flush();
     records.flush();
     parents.flush();
   }
@@ -659,7 +650,7 @@ WriteReport DatabaseStreamWriter::finish() {
       s.writer, s.header, s.grid, s.shift, sorted, counts,
       [&](const OpEntry& e, std::vector<Op>& held) -> const Op* {
         Bytes buffer(e.spool_size);
-        s.spool.read(e.spool_at, buffer.data(), buffer.size());
+        s.spool.read(e.spool_at, buffer);
         std::vector<Op> one = decode_page(buffer, s.grid, "scratch op " + std::to_string(e.id));
         if (one.size() != 1 || one[0].id.value != e.id)
           throw_internal("database writer: the scratch file lost op " + std::to_string(e.id));
@@ -670,7 +661,7 @@ WriteReport DatabaseStreamWriter::finish() {
         return &op;
       },
       s.options, s.tmp_dir);
-  report.spool_bytes = s.spool_end;
+  report.spool_bytes = s.spool.bytes();
   report.scratch_bytes += scratch + s.records.bytes() + s.parents.bytes();
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return report;
