@@ -592,7 +592,10 @@ nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
                         {"level0", st.seconds_level0},
                         {"leaves", st.seconds_leaves},
                         {"upper", st.seconds_upper},
-                        {"assemble", st.seconds_assemble}}}};
+                        {"assemble", st.seconds_assemble},
+                        {"assembly_feed", st.seconds_feed},
+                        {"assembly_join", st.seconds_join},
+                        {"assembly_emit", st.seconds_emit}}}};
   report["crmr"] = tap.counts.json(build_seconds);
   report["database"] = database_report(w, a, db_path, tap.counts.vertices);
   // The writer's own peak (its finish(): sorts, sweep, pages), the builder's memory given back.

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "smr/build/greedy_tin.h"
+#include "smr/build/op_assembly.h"
 #include "smr/build/triangle_rows.h"
 #include "smr/core/chunked.h"
 #include "smr/core/id_map.h"
@@ -64,13 +65,6 @@ struct MTri {
   std::uint32_t destroyer = kNone;  // removal whose star it is in; kNone = alive
   bool is_void = false;
   bool copied = false;  // handed to a level-0 block while leaves were still being merged
-};
-
-/// What the assembly needs of a triangle (MTri less its adjacency and bounds): a third the size.
-struct ATri {
-  std::array<std::uint32_t, 3> v{};
-  std::uint32_t creator = kNone, destroyer = kNone;
-  bool is_void = false;
 };
 
 struct Removal {
@@ -395,6 +389,7 @@ class Builder {
   }
 
   void run(OpSink& sink) {
+    make_assembler();
     Clock::time_point t = Clock::now();
     auto lap = [&](double& into) {
       const Clock::time_point now = Clock::now();
@@ -443,7 +438,7 @@ class Builder {
       report(0.7 + 0.2 * double(level) / double(std::max(1, levels_)));
     }
     lap(stats_.seconds_upper);
-    // The build records at their largest: every triangle ever made stays for the final sweep.
+    // The build records at their largest: every triangle ever made is still in memory.
     stats_.triangles_made = tris_.size();
     stats_.record_bytes = tris_.size() * sizeof(MTri) + verts_.size() * sizeof(MVert) +
                           removals_.size() * sizeof(Removal) +
@@ -1679,6 +1674,7 @@ class Builder {
     plans_ += b.plans_;
     stats_.rounds += u.stats.rounds;
     stats_.non_delaunay_holes += u.stats.non_delaunay_holes;
+    feed();
   }
 
   // With a window w (level 0, or an exact upper level) errors are exact from the block's window w,
@@ -1798,28 +1794,51 @@ class Builder {
     }
   }
 
-  // ---- the CRMR: ops in falling error, replayed coarse to fine for the links, each handed to the
-  // sink as soon as it is made ----
+  // ---- the CRMR: the removals, in the order they were made, go to the out-of-core assembler
+  // as they are merged (feed()), which orders them by falling error, links them and hands each
+  // op to the sink (assemble()).
+  using StarTriangle = OpAssembler::StarTriangle;
+  StarTriangle star_triangle(std::uint32_t t) const {
+    const MTri& x = tris_[t];
+    return StarTriangle{x.v, t, x.creator, x.is_void};
+  }
+
+  void make_assembler() {
+    AssemblyOptions ao;
+    ao.tmp_dir = opt_.tmp_dir;
+    ao.memory_bytes = opt_.assembly_memory_bytes;
+    if (ao.memory_bytes == 0) {
+      ao.memory_bytes = opt_.memory_bytes != 0 ? std::max<std::uint64_t>(opt_.memory_bytes / 2,
+                                                                         std::uint64_t{16} << 20)
+                                               : std::uint64_t{256} << 20;
+    }
+    ao.progress = [this](double f) { report(0.9 + 0.1 * f); };
+    assembler_ = std::make_unique<OpAssembler>(ao);
+  }
+
+  /// Hands the removals merged since the last call to the assembler (their triangles are final).
+  void feed() {
+    if (!assembler_) return;
+    Clock::time_point t0 = Clock::now();
+    for (; fed_ < removals_.size(); ++fed_) {
+      const Removal& r = removals_[fed_];
+      feed_star_.clear();
+      for (std::uint32_t i = r.star_begin; i < r.star_end; ++i) {
+        feed_star_.push_back(star_triangle(star_ids_[i]));
+      }
+      feed_made_.clear();
+      for (std::uint32_t t = r.new_begin; t < r.new_end; ++t) {
+        feed_made_.push_back({tris_[t].v, t, tris_[t].is_void});
+      }
+      assembler_->add_removal(std::span(&r.vertex, 1), feed_star_, feed_made_, r.err);
+    }
+    t_fed_ += since(t0);
+  }
+
+  // ----
+  // (op_assembly.h), which orders them by falling error, links them and hands each op to the sink.
   void assemble(OpSink& sink) {
     const std::size_t m = removals_.size();
-    // err' = max(own, children's err'): children (creators of star triangles) come first.
-    std::vector<double> err(m);
-    for (std::size_t k = 0; k < m; ++k) {
-      double e = removals_[k].err;
-      for (std::uint32_t i = removals_[k].star_begin; i < removals_[k].star_end; ++i) {
-        const std::uint32_t c = tris_[star_ids_[i]].creator;
-        if (c != kNone) e = std::max(e, err[c]);
-      }
-      err[k] = e;
-    }
-    std::vector<std::uint32_t> order(m);
-    for (std::uint32_t k = 0; k < m; ++k) order[k] = k;
-    std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
-      return err[a] > err[b] || (err[a] == err[b] && a > b);
-    });
-    op_of_.assign(m, 0);
-    for (std::uint32_t i = 0; i < m; ++i) op_of_[order[i]] = i + 1;
-
     CrmrInfo info;
     info.kind = ModelKind::kTerrain;
     info.georef = dem_.georef();
@@ -1832,82 +1851,18 @@ class Builder {
     info.vertex_count = verts_.size();
     for (const MVert& v : verts_) info.bounds.add(world(v));
 
-    // Owner (op whose fragment holds it) and index of every triangle.
-    std::vector<std::uint32_t> owner(tris_.size()), local(tris_.size());
-    std::vector<std::uint32_t> base;
+    feed();
+    OpAssembler& assembler = *assembler_;
+    std::vector<StarTriangle> base;
+    double err0 = 0.0;
     for (std::uint32_t t = 0; t < tris_.size(); ++t) {
       if (tris_[t].destroyer == kNone) {
-        owner[t] = 0;
-        local[t] = static_cast<std::uint32_t>(base.size());
-        base.push_back(t);
+        base.push_back(star_triangle(t));
+        err0 = std::max(err0, tris_[t].bound.err());
       }
     }
-    for (std::size_t k = 0; k < m; ++k) {
-      const Removal& r = removals_[k];
-      for (std::uint32_t i = r.star_begin; i < r.star_end; ++i) {
-        owner[star_ids_[i]] = op_of_[k];
-        local[star_ids_[i]] = i - r.star_begin;
-      }
-    }
-    double err0 = 0.0;
-    for (std::uint32_t t : base) err0 = std::max(err0, tris_[t].bound.err());
-    for (double e : err) err0 = std::max(err0, e);
     info.err0 = err0;
-    info.err_final = std::min(err_final_, err0);
-    birth_of_.resize(m);
-    for (std::size_t k = 0; k < m; ++k) birth_of_[k] = resolution_of(info, err[k]);
-
-    // Everything the header needs is known: the sink may start.
-    sink.begin(info, m + 1);
-    // The sweep needs neither adjacency nor bounds: keep the rest, a third of the bytes, freeing
-    // the full records as they are copied.
-    tris_.drain([&](std::size_t, const MTri& t) {
-      atris_.push_back(ATri{t.v, t.creator, t.destroyer, t.is_void});
-    });
-    // The decimation's per-vertex scratch is done with.
-    std::vector<double>().swap(cost_);
-    std::vector<std::uint8_t>().swap(dirty_);
-    for (auto* v : {&stamp_, &cand_mark_, &seen_}) std::vector<std::uint32_t>().swap(*v);
-    open_edges_ = IdMap<std::uint32_t>();
-    IdMap<std::uint32_t> current(60);  // directed edge -> triangle; at most 3 per M^m triangle
-    current.reserve(3 * finest_triangles_);
-    auto enter = [&](std::uint32_t t) {
-      for (int k = 0; k < 3; ++k) current[edge_key(atris_[t].v[k], atris_[t].v[(k + 1) % 3])] = t;
-    };
-    auto leave = [&](std::uint32_t t) {
-      for (int k = 0; k < 3; ++k) current.erase(edge_key(atris_[t].v[k], atris_[t].v[(k + 1) % 3]));
-    };
-    std::vector<std::uint32_t> depth(m + 1, 0);  // longest parent chain from R^0
-    auto emit = [&](Op&& op) {
-      std::uint32_t& d = depth[op.id.value];
-      for (OpId p : op.parents) d = std::max(d, depth[p.value] + 1);
-      stats_.dag_height = std::max<std::uint64_t>(stats_.dag_height, d);
-      sink.add(std::move(op));
-    };
-    {
-      Op op;
-      fill_op(op, 0, kNone, base, {}, owner, local, current);
-      op.error = err0;
-      emit(std::move(op));
-    }
-    for (std::uint32_t t : base) enter(t);
-    std::vector<std::uint32_t> frag, pre;
-    for (std::uint32_t i = 0; i < m; ++i) {
-      const std::uint32_t k = order[i];
-      const Removal& r = removals_[k];
-      frag.clear();
-      for (std::uint32_t j = r.star_begin; j < r.star_end; ++j) frag.push_back(star_ids_[j]);
-      pre.clear();
-      for (std::uint32_t t = r.new_begin; t < r.new_end; ++t) pre.push_back(t);
-      Op op;
-      fill_op(op, i + 1, r.vertex, frag, pre, owner, local, current);
-      op.error = err[k];
-      op.birth_res = birth_of_[k];
-      for (std::uint32_t t : pre) leave(t);
-      for (std::uint32_t t : frag) enter(t);
-      emit(std::move(op));
-      if ((i & 0xffff) == 0) report(0.9 + 0.1 * double(i) / double(std::max<std::size_t>(1, m)));
-    }
+    info.err_final = err_final_;
     stats_.finest_vertices = finest_vertices_;
     stats_.samples_scanned = scanned_;
     stats_.temp_bytes = spill_ ? spill_->bytes() : 0;
@@ -1918,15 +1873,28 @@ class Builder {
     stats_.levels = levels_;
     {
       std::vector<std::uint8_t> seen(verts_.size(), 0);
-      for (std::uint32_t t : base) {
-        for (std::uint32_t v : atris_[t].v) seen[v] = 1;
+      for (const StarTriangle& t : base) {
+        for (std::uint32_t v : t.v) seen[v] = 1;
       }
       stats_.base_vertices = static_cast<std::uint64_t>(std::count(seen.begin(), seen.end(), 1));
     }
-    // The build records are done with: the sink's finish may use their memory.
-    atris_.release();
+    // The build records are done with (the assembler has its own): the sink and the assembly
+    // may use their memory. The vertices stay for their positions.
+    tris_.release();
     star_ids_.release();
     std::vector<Removal>().swap(removals_);
+    std::vector<double>().swap(cost_);
+    std::vector<std::uint8_t>().swap(dirty_);
+    for (auto* v : {&stamp_, &cand_mark_, &seen_}) std::vector<std::uint32_t>().swap(*v);
+    open_edges_ = IdMap<std::uint32_t>();
+    assembler.finish(
+        info, base, [this](std::uint32_t v) { return world(verts_[v]); }, sink);
+    stats_.seconds_feed = t_fed_;
+    stats_.seconds_join = assembler.stats().seconds_join;
+    stats_.seconds_emit = assembler.stats().seconds_emit;
+    stats_.dag_height = assembler.stats().dag_height;
+    stats_.temp_bytes += assembler.stats().scratch_bytes;
+    assembler_.reset();
     std::vector<MVert>().swap(verts_);
     report(1.0);
   }
@@ -1934,93 +1902,6 @@ class Builder {
   Vec3 world(const MVert& v) const {
     const Georef& g = dem_.georef();
     return {g.x0 + v.col * g.dx, g.y0 + v.row * g.dy, double(v.z)};
-  }
-
-  void fill_op(Op& op, std::uint32_t id, std::uint32_t new_vertex,
-               const std::vector<std::uint32_t>& frag, const std::vector<std::uint32_t>& pre,
-               const std::vector<std::uint32_t>& owner, const std::vector<std::uint32_t>& local,
-               const IdMap<std::uint32_t>& current) const {
-    op.id = OpId(id);
-    std::vector<std::uint32_t>& vs = scratch_vs_;
-    vs.clear();
-    for (std::uint32_t t : frag) vs.insert(vs.end(), atris_[t].v.begin(), atris_[t].v.end());
-    std::sort(vs.begin(), vs.end());
-    vs.erase(std::unique(vs.begin(), vs.end()), vs.end());
-    if (new_vertex != kNone) {
-      vs.erase(std::find(vs.begin(), vs.end(), new_vertex));
-      vs.insert(vs.begin(), new_vertex);
-      op.new_vertex_count = 1;
-    } else {
-      op.new_vertex_count = static_cast<std::uint32_t>(vs.size());
-    }
-    auto index = [&](std::uint32_t v) {
-      if (new_vertex != kNone && v == new_vertex) return std::uint32_t{0};
-      const auto b = vs.begin() + (new_vertex != kNone ? 1 : 0);
-      return static_cast<std::uint32_t>(std::lower_bound(b, vs.end(), v) - vs.begin());
-    };
-    op.vertices.reserve(vs.size());
-    for (std::uint32_t v : vs) op.vertices.push_back({VertexId(v), world(verts_[v])});
-    op.fragment.resize(frag.size());
-    for (std::size_t i = 0; i < frag.size(); ++i) {
-      const ATri& t = atris_[frag[i]];
-      FragmentTriangle& ft = op.fragment[i];
-      for (int k = 0; k < 3; ++k) ft.v[k] = index(t.v[k]);
-      if (t.is_void) ft.flags |= FragmentTriangle::kVoid;
-      if (t.creator != kNone) {
-        ft.killer = OpId(op_of_[t.creator]);
-        ft.death_res = birth_of_[t.creator];
-        op.children.push_back(ft.killer);
-      }
-    }
-    derive_fragment_neighbours(op);
-    for (std::size_t i = 0; i < frag.size(); ++i) {
-      const ATri& t = atris_[frag[i]];
-      for (std::uint8_t k = 0; k < 3; ++k) {
-        if (op.fragment[i].nbr[k] != FragmentTriangle::kNoNeighbour) continue;
-        const std::uint32_t a = t.v[k], b = t.v[(k + 1) % 3];
-        // A fragment boundary edge: its closest coarser version is the newer of the replaced
-        // triangle inside (PreF) and the current triangle outside; none on the model boundary.
-        const std::uint32_t* out = current.find(edge_key(b, a));
-        if (out == nullptr) continue;
-        std::uint32_t inside = kNone;
-        int inside_edge = -1;
-        for (std::uint32_t q : pre) {
-          const int j = index_of(atris_[q], a);
-          if (j >= 0 && atris_[q].v[(j + 1) % 3] == b) {
-            inside = q;
-            inside_edge = j;
-          }
-        }
-        if (inside == kNone)
-          throw_internal("block TIN: a fragment boundary edge has no PreF triangle");
-        const std::uint32_t o = *out;
-        if (owner[o] > owner[inside]) {
-          const int j = index_of(atris_[o], b);
-          op.coarser.push_back(
-              {static_cast<std::uint32_t>(i), k,
-               EdgeRef{TriRef{OpId(owner[o]), local[o]}, static_cast<std::uint8_t>(j)}});
-        } else {
-          op.coarser.push_back({static_cast<std::uint32_t>(i), k,
-                                EdgeRef{TriRef{OpId(owner[inside]), local[inside]},
-                                        static_cast<std::uint8_t>(inside_edge)}});
-        }
-      }
-    }
-    op.pre.clear();
-    op.pre_tris.clear();
-    for (std::uint32_t t : pre) {
-      op.pre.push_back({OpId(owner[t]), local[t]});
-      op.parents.push_back(OpId(owner[t]));
-      PreTriangle pt;
-      for (int k = 0; k < 3; ++k) pt.v[k] = index(atris_[t].v[k]);
-      if (atris_[t].is_void) pt.flags |= FragmentTriangle::kVoid;
-      op.pre_tris.push_back(pt);
-    }
-    for (std::vector<OpId>* ids : {&op.parents, &op.children}) {
-      std::sort(ids->begin(), ids->end());
-      ids->erase(std::unique(ids->begin(), ids->end()), ids->end());
-    }
-    compute_op_bounds(op);
   }
 
   void report(double f) const {
@@ -2043,22 +1924,23 @@ class Builder {
   std::uint64_t finest_vertices_ = 0, finest_triangles_ = 0;
   std::vector<MVert> verts_;
   Chunked<MTri> tris_;
-  Chunked<ATri> atris_;  // tris_ compacted for the assembly
   std::vector<Removal> removals_;
   Chunked<std::uint32_t> star_ids_;
   IdMap<std::uint32_t> shared_;      // grid index -> border vertex + 1
   IdMap<std::uint32_t> open_edges_;  // edge -> (tri << 2 | edge)
   std::vector<std::pair<std::uint64_t, std::uint32_t>> scratch_outer_;
   mutable std::uint64_t scanned_ = 0, plans_ = 0;
-  std::vector<std::uint32_t> op_of_;  // removal -> op id
-  std::vector<double> birth_of_;      // removal -> birth_res
-  mutable std::vector<std::uint32_t> scratch_vs_;
   mutable std::vector<std::array<double, 2>> clip_a_, clip_b_;  // overlay_bound's scratch
   std::vector<double> cost_;
   std::vector<std::uint8_t> dirty_;
   std::vector<std::uint32_t> stamp_;
   std::uint32_t round_stamp_ = 0;
   std::vector<std::uint32_t> cand_mark_, seen_;  // candidates of this level; in the next round
+  std::unique_ptr<OpAssembler> assembler_;       // the calling builder's (workers have none)
+  std::size_t fed_ = 0;                          // removals handed to it
+  std::vector<StarTriangle> feed_star_;
+  std::vector<OpAssembler::MadeTriangle> feed_made_;
+  double t_fed_ = 0.0;
   std::uint32_t cand_stamp_ = 0, seen_stamp_ = 0;
 };
 

@@ -38,10 +38,11 @@
 // and the reader are sequential), built by `threads` workers into records of their own and
 // merged in order; the Delaunay repair runs on the calling thread; blocks of the exact levels
 // are copied out, decimated by workers and merged back in order. Ids are the ones a single pass
-// gives, so the CRMR does not depend on the thread count. The final sweep hands each op to an
-// OpSink as it is made (DatabaseStreamWriter spools it to disk); what stays in memory is the build
-// records of the triangles ever made (an MTri of 64 bytes, compacted to 24 for the sweep) and the
-// vertices.
+// gives, so the CRMR does not depend on the thread count. Each removal goes to the out-of-core
+// assembler (op_assembly.h) as it is merged; at the end the assembler orders and links the ops and
+// hands each to an OpSink as it is made (DatabaseStreamWriter spools it to disk). What stays in
+// memory is the build records of the triangles ever made (an MTri of 64 bytes; the assembler
+// has its own copy on disk, so they could be paged out -- not done yet) and the vertices.
 #pragma once
 
 #include <cstdint>
@@ -68,6 +69,9 @@ struct BlockTinOptions {
   /// costs 5 bytes a sample, and its copy) and sets the reader's block cache to an 8th, which
   /// is emptied once the leaf blocks are read.
   std::uint64_t memory_bytes = 0;
+  /// Budget of the final assembly's external sorts (op_assembly.h; 0 = half of
+  /// memory_bytes, at least 16 MiB, or 256 MiB when there is no budget).
+  std::uint64_t assembly_memory_bytes = 0;
   /// Directory of the scratch file holding the samples for the later passes' re-reads (the
   /// Delaunay repair, level 0, the exact upper levels; empty = the system's temporary directory).
   /// Checked for room before any work.
@@ -106,7 +110,7 @@ struct BlockTinStats {
   std::uint64_t plans = 0;                // removals planned (evaluated)
   std::uint64_t temp_bytes = 0;           // written to the scratch file
   // Triangles ever made, and the bytes of the build records (triangles, vertices, removals)
-  // before the final sweep: they stay in memory, outside `memory_bytes`, and grow with the
+  // before the assembly: they stay in memory, outside `memory_bytes`, and grow with the
   // finest mesh (~64 bytes a triangle made, ~3 triangles made per finest-mesh triangle).
   std::uint64_t triangles_made = 0, record_bytes = 0;
   // Seconds: survey pass, leaf windows read, leaf greedy TINs, the Delaunay repair, level 0,
@@ -116,9 +120,12 @@ struct BlockTinStats {
   // level 0 when level0_interleaved (their own figures are then 0); the others are wall time.
   double seconds_survey = 0, seconds_read = 0, seconds_greedy = 0, seconds_delaunay = 0,
          seconds_level0 = 0, seconds_leaves = 0, seconds_upper = 0, seconds_assemble = 0;
+  // Of the assembly (op_assembly.h): handing removals over as they are merged (inside the levels'
+  // times), then, inside seconds_assemble, its joins and making the ops (the sink's add included).
+  double seconds_feed = 0, seconds_join = 0, seconds_emit = 0;
 };
 
-/// Builds the CRMR into `sink`, op by op in id order as the final sweep makes them (the ops never
+/// Builds the CRMR into `sink`, op by op in id order as the assembly makes them (the ops never
 /// exist all at once; smr::DatabaseStreamWriter writes them to a database). Throws smr::Error on
 /// unusable input (fewer than 2x2 samples, no valid sample) or options (block_cells not a power of
 /// two >= 8, max_degree < 3).

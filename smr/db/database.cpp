@@ -21,6 +21,7 @@
 #include "storage/checksum.h"
 #include "storage/error.h"
 #include "storage/external_sort.h"
+#include "storage/record_file.h"
 #include "storage/temp_file.h"
 
 namespace smr {
@@ -30,6 +31,7 @@ using storage::ByteReader;
 using storage::Bytes;
 using storage::ByteView;
 using storage::ByteWriter;
+using storage::RecordFile;
 using storage::Table;
 
 namespace {
@@ -393,35 +395,6 @@ struct Message {
   NormalCone cone;
   std::uint64_t height = 0;
   bool operator<(const Message& o) const { return to < o.to; }
-};
-
-// Sequential records in a scratch file, written through a buffer of 4 MiB.
-template <class T>
-class RecordFile {
- public:
-  explicit RecordFile(const std::string& dir) : file_(dir, 0) {}
-  void push(const T& r) { append(&r, 1); }
-  void append(const T* r, std::size_t n) {
-    buffer_.insert(buffer_.end(), r, r + n);
-    if (buffer_.size() * sizeof(T) >= kFlushBytes) flush();
-  }
-  void flush() {
-    file_.write(count_ * sizeof(T), buffer_.data(), buffer_.size() * sizeof(T));
-    count_ += buffer_.size();
-    buffer_.clear();
-  }
-  std::uint64_t count() const { return count_ + buffer_.size(); }
-  // Records [first, first + out.size()) (after flush()).
-  void read(std::uint64_t first, std::vector<T>& out) const {
-    file_.read(first * sizeof(T), out.data(), out.size() * sizeof(T));
-  }
-  std::uint64_t bytes() const { return count() * sizeof(T); }
-
- private:
-  static constexpr std::size_t kFlushBytes = std::size_t{4} << 20;
-  storage::TempFile file_;
-  std::vector<T> buffer_;
-  std::uint64_t count_ = 0;
 };
 
 }  // namespace

@@ -1,0 +1,434 @@
+// Out-of-core assembly of a decimation's CRMR; op_assembly.h describes the method.
+#include "smr/build/op_assembly.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <vector>
+
+#include "storage/error.h"
+#include "storage/external_sort.h"
+#include "storage/record_file.h"
+
+namespace smr {
+
+namespace {
+
+using storage::ExternalSorter;
+using storage::RecordFile;
+constexpr std::uint32_t kNone = OpAssembler::kNone;
+
+std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
+  return (std::uint64_t(a) << 32) | b;
+}
+
+// A removal's record in the spool: this head, its vertices, its star, then what it made.
+struct SpoolHead {
+  std::uint32_t vertices = 0, star = 0, made = 0, pad = 0;
+};
+
+// The order: falling err, the later removal first among equals.
+struct OrderKey {
+  double err = 0.0;
+  std::uint32_t k = 0, bytes = 0;
+  std::uint64_t offset = 0;
+  bool operator<(const OrderKey& o) const { return err > o.err || (err == o.err && k > o.k); }
+};
+struct OrderEntry {
+  std::uint64_t offset = 0;
+  std::uint32_t k = 0, bytes = 0;
+};
+
+// Raw joins, written as removals come (removal indices), sorted by op id at finish.
+struct RawFixup {  // triangle `tri` made by `creator` is triangle `local` of dest's star
+  std::uint32_t creator = 0, tri = 0, dest = 0, local = 0;  // dest kNone: R^0
+};
+// A directed edge of a triangle (an answer: edge `edge` of triangle `local` of dest's star, made
+// by `creator`) or a fragment boundary edge asking for the triangle across (edge `edge` of star
+// triangle `local` of removal `dest`; its key is the reversed edge b->a). Sorted by key only (the
+// sort is stable), so each edge's triangles and questions meet in one group.
+struct EdgeItem {
+  std::uint64_t key = 0;
+  std::uint32_t dest = 0, creator = 0, local = 0;
+  std::uint8_t edge = 0, question = 0;
+  bool operator<(const EdgeItem& o) const { return key < o.key; }
+};
+// The same, by op ids.
+struct Fixup {
+  std::uint32_t op = 0, tri = 0, owner = 0, local = 0;
+  bool operator<(const Fixup& o) const { return op < o.op || (op == o.op && tri < o.tri); }
+};
+struct Link {  // the live triangle across a boundary edge: its owner op, index, edge
+  std::uint32_t op = 0, tri = 0, edge = 0;
+  std::uint32_t owner = 0, local = 0, coarser_edge = 0;
+  bool operator<(const Link& o) const {
+    if (op != o.op) return op < o.op;
+    return tri < o.tri || (tri == o.tri && edge < o.edge);
+  }
+};
+
+template <class T>
+void put(std::vector<std::uint8_t>& out, const T* p, std::size_t n) {
+  const auto* b = reinterpret_cast<const std::uint8_t*>(p);
+  out.insert(out.end(), b, b + n * sizeof(T));
+}
+
+template <class T>
+const std::uint8_t* get(const std::uint8_t* in, std::vector<T>& out, std::size_t n) {
+  out.resize(n);
+  std::memcpy(out.data(), in, n * sizeof(T));
+  return in + n * sizeof(T);
+}
+
+int index_of(const std::array<std::uint32_t, 3>& v, std::uint32_t x) {
+  for (int k = 0; k < 3; ++k) {
+    if (v[k] == x) return k;
+  }
+  return -1;
+}
+
+// Reads a sorter's stream one op at a time.
+template <class T>
+class Cursor {
+ public:
+  explicit Cursor(ExternalSorter<T>& s) : s_(s) { more_ = s_.next(head_); }
+  // Calls f(record) for each record whose op is `op`; records of earlier ops are an error.
+  template <class F>
+  void take(std::uint32_t op, F&& f) {
+    while (more_ && head_.op <= op) {
+      if (head_.op < op) throw_internal("op assembly: a record names an op already made");
+      f(head_);
+      more_ = s_.next(head_);
+    }
+  }
+  bool done() const { return !more_; }
+
+ private:
+  ExternalSorter<T>& s_;
+  T head_{};
+  bool more_ = false;
+};
+
+}  // namespace
+
+struct OpAssembler::State {
+  explicit State(AssemblyOptions o)
+      : options(std::move(o)),
+        dir(storage::scratch_dir(options.tmp_dir)),
+        spool(dir),
+        fixups(dir),
+        edges(std::make_unique<ExternalSorter<EdgeItem>>(dir, budget(4))),
+        order(std::make_unique<ExternalSorter<OrderKey>>(dir, budget(4))) {}
+
+  AssemblyOptions options;
+  std::string dir;
+  RecordFile<std::uint8_t> spool;
+  RecordFile<RawFixup> fixups;
+  std::unique_ptr<ExternalSorter<EdgeItem>> edges;  // filled as removals come
+  std::unique_ptr<ExternalSorter<OrderKey>> order;  // filled as removals come
+  std::vector<double> err;                          // per removal
+  std::vector<std::uint8_t> record;
+  AssemblyStats stats;
+  bool finished = false;
+
+  std::uint64_t budget(int parts) const {
+    return std::max<std::uint64_t>(options.memory_bytes / parts, 16 << 10);
+  }
+};
+
+OpAssembler::OpAssembler(AssemblyOptions options)
+    : s_(std::make_unique<State>(std::move(options))) {}
+OpAssembler::~OpAssembler() = default;
+
+std::uint64_t OpAssembler::removals() const {
+  return s_->err.size();
+}
+double OpAssembler::error(std::uint32_t k) const {
+  return s_->err.at(k);
+}
+const AssemblyStats& OpAssembler::stats() const {
+  return s_->stats;
+}
+
+std::uint32_t OpAssembler::add_removal(std::span<const std::uint32_t> vertices,
+                                       std::span<const StarTriangle> star,
+                                       std::span<const MadeTriangle> made, double error) {
+  State& s = *s_;
+  if (s.finished) throw_internal("op assembly: add_removal() after finish()");
+  if (s.err.size() >= kNone) throw_internal("op assembly: more than 2^32 - 1 removals");
+  const auto k = static_cast<std::uint32_t>(s.err.size());
+  double e = error;
+  for (std::uint32_t j = 0; j < star.size(); ++j) {
+    const StarTriangle& t = star[j];
+    if (t.creator != kNone) {
+      if (t.creator >= k) throw_internal("op assembly: a star triangle made by a later removal");
+      e = std::max(e, s.err[t.creator]);
+      s.fixups.push({t.creator, t.id, k, j});
+    }
+    for (std::uint32_t i = 0; i < 3; ++i) {
+      s.edges->add({edge_key(t.v[i], t.v[(i + 1) % 3]), k, t.creator, j, std::uint8_t(i), 0});
+    }
+  }
+  // F's boundary edges: a star triangle's edges whose reverse no star triangle has.
+  for (std::uint32_t j = 0; j < star.size(); ++j) {
+    for (std::uint32_t i = 0; i < 3; ++i) {
+      const std::uint32_t a = star[j].v[i], b = star[j].v[(i + 1) % 3];
+      bool inner = false;
+      for (const StarTriangle& o : star) {
+        const int x = index_of(o.v, b);
+        inner = inner || (x >= 0 && o.v[(x + 1) % 3] == a);
+      }
+      if (!inner) s.edges->add({edge_key(b, a), k, kNone, j, std::uint8_t(i), 1});
+    }
+  }
+  s.err.push_back(e);
+  std::vector<std::uint8_t>& r = s.record;
+  r.clear();
+  const SpoolHead head{static_cast<std::uint32_t>(vertices.size()),
+                       static_cast<std::uint32_t>(star.size()),
+                       static_cast<std::uint32_t>(made.size()), 0};
+  put(r, &head, 1);
+  put(r, vertices.data(), vertices.size());
+  put(r, star.data(), star.size());
+  put(r, made.data(), made.size());
+  s.order->add({e, k, static_cast<std::uint32_t>(r.size()), s.spool.count()});
+  s.spool.append(r.data(), r.size());
+  ++s.stats.removals;
+  s.stats.triangles_destroyed += star.size();
+  s.stats.triangles_made += made.size();
+  return k;
+}
+
+void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
+                         const std::function<Vec3(std::uint32_t)>& position, OpSink& sink) {
+  State& s = *s_;
+  if (s.finished) throw_internal("op assembly: finish() called twice");
+  const auto t0 = std::chrono::steady_clock::now();
+  auto since = [](std::chrono::steady_clock::time_point t) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+  };
+  s.finished = true;
+  const std::size_t m = s.err.size();
+  auto report = [&](double f) {
+    if (s.options.progress) s.options.progress(std::clamp(f, 0.0, 1.0));
+  };
+
+  // R^0's triangles join like any star (destroyer kNone = R^0).
+  for (std::uint32_t j = 0; j < base.size(); ++j) {
+    const StarTriangle& t = base[j];
+    if (t.creator != kNone) {
+      if (t.creator >= m) throw_internal("op assembly: a base triangle made by no removal");
+      s.fixups.push({t.creator, t.id, kNone, j});
+    }
+    for (std::uint32_t i = 0; i < 3; ++i) {
+      s.edges->add({edge_key(t.v[i], t.v[(i + 1) % 3]), kNone, t.creator, j, std::uint8_t(i), 0});
+    }
+  }
+  s.spool.flush();
+  s.fixups.flush();
+
+  // Op ids: ranks in the order (R^0 is 0).
+  std::vector<std::uint32_t> op_of(m, 0);
+  RecordFile<OrderEntry> ops(s.dir);
+  {
+    OrderKey o;
+    std::uint32_t i = 0;
+    while (s.order->next(o)) {
+      op_of[o.k] = ++i;
+      ops.push({o.offset, o.k, o.bytes});
+    }
+    ops.flush();
+  }
+  s.stats.scratch_bytes += s.order->spilled_bytes();
+  s.order.reset();
+  auto op_id = [&](std::uint32_t removal) { return removal == kNone ? 0 : op_of[removal]; };
+  constexpr std::uint32_t kNever = kNone;  // killer of a finest triangle: never replaced
+  report(0.05);
+
+  ExternalSorter<Fixup> fixups(s.dir, s.budget(4));
+  s.fixups.for_each([&](const RawFixup& f) {
+    fixups.add({op_of[f.creator], f.tri, op_id(f.dest), f.local});
+  });
+  ExternalSorter<Link> links(s.dir, s.budget(4));
+  {
+    // Each edge's group: the question of op i is answered by the triangle across alive just
+    // before i (owner < i < killer; one at most, as triangles with one directed edge live one
+    // after another).
+    std::vector<EdgeItem> group;
+    EdgeItem e;
+    bool more = s.edges->next(e);
+    while (more) {
+      group.clear();
+      const std::uint64_t key = e.key;
+      for (; more && e.key == key; more = s.edges->next(e)) group.push_back(e);
+      for (const EdgeItem& q : group) {
+        if (q.question == 0) continue;
+        const std::uint32_t i = op_of[q.dest];
+        for (const EdgeItem& r : group) {
+          if (r.question != 0) continue;
+          const std::uint32_t owner = op_id(r.dest);
+          const std::uint32_t killer = r.creator == kNone ? kNever : op_of[r.creator];
+          if (owner < i && i < killer) {
+            links.add({i, q.local, q.edge, owner, r.local, r.edge});
+            break;
+          }
+        }
+      }
+    }
+    s.stats.scratch_bytes += s.edges->spilled_bytes();
+    s.edges.reset();
+  }
+  s.stats.scratch_bytes += s.spool.bytes() + s.fixups.bytes() + ops.bytes();
+  report(0.35);
+
+  double err0 = info.err0;
+  for (double e : s.err) err0 = std::max(err0, e);
+  info.err0 = err0;
+  info.err_final = std::min(info.err_final, err0);
+  auto birth = [&](std::uint32_t removal) { return resolution_of(info, s.err[removal]); };
+  s.stats.seconds_join = since(t0);
+  const auto t1 = std::chrono::steady_clock::now();
+  sink.begin(info, m + 1);
+
+  std::vector<std::uint32_t> depth(m + 1, 0);
+  std::vector<std::uint32_t> vs;  // the op's vertex ids: `lead` introduced ones, then sorted
+  std::size_t lead = 0;
+  auto index = [&](std::uint32_t v) {
+    for (std::size_t j = 0; j < lead; ++j) {
+      if (vs[j] == v) return static_cast<std::uint32_t>(j);
+    }
+    const auto it = std::lower_bound(vs.begin() + static_cast<std::ptrdiff_t>(lead), vs.end(), v);
+    if (it == vs.end() || *it != v) throw_internal("op assembly: a PreF corner is not in F");
+    return static_cast<std::uint32_t>(it - vs.begin());
+  };
+  // Fills the op's vertices (`first` introduced, then the rest of F's by id) and fragment.
+  auto fill = [&](Op& op, std::span<const std::uint32_t> first,
+                  std::span<const StarTriangle> frag) {
+    vs.clear();
+    for (const StarTriangle& t : frag) vs.insert(vs.end(), t.v.begin(), t.v.end());
+    std::sort(vs.begin(), vs.end());
+    vs.erase(std::unique(vs.begin(), vs.end()), vs.end());
+    lead = first.size();
+    if (!first.empty()) {
+      for (std::uint32_t v : first) {
+        const auto it = std::lower_bound(vs.begin(), vs.end(), v);
+        if (it == vs.end() || *it != v)
+          throw_internal("op assembly: a removed vertex is on none of its star's triangles");
+        vs.erase(it);
+      }
+      vs.insert(vs.begin(), first.begin(), first.end());
+    }
+    op.new_vertex_count = static_cast<std::uint32_t>(first.empty() ? vs.size() : first.size());
+    op.vertices.reserve(vs.size());
+    for (std::uint32_t v : vs) op.vertices.push_back({VertexId(v), position(v)});
+    op.fragment.resize(frag.size());
+    for (std::size_t i = 0; i < frag.size(); ++i) {
+      FragmentTriangle& ft = op.fragment[i];
+      for (int k = 0; k < 3; ++k) ft.v[k] = index(frag[i].v[k]);
+      if (frag[i].is_void) ft.flags |= FragmentTriangle::kVoid;
+      if (frag[i].creator != kNone) {
+        ft.killer = OpId(op_of[frag[i].creator]);
+        ft.death_res = birth(frag[i].creator);
+        op.children.push_back(ft.killer);
+      }
+    }
+    derive_fragment_neighbours(op);
+  };
+  auto emit = [&](Op&& op) {
+    std::uint32_t& d = depth[op.id.value];
+    for (OpId p : op.parents) d = std::max(d, depth[p.value] + 1);
+    s.stats.dag_height = std::max<std::uint64_t>(s.stats.dag_height, d);
+    for (std::vector<OpId>* ids : {&op.parents, &op.children}) {
+      std::sort(ids->begin(), ids->end());
+      ids->erase(std::unique(ids->begin(), ids->end()), ids->end());
+    }
+    compute_op_bounds(op);
+    sink.add(std::move(op));
+  };
+  {
+    Op op;
+    op.id = OpId(0);
+    fill(op, {}, base);
+    op.error = err0;
+    emit(std::move(op));
+  }
+
+  Cursor<Fixup> fix(fixups);
+  Cursor<Link> link(links);
+  std::vector<OrderEntry> chunk;
+  std::vector<std::uint8_t> bytes;
+  std::vector<std::uint32_t> verts;
+  std::vector<StarTriangle> star;
+  std::vector<MadeTriangle> made;
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> owner;  // per made triangle: op, index
+  std::uint64_t at = 0;
+  for (std::uint32_t i = 1; i <= m; ++i) {
+    if (i - 1 == at + chunk.size()) {
+      at = i - 1;
+      chunk.resize(static_cast<std::size_t>(std::min<std::uint64_t>(4096, m - at)));
+      ops.read(at, chunk);
+    }
+    const OrderEntry& oe = chunk[i - 1 - at];
+    bytes.resize(oe.bytes);
+    s.spool.read(oe.offset, bytes);
+    SpoolHead head;
+    std::memcpy(&head, bytes.data(), sizeof head);
+    const std::uint8_t* p = bytes.data() + sizeof head;
+    p = get(p, verts, head.vertices);
+    p = get(p, star, head.star);
+    get(p, made, head.made);
+
+    Op op;
+    op.id = OpId(i);
+    fill(op, verts, star);
+    op.error = s.err[oe.k];
+    op.birth_res = birth(oe.k);
+    owner.assign(made.size(), {kNone, 0});
+    fix.take(i, [&](const Fixup& f) {
+      for (std::size_t j = 0; j < made.size(); ++j) {
+        if (made[j].id == f.tri) owner[j] = {f.owner, f.local};
+      }
+    });
+    for (std::size_t j = 0; j < made.size(); ++j) {
+      if (owner[j].first == kNone)
+        throw_internal("op assembly: a made triangle is in no later star nor in R^0");
+      op.pre.push_back({OpId(owner[j].first), owner[j].second});
+      op.parents.push_back(OpId(owner[j].first));
+      PreTriangle pt;
+      for (int k = 0; k < 3; ++k) pt.v[k] = index(made[j].v[k]);
+      if (made[j].is_void) pt.flags |= FragmentTriangle::kVoid;
+      op.pre_tris.push_back(pt);
+    }
+    // Links: the newer of PreF's triangle with a->b and the live one across.
+    link.take(i, [&](const Link& l) {
+      const std::array<std::uint32_t, 3>& v = star[l.tri].v;
+      const std::uint32_t a = v[l.edge], b = v[(l.edge + 1) % 3];
+      std::size_t inside = made.size();
+      int inside_edge = -1;
+      for (std::size_t j = 0; j < made.size(); ++j) {
+        const int x = index_of(made[j].v, a);
+        if (x >= 0 && made[j].v[(x + 1) % 3] == b) {
+          inside = j;
+          inside_edge = x;
+        }
+      }
+      if (inside == made.size())
+        throw_internal("op assembly: a fragment boundary edge has no PreF triangle");
+      EdgeRef target{TriRef{OpId(owner[inside].first), owner[inside].second},
+                     static_cast<std::uint8_t>(inside_edge)};
+      if (l.owner > owner[inside].first) {
+        target = EdgeRef{TriRef{OpId(l.owner), l.local}, static_cast<std::uint8_t>(l.coarser_edge)};
+      }
+      op.coarser.push_back({l.tri, static_cast<std::uint8_t>(l.edge), target});
+      ++s.stats.links;
+    });
+    emit(std::move(op));
+    if ((i & 0xffff) == 0) report(0.35 + 0.65 * double(i) / double(m));
+  }
+  if (!fix.done() || !link.done()) throw_internal("op assembly: records name no op");
+  s.stats.scratch_bytes += fixups.spilled_bytes() + links.spilled_bytes();
+  s.stats.seconds_emit = since(t1);
+  report(1.0);
+}
+
+}  // namespace smr
