@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <functional>
 #include <limits>
@@ -17,8 +18,10 @@
 
 #include <glm/geometric.hpp>
 
+#include "smr/build/op_assembly.h"
 #include "smr/core/geometry.h"
 #include "storage/error.h"
+#include "storage/external_sort.h"
 
 namespace smr {
 
@@ -152,6 +155,42 @@ class Builder {
     init_components();
   }
 
+  /// A block of the out-of-core builder: local vertices with their (partial) quadrics and
+  /// locks, triangles with their bounds. `constrain[v]`: v was locked one level below, so open
+  /// edges of v's that now have an unlocked end get their boundary constraint planes here.
+  Builder(const QemPmOptions& options, std::vector<Vec3> pos, std::vector<Quadric> quad,
+          std::vector<std::uint8_t> locked, const std::vector<std::uint8_t>& constrain,
+          const std::vector<Tri>& tris)
+      : options_(options) {
+    pos_ = std::move(pos);
+    quad_ = std::move(quad);
+    locked_ = std::move(locked);
+    const std::size_t n = pos_.size();
+    star_.resize(n);
+    removed_.assign(n, 0);
+    boundary_.assign(n, 0);
+    stamp_.assign(n, 0);
+    tris_.reserve(tris.size() * 2);
+    for (const Tri& t : tris) add_triangle(t);
+    cos_max_turn_ = std::cos(options_.max_normal_turn_degrees * 3.14159265358979323846 / 180.0);
+    std::unordered_map<std::uint64_t, std::uint32_t> directed;
+    directed.reserve(tris_.size() * 3);
+    for (std::uint32_t id = 0; id < tris_.size(); ++id) {
+      const Tri& t = tris_[id];
+      for (int k = 0; k < 3; ++k) directed.emplace(edge_key(t.v[k], t.v[(k + 1) % 3]), id);
+    }
+    for (const Tri& t : tris_) {
+      for (int k = 0; k < 3; ++k) {
+        const std::uint32_t a = t.v[k], b = t.v[(k + 1) % 3];
+        if (directed.count(edge_key(b, a)) != 0) continue;
+        boundary_[a] = boundary_[b] = 1;  // exact for unlocked vertices (all their faces are here)
+        if ((locked_[a] && locked_[b]) || !(constrain[a] && constrain[b])) continue;
+        add_constraint(t, k);
+      }
+    }
+    init_components();
+  }
+
   Crmr run(const std::string& name, QemPmStats* stats) {
     simplify();
     if (options_.spawn_components && exhausted_) remove_components();
@@ -210,17 +249,26 @@ class Builder {
         const std::uint32_t a = t.v[k], b = t.v[(k + 1) % 3];
         if (directed.count(edge_key(b, a)) != 0) continue;
         boundary_[a] = boundary_[b] = 1;
-        const Vec3 e = pos_[b] - pos_[a];
-        Vec3 m = glm::cross(e, n);
-        const double ml = glm::length(m);
-        if (!(ml > 0.0)) continue;
-        m /= ml;
-        Quadric bq;
-        bq.add_plane(m, -glm::dot(m, pos_[a]), options_.boundary_weight * glm::dot(e, e));
-        quad_[a] += bq;
-        quad_[b] += bq;
+        add_constraint(t, k);
       }
     }
+  }
+
+  // The constraint plane of boundary edge k of t: through the edge, perpendicular to t.
+  void add_constraint(const Tri& t, int k) {
+    const std::uint32_t a = t.v[k], b = t.v[(k + 1) % 3];
+    const Vec3 c = normal(t.v);
+    const double len = glm::length(c);
+    if (!(len > 0.0)) return;
+    const Vec3 e = pos_[b] - pos_[a];
+    Vec3 m = glm::cross(e, c / len);
+    const double ml = glm::length(m);
+    if (!(ml > 0.0)) return;
+    m /= ml;
+    Quadric bq;
+    bq.add_plane(m, -glm::dot(m, pos_[a]), options_.boundary_weight * glm::dot(e, e));
+    quad_[a] += bq;
+    quad_[b] += bq;
   }
 
   void init_components() {
@@ -279,6 +327,9 @@ class Builder {
   }
   // With nf = neighbours(from).
   bool valid(std::uint32_t from, std::uint32_t to, const std::vector<std::uint32_t>& nf) {
+    // A block's locked vertices stay, and a collapse needs its target's whole star (the link
+    // condition), which a locked vertex has only partly in the block.
+    if (is_locked(from) || is_locked(to)) return false;
     std::uint32_t shared = 0;
     std::array<std::uint32_t, 2> opposite{kNone, kNone};
     std::uint32_t replaced = 0;
@@ -356,7 +407,7 @@ class Builder {
 
   void push_best(std::uint32_t from) {
     ++stamp_[from];
-    if (removed_[from]) return;
+    if (removed_[from] || is_locked(from)) return;
     neighbours(from, cand_);
     // The cheapest valid target (ties: the smaller id): validity, the costly test, is checked in
     // order of cost until one passes.
@@ -898,6 +949,59 @@ class Builder {
     return crmr;
   }
 
+  bool is_locked(std::uint32_t v) const { return !locked_.empty() && locked_[v] != 0; }
+
+  // ---- independent-set rounds (the block builder) ------------------------------------------
+
+  // Rounds of collapses whose bound is at most `tolerance`, cheapest quadric cost first; in a
+  // round no two collapses touch (each takes its two vertices and their neighbours), so none
+  // depends on another of its round and the DAG height is at most the number of rounds.
+  // Returns the rounds that made a collapse.
+  std::uint64_t simplify_rounds(double tolerance) {
+    std::uint64_t rounds = 0;
+    std::vector<Candidate> cands;
+    std::vector<std::uint8_t> taken(pos_.size(), 0);
+    for (;;) {
+      cands.clear();
+      for (std::uint32_t v = 0; v < pos_.size(); ++v) {
+        if (removed_[v] || is_locked(v)) continue;
+        neighbours(v, cand_);
+        ranked_.clear();
+        for (std::uint32_t to : cand_) ranked_.push_back({cost(v, to), to});
+        std::sort(ranked_.begin(), ranked_.end());
+        for (const auto& [c, to] : ranked_) {
+          if (!valid(v, to, cand_)) continue;
+          cands.push_back({c, v, to, 0});
+          break;
+        }
+      }
+      // Candidate's order puts the cheapest last (it serves a max-heap).
+      std::sort(cands.begin(), cands.end(),
+                [](const Candidate& a, const Candidate& b) { return b < a; });
+      std::fill(taken.begin(), taken.end(), 0);
+      std::uint64_t made = 0;
+      for (const Candidate& c : cands) {
+        if (taken[c.from] || taken[c.to]) continue;
+        neighbours(c.from, ring_);
+        bool free = true;
+        for (std::uint32_t w : ring_) free = free && !taken[w];
+        neighbours(c.to, local_);
+        for (std::uint32_t w : local_) free = free && !taken[w];
+        if (!free) continue;
+        const double error = collapse_error(c.from, c.to);
+        if (error > tolerance) continue;
+        taken[c.from] = taken[c.to] = 1;
+        for (std::uint32_t w : ring_) taken[w] = 1;
+        for (std::uint32_t w : local_) taken[w] = 1;
+        apply(c.from, c.to, error);
+        ++made;
+      }
+      if (made == 0) return rounds;
+      ++rounds;
+    }
+  }
+
+  friend class BlockPmBuilder;
   QemPmOptions options_;
   QemPmStats stats_;
   bool exhausted_ = false;  // simplification went as far as the rules allow
@@ -907,6 +1011,7 @@ class Builder {
   std::vector<std::vector<std::uint32_t>> star_;
   std::vector<Quadric> quad_;
   std::vector<std::uint8_t> removed_, boundary_;
+  std::vector<std::uint8_t> locked_;  // block builder: vertices that stay (empty: none)
   std::vector<std::uint32_t> stamp_, comp_, comp_vertices_;
   std::vector<std::uint8_t> comp_open_;
   std::priority_queue<Candidate> heap_;
@@ -923,6 +1028,342 @@ class Builder {
   std::vector<std::uint32_t> tri_op_, tri_local_;
 };
 
+// ---- out of core: octree blocks with locked borders (qem_pm.h, build_block_pm) -------------
+
+struct FaceRecord {  // a source triangle and its leaf cell
+  std::uint64_t cell = 0;
+  std::array<std::uint32_t, 3> v{};
+  std::uint32_t pad = 0;
+  bool operator<(const FaceRecord& o) const { return cell < o.cell; }
+};
+
+// What a block hands to its parent: its triangles (global vertex and triangle ids, bounds, the
+// collapse that made each) and the quadrics of their vertices.
+struct BlockTriangle {
+  std::array<std::uint32_t, 3> v{};
+  double e = 0.0;
+  std::uint32_t creator = kNone;  // global removal
+  std::uint32_t id = 0;
+};
+struct BlockState {
+  std::vector<BlockTriangle> tris;
+  std::vector<std::pair<std::uint32_t, Quadric>> quads;  // by vertex id
+};
+
+// Spreads the low 21 bits of x to every third bit (Morton order).
+std::uint64_t spread3(std::uint64_t x) {
+  x &= 0x1fffff;
+  x = (x | x << 32) & 0x1f00000000ffffULL;
+  x = (x | x << 16) & 0x1f0000ff0000ffULL;
+  x = (x | x << 8) & 0x100f00f00f00f00fULL;
+  x = (x | x << 4) & 0x10c30c30c30c30c3ULL;
+  x = (x | x << 2) & 0x1249249249249249ULL;
+  return x;
+}
+
+class BlockPmBuilder {
+ public:
+  BlockPmBuilder(const MeshStream& mesh, const BlockPmOptions& options, BlockPmStats& stats)
+      : mesh_(mesh), opt_(options), stats_(stats) {
+    if (!(options.tolerance_fraction > 0.0) || !std::isfinite(options.tolerance_fraction))
+      throw_input("block PM: the tolerance fraction must be positive");
+    if (options.leaf_triangles < 16)
+      throw_input("block PM: leaf blocks need at least 16 triangles");
+    budget_ = options.memory_bytes != 0 ? options.memory_bytes : std::uint64_t{256} << 20;
+    qem_.max_normal_turn_degrees = options.max_normal_turn_degrees;
+    qem_.boundary_weight = options.boundary_weight;
+    qem_.spawn_components = false;
+    if (!(qem_.max_normal_turn_degrees > 0.0 && qem_.max_normal_turn_degrees <= 180.0))
+      throw_input("block PM: max normal turn must be in (0, 180] degrees");
+  }
+
+  void run(OpSink& sink) {
+    using Clock = std::chrono::steady_clock;
+    const auto t0 = Clock::now();
+    auto since = [](Clock::time_point t) {
+      return std::chrono::duration<double>(Clock::now() - t).count();
+    };
+    read_vertices();
+    AssemblyOptions ao;
+    ao.tmp_dir = opt_.tmp_dir;
+    ao.memory_bytes = budget_ / 2;
+    ao.progress = [this](double f) { report(0.9 + 0.1 * f); };
+    assembler_ = std::make_unique<OpAssembler>(ao);
+    storage::ExternalSorter<FaceRecord> faces(opt_.tmp_dir, budget_ / 2);
+    sort_faces(faces);
+    stats_.seconds_sort = since(t0);
+    const auto t1 = Clock::now();
+    FaceRecord f;
+    bool more = faces.next(f);
+    std::vector<std::array<std::uint32_t, 3>> leaf;
+    while (more) {
+      const std::uint64_t cell = f.cell;
+      leaf.clear();
+      for (; more && f.cell == cell; more = faces.next(f)) leaf.push_back(f.v);
+      ++stats_.leaf_blocks;
+      push(0, cell, leaf_state(leaf));
+      report(0.9 * double(leaf_done_ += leaf.size()) / double(stats_.triangles));
+    }
+    stats_.temp_bytes += faces.spilled_bytes();
+    for (int l = 0; l < levels_; ++l) flush(l);
+    if (pending_[levels_].size() != 1) throw_internal("block PM: the root block is missing");
+    BlockState root = std::move(pending_[levels_].front());
+    stats_.seconds_blocks = since(t1);
+    const auto t2 = Clock::now();
+    finish(root, sink);
+    stats_.seconds_assemble = since(t2);
+  }
+
+ private:
+  void report(double f) const {
+    if (opt_.progress) opt_.progress(std::clamp(f, 0.0, 1.0));
+  }
+
+  void read_vertices() {
+    pos_.reserve(mesh_.vertex_count());
+    mesh_.vertices([&](std::span<const Vec3> batch) {
+      for (const Vec3& p : batch) {
+        if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+          throw_input("mesh '" + mesh_.name() + "': vertex " + std::to_string(pos_.size()) +
+                      " has a coordinate that is not finite");
+        pos_.push_back(p);
+        box_.add(p);
+      }
+    });
+    if (pos_.size() >= kNone) throw_input("mesh '" + mesh_.name() + "': too many vertices");
+    stats_.vertices = pos_.size();
+  }
+
+  // Leaf cells: the bounding cube split 2^levels_ times per axis, about leaf_triangles each.
+  void sort_faces(storage::ExternalSorter<FaceRecord>& faces) {
+    const std::uint64_t nt = mesh_.triangle_count();
+    if (nt == 0) throw_input("mesh '" + mesh_.name() + "' has no triangles");
+    levels_ = 0;
+    while (levels_ < 20 && (std::uint64_t{1} << (3 * levels_)) * opt_.leaf_triangles < nt)
+      ++levels_;
+    const Vec3 ext = box_.hi - box_.lo;
+    side_ = std::max({ext.x, ext.y, ext.z, 1e-300});
+    const double cells = double(std::uint64_t{1} << levels_);
+    vmin_.assign(pos_.size(), ~std::uint64_t{0});
+    vmax_.assign(pos_.size(), 0);
+    std::uint64_t index = 0;
+    mesh_.triangles([&](std::span<const std::array<std::uint32_t, 3>> batch) {
+      for (const auto& t : batch) {
+        for (std::uint32_t v : t) {
+          if (v >= pos_.size())
+            throw_input("mesh '" + mesh_.name() + "': triangle " + std::to_string(index) +
+                        " names vertex " + std::to_string(v) + ", past the last (" +
+                        std::to_string(pos_.size()) + " vertices)");
+        }
+        const Vec3 c = (pos_[t[0]] + pos_[t[1]] + pos_[t[2]]) / 3.0;
+        std::uint64_t code = 0;
+        for (int a = 0; a < 3; ++a) {
+          const double u = (c[a] - box_.lo[a]) / side_ * cells;
+          const auto k = static_cast<std::uint64_t>(std::clamp(u, 0.0, cells - 1.0));
+          code |= spread3(k) << a;
+        }
+        for (std::uint32_t v : t) {
+          vmin_[v] = std::min(vmin_[v], code);
+          vmax_[v] = std::max(vmax_[v], code);
+        }
+        faces.add({code, t, 0});
+        ++index;
+      }
+    });
+    stats_.triangles = index;
+    stats_.levels = levels_;
+    pending_.resize(levels_ + 1);
+    pending_code_.assign(levels_ + 1, 0);
+  }
+
+  bool locked_at(std::uint32_t v, int level) const {
+    return level < levels_ && (vmin_[v] >> (3 * level)) != (vmax_[v] >> (3 * level));
+  }
+
+  BlockState leaf_state(const std::vector<std::array<std::uint32_t, 3>>& leaf) {
+    BlockState b;
+    std::unordered_map<std::uint32_t, Quadric> quads;
+    for (const auto& t : leaf) {
+      b.tris.push_back({t, 0.0, kNone, next_tri_++});
+      const Vec3 c = glm::cross(pos_[t[1]] - pos_[t[0]], pos_[t[2]] - pos_[t[0]]);
+      const double len = glm::length(c);
+      Quadric q;
+      if (len > 0.0) q.add_plane(c / len, -glm::dot(c / len, pos_[t[0]]), 0.5 * len);
+      for (std::uint32_t v : t) quads[v] += q;
+    }
+    b.quads.assign(quads.begin(), quads.end());
+    std::sort(b.quads.begin(), b.quads.end(),
+              [](const auto& x, const auto& y) { return x.first < y.first; });
+    return simplify(0, std::move(b));
+  }
+
+  // A block of `level` done: it waits for its siblings; a parent is made when the next block
+  // belongs to another parent (blocks come in Morton order).
+  void push(int level, std::uint64_t code, BlockState b) {
+    if (level < levels_ && !pending_[level].empty() && (code >> 3) != pending_code_[level] >> 3) {
+      flush(level);
+    }
+    pending_[level].push_back(std::move(b));
+    pending_code_[level] = code;
+  }
+
+  void flush(int level) {
+    if (pending_[level].empty()) return;
+    BlockState merged;
+    std::vector<std::pair<std::uint32_t, Quadric>> quads;
+    for (BlockState& b : pending_[level]) {
+      merged.tris.insert(merged.tris.end(), b.tris.begin(), b.tris.end());
+      quads.insert(quads.end(), b.quads.begin(), b.quads.end());
+    }
+    pending_[level].clear();
+    std::stable_sort(quads.begin(), quads.end(),
+                     [](const auto& x, const auto& y) { return x.first < y.first; });
+    for (const auto& [v, q] : quads) {
+      if (!merged.quads.empty() && merged.quads.back().first == v) {
+        merged.quads.back().second += q;
+      } else {
+        merged.quads.push_back({v, q});
+      }
+    }
+    push(level + 1, pending_code_[level] >> 3, simplify(level + 1, std::move(merged)));
+  }
+
+  // Simplifies one block and hands its collapses to the assembler.
+  BlockState simplify(int level, BlockState in) {
+    stats_.max_block_triangles =
+        std::max<std::uint64_t>(stats_.max_block_triangles, in.tris.size());
+    const std::size_t n = in.quads.size();
+    std::vector<std::uint32_t> gid(n);
+    std::vector<Vec3> pos(n);
+    std::vector<Quadric> quad(n);
+    std::vector<std::uint8_t> locked(n), constrain(n);
+    std::unordered_map<std::uint32_t, std::uint32_t> local;
+    local.reserve(n * 2);
+    for (std::uint32_t i = 0; i < n; ++i) {
+      const std::uint32_t v = in.quads[i].first;
+      gid[i] = v;
+      pos[i] = pos_[v];
+      quad[i] = in.quads[i].second;
+      locked[i] = locked_at(v, level) ? 1 : 0;
+      constrain[i] = level == 0 || locked_at(v, level - 1) ? 1 : 0;
+      local.emplace(v, i);
+    }
+    std::vector<Tri> tris;
+    tris.reserve(in.tris.size());
+    for (const BlockTriangle& t : in.tris) {
+      Tri lt;
+      for (int k = 0; k < 3; ++k) lt.v[k] = local.at(t.v[k]);
+      lt.e = t.e;
+      tris.push_back(lt);
+    }
+    Builder b(qem_, std::move(pos), std::move(quad), std::move(locked), constrain, tris);
+    // Stages of growing tolerance: up to tolerance_fraction of the block's side (the root: as
+    // far as the rules allow).
+    const double top =
+        opt_.tolerance_fraction * side_ / double(std::uint64_t{1} << (levels_ - level));
+    double eps = level == 0 ? top / 1024.0 : top / 2.0;
+    std::uint64_t rounds = 0;
+    for (;; eps *= 2.0) {
+      const bool last = level < levels_ ? eps >= top : eps > 4.0 * side_;
+      rounds += b.simplify_rounds(last && level == levels_ ? kInfinity : std::min(eps, top));
+      if (last) break;
+    }
+    stats_.rounds += rounds;
+    // The collapses, in order, as removals; new triangles get the next global ids.
+    const std::uint32_t k0 = static_cast<std::uint32_t>(assembler_->removals());
+    const std::size_t n_in = in.tris.size();
+    std::vector<std::uint32_t> id_of(b.tris_.size()), creator_of(b.tris_.size());
+    for (std::size_t t = 0; t < n_in; ++t) {
+      id_of[t] = in.tris[t].id;
+      creator_of[t] = in.tris[t].creator;
+    }
+    std::vector<OpAssembler::StarTriangle> star;
+    std::vector<OpAssembler::MadeTriangle> made;
+    for (std::uint32_t c = 0; c < b.collapses_.size(); ++c) {
+      const Collapse& col = b.collapses_[c];
+      star.clear();
+      for (std::uint32_t i = col.old_begin; i < col.old_end; ++i) {
+        const std::uint32_t t = b.old_tris_[i];
+        const Tri& x = b.tris_[t];
+        star.push_back({{gid[x.v[0]], gid[x.v[1]], gid[x.v[2]]}, id_of[t], creator_of[t], false});
+      }
+      made.clear();
+      for (std::uint32_t i = col.new_begin; i < col.new_end; ++i) {
+        const std::uint32_t t = b.new_tris_[i];
+        const Tri& x = b.tris_[t];
+        id_of[t] = next_tri_++;
+        creator_of[t] = k0 + c;
+        made.push_back({{gid[x.v[0]], gid[x.v[1]], gid[x.v[2]]}, id_of[t], false});
+      }
+      const std::uint32_t removed = gid[col.removed];
+      assembler_->add_removal(std::span(&removed, 1), star, made, col.error);
+    }
+    stats_.collapses += b.collapses_.size();
+    BlockState out;
+    std::vector<std::uint8_t> used(n, 0);
+    for (std::uint32_t t = 0; t < b.tris_.size(); ++t) {
+      const Tri& x = b.tris_[t];
+      if (x.destroyer != kNone) continue;
+      out.tris.push_back({{gid[x.v[0]], gid[x.v[1]], gid[x.v[2]]}, x.e, creator_of[t], id_of[t]});
+      for (std::uint32_t v : x.v) used[v] = 1;
+    }
+    for (std::uint32_t i = 0; i < n; ++i) {
+      if (used[i]) out.quads.push_back({gid[i], b.quad_[i]});
+    }
+    return out;
+  }
+
+  void finish(const BlockState& root, OpSink& sink) {
+    CrmrInfo info;
+    info.kind = ModelKind::kMesh3d;
+    info.source = mesh_.name();
+    info.builder = "block-pm leaf-triangles=" + std::to_string(opt_.leaf_triangles) +
+                   " tolerance-fraction=" + std::to_string(opt_.tolerance_fraction) +
+                   " max-normal-turn=" + std::to_string(opt_.max_normal_turn_degrees) +
+                   " boundary-weight=" + std::to_string(opt_.boundary_weight);
+    std::vector<std::uint8_t> used(pos_.size(), 0);
+    std::vector<OpAssembler::StarTriangle> base;
+    for (const BlockTriangle& t : root.tris) {
+      base.push_back({t.v, t.id, t.creator, false});
+      info.err0 = std::max(info.err0, t.e);
+    }
+    for (std::uint32_t v = 0; v < pos_.size(); ++v) {
+      if (vmax_[v] >= vmin_[v]) {
+        info.bounds.add(pos_[v]);
+        ++info.vertex_count;
+      }
+    }
+    for (const BlockTriangle& t : root.tris) {
+      for (std::uint32_t v : t.v) used[v] = 1;
+    }
+    stats_.base_triangles = base.size();
+    stats_.base_vertices = static_cast<std::uint64_t>(std::count(used.begin(), used.end(), 1));
+    info.err_final = 0.0;
+    assembler_->finish(
+        info, base, [this](std::uint32_t v) { return pos_[v]; }, sink);
+    stats_.dag_height = assembler_->stats().dag_height;
+    stats_.temp_bytes += assembler_->stats().scratch_bytes;
+    report(1.0);
+  }
+
+  static constexpr double kInfinity = std::numeric_limits<double>::infinity();
+  const MeshStream& mesh_;
+  const BlockPmOptions& opt_;
+  BlockPmStats& stats_;
+  QemPmOptions qem_;
+  std::uint64_t budget_ = 0;
+  std::vector<Vec3> pos_;
+  Box3 box_;
+  double side_ = 1.0;
+  int levels_ = 0;
+  std::vector<std::uint64_t> vmin_, vmax_;        // leaf cells of each vertex's triangles
+  std::vector<std::vector<BlockState>> pending_;  // per level: blocks waiting for siblings
+  std::vector<std::uint64_t> pending_code_;
+  std::uint32_t next_tri_ = 0;
+  std::uint64_t leaf_done_ = 0;
+  std::unique_ptr<OpAssembler> assembler_;
+};
+
 }  // namespace
 
 Crmr build_qem_pm(const TriangleMesh& mesh, const std::string& name, const QemPmOptions& options,
@@ -936,6 +1377,22 @@ Crmr build_qem_pm(const TriangleMesh& mesh, const std::string& name, const QemPm
   }
   Builder b(mesh, options);
   return b.run(name, stats);
+}
+
+}  // namespace smr
+
+namespace smr {
+
+void build_block_pm(const MeshStream& mesh, OpSink& sink, const BlockPmOptions& options,
+                    BlockPmStats* stats) {
+  BlockPmStats local;
+  BlockPmBuilder(mesh, options, stats != nullptr ? *stats : local).run(sink);
+}
+
+Crmr build_block_pm(const MeshStream& mesh, const BlockPmOptions& options, BlockPmStats* stats) {
+  CrmrCollector collector;
+  build_block_pm(mesh, collector, options, stats);
+  return collector.take();
 }
 
 }  // namespace smr

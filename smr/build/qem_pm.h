@@ -25,9 +25,12 @@
 // op of its parents (bounded fragment size).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
+#include <span>
 #include <string>
+#include <utility>
 
 #include "smr/core/crmr.h"
 #include "smr/core/mesh.h"
@@ -62,6 +65,89 @@ struct QemPmStats {
   std::uint64_t base_vertices = 0, base_triangles = 0;
   std::uint64_t rejected_link = 0, rejected_flip = 0, rejected_boundary = 0;
 };
+
+/// A triangle mesh read in passes, never held whole: the block builder's input. Indices are
+/// into the vertex order; the mesh must be manifold and consistently oriented (what read_mesh
+/// validates in memory).
+class MeshStream {
+ public:
+  virtual ~MeshStream() = default;
+  virtual std::string name() const = 0;
+  virtual std::uint64_t vertex_count() const = 0;
+  virtual std::uint64_t triangle_count() const = 0;
+  /// Calls f with consecutive batches of the vertices' positions, in order.
+  virtual void vertices(const std::function<void(std::span<const Vec3>)>& f) const = 0;
+  /// Calls f with consecutive batches of the triangles, in order.
+  virtual void triangles(
+      const std::function<void(std::span<const std::array<std::uint32_t, 3>>)>& f) const = 0;
+};
+
+/// A mesh in memory as a MeshStream.
+class MemoryMeshStream final : public MeshStream {
+ public:
+  MemoryMeshStream(const TriangleMesh& mesh, std::string name)
+      : mesh_(mesh), name_(std::move(name)) {}
+  std::string name() const override { return name_; }
+  std::uint64_t vertex_count() const override { return mesh_.positions.size(); }
+  std::uint64_t triangle_count() const override { return mesh_.triangles.size(); }
+  void vertices(const std::function<void(std::span<const Vec3>)>& f) const override {
+    f(mesh_.positions);
+  }
+  void triangles(
+      const std::function<void(std::span<const std::array<std::uint32_t, 3>>)>& f) const override {
+    f(mesh_.triangles);
+  }
+
+ private:
+  const TriangleMesh& mesh_;
+  std::string name_;
+};
+
+// Out of core (DESIGN.md section 4; Hoppe 1998's block construction, in 3-D): the triangles are
+// sorted by the octree leaf cell of their centroid (an external sort), so each leaf block is read
+// on its own. A block is simplified by the collapses above with its locked vertices -- those with
+// triangles in another block of its level -- kept, in stages of growing tolerance (x2, up to
+// tolerance_fraction of the block's side, doubling per level as blocks do), each stage in
+// independent-set rounds (no two collapses of a round touch, so the DAG height is at most the
+// number of rounds). Then 2x2x2 blocks merge, the borders between them unlock and simplification
+// goes on, up to the root, which simplifies as far as the rules allow. Every collapse goes to the
+// out-of-core assembler (op_assembly.h) as it is made, so ops are ordered and linked on disk.
+// Components are not spawned (R^0 keeps each at its smallest) and splits are not coalesced.
+// Quadrics: each block adds its triangles' planes to their corners and sums what its children
+// carried; boundary constraint planes are added when an edge's boundary status is first known
+// (one end unlocked), from the triangle then on it.
+// Memory: 24 bytes a vertex (positions) and 8 (their octree span), 16 a collapse (the
+// assembler), the largest block being simplified and the blocks waiting for their siblings.
+struct BlockPmOptions {
+  /// Leaf octree cells are made small enough to hold about this many triangles on average.
+  std::uint64_t leaf_triangles = 1 << 16;
+  /// A level's largest tolerance, as a fraction of its blocks' side.
+  double tolerance_fraction = 1.0 / 64.0;
+  double max_normal_turn_degrees = 75.0;
+  double boundary_weight = 100.0;
+  /// Budget of the external sorts (triangle order, assembly); 0 = 256 MiB.
+  std::uint64_t memory_bytes = 0;
+  /// Scratch files' directory (empty = the system's temporary directory).
+  std::string tmp_dir;
+  std::function<void(double)> progress;
+};
+
+struct BlockPmStats {
+  int levels = 0;  // octree levels above the leaves (the root is the last)
+  std::uint64_t leaf_blocks = 0, vertices = 0, triangles = 0;
+  std::uint64_t collapses = 0, rounds = 0, dag_height = 0;
+  std::uint64_t base_vertices = 0, base_triangles = 0;
+  std::uint64_t max_block_triangles = 0;  // largest block simplified
+  std::uint64_t temp_bytes = 0;
+  double seconds_sort = 0, seconds_blocks = 0, seconds_assemble = 0;
+};
+
+/// Builds the CRMR of `mesh` block by block into `sink` (ops in id order). Throws smr::Error on
+/// an empty mesh, an index out of range or unusable options.
+void build_block_pm(const MeshStream& mesh, OpSink& sink, const BlockPmOptions& options = {},
+                    BlockPmStats* stats = nullptr);
+Crmr build_block_pm(const MeshStream& mesh, const BlockPmOptions& options = {},
+                    BlockPmStats* stats = nullptr);
 
 /// Builds the CRMR of `mesh` (a validated manifold, consistently oriented mesh: smr/io's
 /// read_mesh output). `name` is recorded as the source. Throws smr::Error on an empty mesh.

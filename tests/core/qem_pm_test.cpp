@@ -7,6 +7,8 @@
 // bound checked against the source by sampled distances in both directions.
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <string>
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
@@ -42,6 +44,25 @@ std::vector<TriRef> level(const Crmr& crmr, bool finest) {
 std::array<std::uint64_t, 3> canonical(std::array<std::uint64_t, 3> t) {
   std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());
   return t;
+}
+
+// The fully refined mesh M^m is the source: same triangles (orientation kept), no vertex moved.
+void expect_finest_mesh_is_the_source(const Crmr& crmr, const TriangleMesh& source) {
+  std::vector<std::array<std::uint64_t, 3>> want, got;
+  for (const auto& t : source.triangles) want.push_back(canonical({t[0], t[1], t[2]}));
+  for (const TriRef& ref : level(crmr, true)) {
+    const Op& op = crmr.ops[ref.op.value];
+    const FragmentTriangle& t = op.fragment[ref.index];
+    std::array<std::uint64_t, 3> ids{};
+    for (int k = 0; k < 3; ++k) {
+      ids[k] = op.vertex_id(t, k).value;
+      EXPECT_EQ(op.position(t, k), source.positions[ids[k]]) << "vertex " << ids[k] << " moved";
+    }
+    got.push_back(canonical(ids));
+  }
+  std::sort(want.begin(), want.end());
+  std::sort(got.begin(), got.end());
+  EXPECT_EQ(got, want) << "M^m differs from the source mesh";
 }
 
 class QemPm : public ::testing::TestWithParam<std::string> {};
@@ -88,21 +109,7 @@ TEST_P(QemPm, CrmrInvariantsHoldAndTheFinestMeshIsTheSource) {
   EXPECT_GE(new_vertices, b.stats.collapses);
   EXPECT_LT(b.crmr.ops.size(), b.stats.collapses + 1) << "nothing was coalesced";
 
-  std::vector<std::array<std::uint64_t, 3>> want, got;
-  for (const auto& t : b.source.triangles) want.push_back(canonical({t[0], t[1], t[2]}));
-  for (const TriRef& ref : level(b.crmr, true)) {
-    const Op& op = b.crmr.ops[ref.op.value];
-    const FragmentTriangle& t = op.fragment[ref.index];
-    std::array<std::uint64_t, 3> ids{};
-    for (int k = 0; k < 3; ++k) {
-      ids[k] = op.vertex_id(t, k).value;
-      EXPECT_EQ(op.position(t, k), b.source.positions[ids[k]]) << "vertex " << ids[k] << " moved";
-    }
-    got.push_back(canonical(ids));
-  }
-  std::sort(want.begin(), want.end());
-  std::sort(got.begin(), got.end());
-  EXPECT_EQ(got, want) << "M^m differs from the source mesh";
+  expect_finest_mesh_is_the_source(b.crmr, b.source);
 
   const SurfaceReport fine = check_surface(b.crmr, level(b.crmr, true));
   const SurfaceReport base = check_surface(b.crmr, level(b.crmr, false));
@@ -122,14 +129,14 @@ TEST_P(QemPm, CrmrInvariantsHoldAndTheFinestMeshIsTheSource) {
       glm::length(b.crmr.header.bounds.hi - b.crmr.header.bounds.lo));
 }
 
-TEST_P(QemPm, ExtractionsAreManifoldSatisfyTheRcfAndHoldTheErrorBound) {
-  const Built& b = built(GetParam());
-  const Crmr& crmr = b.crmr;
+// Extractions from `crmr` for many cameras, tolerances and volumes: set formula == advancing
+// front, manifold with the source's incidence, the RCF met op-wise and pointwise, back-face
+// culling hiding no detail, and the error bound both ways against `source`.
+void expect_extractions_hold(const Crmr& crmr, const TriangleMesh& source) {
   const SurfaceReport fine = check_surface(crmr, level(crmr, true));
   std::vector<std::array<Vec3, 3>> source_tris;
-  for (const auto& t : b.source.triangles) {
-    source_tris.push_back(
-        {b.source.positions[t[0]], b.source.positions[t[1]], b.source.positions[t[2]]});
+  for (const auto& t : source.triangles) {
+    source_tris.push_back({source.positions[t[0]], source.positions[t[1]], source.positions[t[2]]});
   }
   const test::TriangleSoupDistance to_source(source_tris);
   const double scale = glm::length(crmr.header.bounds.hi - crmr.header.bounds.lo);
@@ -242,6 +249,11 @@ TEST_P(QemPm, ExtractionsAreManifoldSatisfyTheRcfAndHoldTheErrorBound) {
   EXPECT_GE(sizes_seen, 5u) << "the RCFs should give many different outputs";
 }
 
+TEST_P(QemPm, ExtractionsAreManifoldSatisfyTheRcfAndHoldTheErrorBound) {
+  const Built& b = built(GetParam());
+  expect_extractions_hold(b.crmr, b.source);
+}
+
 // Without coalescing every vertex split is its own op, and the CRMR is as valid.
 TEST(QemPmOptions, OneOpPerSplitWithoutCoalescing) {
   const TriangleMesh mesh = test::built_mesh("elephant-with-holes.off").source;
@@ -260,6 +272,108 @@ TEST(QemPmOptions, OneOpPerSplitWithoutCoalescing) {
   o.coalesce_error_ratio = 1.5;
   EXPECT_THROW((void)build_qem_pm(mesh, "x", o), Error);
 }
+
+// ---- the out-of-core builder with tiny leaf blocks, so the octree has several levels ----------
+
+struct BlockBuilt {
+  Crmr crmr;
+  BlockPmStats stats;
+};
+
+BlockPmOptions tiny_blocks() {
+  BlockPmOptions o;
+  o.leaf_triangles = 300;
+  o.memory_bytes = 256 << 10;  // the sorts spill
+  return o;
+}
+
+const BlockBuilt& block_built(const std::string& name) {
+  static std::map<std::string, BlockBuilt> cache;
+  auto it = cache.find(name);
+  if (it != cache.end()) return it->second;
+  BlockBuilt b;
+  const TriangleMesh& mesh = built(name).source;
+  b.crmr = build_block_pm(MemoryMeshStream(mesh, name), tiny_blocks(), &b.stats);
+  return cache.emplace(name, std::move(b)).first->second;
+}
+
+class BlockPm : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(BlockPm, CrmrInvariantsHoldAndTheFinestMeshIsTheSource) {
+  const BlockBuilt& b = block_built(GetParam());
+  const TriangleMesh& source = built(GetParam()).source;
+  const InvariantReport r = check_crmr(b.crmr);
+  EXPECT_TRUE(r.ok()) << r.summary();
+  EXPECT_GE(b.stats.levels, 2);
+  EXPECT_GT(b.stats.collapses, source.positions.size() / 2) << "simplified too little";
+  EXPECT_EQ(b.crmr.ops.size(), b.stats.collapses + 1);
+  EXPECT_LE(b.stats.dag_height, b.stats.rounds);
+  EXPECT_LE(b.stats.max_block_triangles, source.triangles.size());
+  expect_finest_mesh_is_the_source(b.crmr, source);
+  test::expect_links_of_a_replay(b.crmr);
+  // No component is spawned: R^0 keeps every one, with the source's topology.
+  const SurfaceReport fine = check_surface(b.crmr, level(b.crmr, true));
+  const SurfaceReport base = check_surface(b.crmr, level(b.crmr, false));
+  EXPECT_TRUE(base.report.ok()) << base.report.summary();
+  EXPECT_EQ(base.components, fine.components);
+  test::expect_same_topology_or_unspawned(base, fine);
+  std::printf(
+      "%s: %zu triangles, %d levels, %llu leaf blocks, %llu collapses in %llu rounds, DAG height "
+      "%llu, base %llu vertices %llu triangles (in core: %llu), err0 %.4g\n",
+      GetParam().c_str(), source.triangles.size(), b.stats.levels,
+      (unsigned long long)b.stats.leaf_blocks, (unsigned long long)b.stats.collapses,
+      (unsigned long long)b.stats.rounds, (unsigned long long)b.stats.dag_height,
+      (unsigned long long)b.stats.base_vertices, (unsigned long long)b.stats.base_triangles,
+      (unsigned long long)built(GetParam()).stats.base_triangles, b.crmr.header.err0);
+}
+
+TEST_P(BlockPm, ExtractionsAcrossBlockBordersAreManifoldAndHoldTheRcfAndTheBound) {
+  expect_extractions_hold(block_built(GetParam()).crmr, built(GetParam()).source);
+}
+
+TEST(BlockPmBuild, DeterministicWhateverTheBudget) {
+  const TriangleMesh& mesh = built("elephant-with-holes.off").source;
+  BlockPmOptions roomy = tiny_blocks();
+  roomy.memory_bytes = 512 << 20;
+  const Crmr a = build_block_pm(MemoryMeshStream(mesh, "e"), tiny_blocks());
+  const Crmr b = build_block_pm(MemoryMeshStream(mesh, "e"), roomy);
+  EXPECT_TRUE(a.header == b.header);
+  ASSERT_EQ(a.ops.size(), b.ops.size());
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < a.ops.size(); ++i) differ += a.ops[i] == b.ops[i] ? 0 : 1;
+  EXPECT_EQ(differ, 0u);
+}
+
+TEST(BlockPmBuild, RejectsBadInput) {
+  TriangleMesh mesh;
+  EXPECT_THROW((void)build_block_pm(MemoryMeshStream(mesh, "empty")), Error);
+  mesh.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+  mesh.triangles = {{0, 1, 3}};
+  try {
+    (void)build_block_pm(MemoryMeshStream(mesh, "bad.ply"));
+    ADD_FAILURE() << "an index out of range was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.ply"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("vertex 3"), std::string::npos) << e.what();
+  }
+  mesh.triangles = {{0, 1, 2}};
+  mesh.positions[1].x = std::nan("");
+  EXPECT_THROW((void)build_block_pm(MemoryMeshStream(mesh, "nan")), Error);
+  BlockPmOptions o;
+  o.tolerance_fraction = 0.0;
+  mesh.positions[1].x = 1.0;
+  EXPECT_THROW((void)build_block_pm(MemoryMeshStream(mesh, "x"), o), Error);
+}
+
+INSTANTIATE_TEST_SUITE_P(CgalMeshes, BlockPm,
+                         ::testing::Values("blobby_3cc.off", "elephant-with-holes.off",
+                                           "mech-holes-shark.off", "ChineseDragon-10kv.off"),
+                         [](const auto& p) {
+                           std::string n = p.param;
+                           n = n.substr(0, n.find('.'));
+                           std::replace(n.begin(), n.end(), '-', '_');
+                           return n;
+                         });
 
 INSTANTIATE_TEST_SUITE_P(CgalMeshes, QemPm,
                          ::testing::Values("blobby_3cc.off", "elephant-with-holes.off",

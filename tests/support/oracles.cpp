@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <sstream>
 #include <unordered_set>
 
+#include <gtest/gtest.h>
 #include <glm/geometric.hpp>
 
 #include "smr/build/greedy_tin.h"
@@ -259,6 +261,46 @@ OracleResult check_x_definition(const OpSource& source, std::span<const OpId> x,
     if (!justified) r.fail("op " + std::to_string(id.value) + " is in X without a reason");
   }
   return r;
+}
+
+void expect_links_of_a_replay(const Crmr& m) {
+  std::map<std::pair<std::uint64_t, std::uint64_t>, EdgeRef> live;
+  auto enter = [&](const Op& op, std::uint32_t i) {
+    const FragmentTriangle& t = op.fragment[i];
+    for (std::uint8_t k = 0; k < 3; ++k) {
+      live[{op.vertex_id(t, k).value, op.vertex_id(t, (k + 1) % 3).value}] = {{op.id, i}, k};
+    }
+  };
+  for (std::uint32_t i = 0; i < m.ops[0].fragment.size(); ++i) enter(m.ops[0], i);
+  std::uint64_t links = 0, wrong = 0;
+  for (std::size_t n = 1; n < m.ops.size(); ++n) {
+    const Op& op = m.ops[n];
+    std::vector<CoarserLink> expected;
+    for (std::uint32_t i = 0; i < op.fragment.size(); ++i) {
+      const FragmentTriangle& t = op.fragment[i];
+      for (std::uint8_t k = 0; k < 3; ++k) {
+        if (t.nbr[k] != FragmentTriangle::kNoNeighbour) continue;
+        const std::uint64_t a = op.vertex_id(t, k).value, b = op.vertex_id(t, (k + 1) % 3).value;
+        const auto out = live.find({b, a});
+        if (out == live.end()) continue;
+        const auto in = live.find({a, b});
+        ASSERT_NE(in, live.end()) << "op " << n << ": a boundary edge with nothing inside";
+        expected.push_back(
+            {i, k, out->second.tri.op > in->second.tri.op ? out->second : in->second});
+      }
+    }
+    links += expected.size();
+    if (expected != op.coarser) ++wrong;
+    for (std::size_t q = 0; q < op.pre.size(); ++q) {
+      const PreTriangle& pt = op.pre_tris[q];
+      for (int k = 0; k < 3; ++k) {
+        live.erase({op.vertices[pt.v[k]].id.value, op.vertices[pt.v[(k + 1) % 3]].id.value});
+      }
+    }
+    for (std::uint32_t i = 0; i < op.fragment.size(); ++i) enter(op, i);
+  }
+  EXPECT_GT(links, m.ops.size());
+  EXPECT_EQ(wrong, 0u) << "ops whose links differ from the replay's";
 }
 
 }  // namespace smr::test

@@ -52,4 +52,10 @@ OracleResult check_rcf_opwise(const OpSource& source, std::span<const TriRef> tr
 OracleResult check_x_definition(const OpSource& source, std::span<const OpId> x, const Rcf& rcf,
                                 bool ancestors);
 
+/// Brute force for the Hypermesh links (Brown 4.5.1): replays the ops in id order from R^0 with
+/// every live triangle's directed edges in a map, as an in-memory builder does, and expects each
+/// op's coarser links to be the newer (larger op) of PreF's triangle with a->b and the live one
+/// with b->a across each fragment boundary edge a->b (none on the model boundary).
+void expect_links_of_a_replay(const Crmr& crmr);
+
 }  // namespace smr::test
