@@ -19,6 +19,7 @@
 #include <unistd.h>
 
 #include "storage/error.h"
+#include "storage/mapped_file.h"
 
 namespace smr::storage {
 namespace {
@@ -893,17 +894,11 @@ void DatabaseWriter::finish() {
   // process's resident set: a 2.6 GB database would show as 2.6 GB of RSS. While it runs, a
   // thread drops the map's pages every 20 ms (they are clean file pages, faulted back in from
   // the page cache if read again), so the writer's memory stays what its buffers hold.
-  const std::uint8_t* map = mapping_of_written();
-  std::atomic<bool> copying{true};
-  std::thread trimmer([&] {
-    while (copying.load() && map != nullptr) {
-      (void)::madvise(const_cast<std::uint8_t*>(map), map_bytes_, MADV_DONTNEED);
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
-  });
-  int rc = mdb_env_copyfd2(env, fd, MDB_CP_COMPACT);
-  copying.store(false);
-  trimmer.join();
+  int rc = 0;
+  {
+    const PageTrimmer trimmer(mapping_of_written(), map_bytes_);
+    rc = mdb_env_copyfd2(env, fd, MDB_CP_COMPACT);
+  }
   if (rc == MDB_SUCCESS && ::fsync(fd) != 0) rc = errno;
   if (::close(fd) != 0 && rc == MDB_SUCCESS) rc = errno;
   check(rc, compact_path_ + ": writing the compacted database");

@@ -285,11 +285,13 @@ struct IngestArgs {
     app.add_option("--builder", builder,
                    "DEMs: greedy (Delaunay insertion, the DEM read whole; the default) or blocks "
                    "(hierarchical block decimation, the DEM read one block at a time; the default "
-                   "with --memory)");
+                   "with --memory). Meshes: blocks streams a PLY through octree blocks (the "
+                   "default with --memory; otherwise the mesh is read, validated and built in "
+                   "memory)");
     app.add_option("--memory", memory,
-                   "DEMs, --builder blocks: memory budget (e.g. 256M, 2G): sizes the windows "
-                   "held for exact error bounds, the raster and write caches; peak RSS is "
-                   "reported by --json");
+                   "--builder blocks: memory budget (e.g. 256M, 2G). DEMs: sizes the windows "
+                   "held for exact error bounds, the raster and write caches; meshes: the "
+                   "external sorts and the writer; peak RSS is reported by --json");
     app.add_option("--block-cells", block_cells,
                    "DEMs, --builder blocks: side of a leaf block in grid cells (a power of two)")
         ->capture_default_str();
@@ -328,12 +330,12 @@ struct IngestArgs {
       throw_input("--coalesce-ratio must be in [0, 1]");
     if (!builder.empty() && builder != "greedy" && builder != "blocks")
       throw_input("--builder must be greedy or blocks, got '" + builder + "'");
-    if (is_mesh() && !builder.empty())
-      throw_input("--builder applies to DEMs; meshes are built by quadric edge collapse");
-    if (is_mesh() && !memory.empty())
+    if (is_mesh() && builder == "greedy")
+      throw_input("--builder greedy applies to DEMs; meshes are built by quadric edge collapse");
+    if (is_mesh() && repair && effective_builder() == "blocks")
       throw_input(
-          "--memory applies to DEMs: meshes are built in memory (out-of-core mesh ingest is not "
-          "available yet)");
+          "--repair needs the mesh in memory: drop --memory / --builder blocks (a streamed mesh "
+          "is not repaired)");
     const std::string chosen = effective_builder();
     if (!memory.empty() && chosen != "blocks")
       throw_input("--memory needs --builder blocks: the greedy builder reads the DEM whole");
@@ -362,8 +364,11 @@ struct IngestArgs {
            " max-error=" + number(max_error) + " max-vertices=" + std::to_string(max_vertices) +
            " base-vertices=" + std::to_string(base_vertices) + " codec=" + codec +
            " z-quantum=" + number(z_quantum) + " page-kb=" + std::to_string(page_kb) +
-           (is_mesh() ? std::string(" repair=") + (repair ? "yes" : "no") + " coalesce=" +
-                            std::to_string(coalesce) + " coalesce-ratio=" + number(coalesce_ratio)
+           (is_mesh() && effective_builder() == "blocks"
+                ? " builder=blocks" +
+                      (memory.empty() ? std::string() : " memory=" + std::to_string(memory_bytes()))
+            : is_mesh() ? std::string(" repair=") + (repair ? "yes" : "no") + " coalesce=" +
+                              std::to_string(coalesce) + " coalesce-ratio=" + number(coalesce_ratio)
             : effective_builder() == "blocks"
                 ? " builder=blocks block-cells=" + std::to_string(block_cells) +
                       (memory.empty() ? std::string() : " memory=" + std::to_string(memory_bytes()))
@@ -403,6 +408,8 @@ nlohmann::json database_report(const smr::WriteReport& w, const IngestArgs& a,
                                const std::string& db_path, std::uint64_t vertices);
 nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
                              smr::tools::GdalProgress& progress, bool verify);
+nlohmann::json ingest_mesh_blocks(const IngestArgs& a, const std::string& db_path,
+                                  smr::tools::GdalProgress& progress, bool verify);
 
 // Reads the DEM, builds the CRMR and writes the database. Returns the report.
 nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quiet, bool verify) {
@@ -410,7 +417,9 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
   auto t0 = Clock::now();
   smr::tools::GdalProgress progress(quiet ? nullptr : stderr);
   smr::Crmr crmr;
-  if (a.is_mesh()) {
+  if (a.is_mesh() && a.effective_builder() == "blocks") {
+    return ingest_mesh_blocks(a, db_path, progress, verify);
+  } else if (a.is_mesh()) {
     smr::MeshReport mr;
     const smr::TriangleMesh mesh =
         smr::read_mesh(a.dem, a.repair ? smr::MeshRepair::all() : smr::MeshRepair{}, &mr);
@@ -602,6 +611,59 @@ nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
   if (phase_rss) report["database"]["finish_peak_rss_mb"] = finish_rss;
   if (verify) {
     // The CRMR never exists in memory: check what was written (checksums, DAG, links, index).
+    const smr::VerifyReport r = smr::verify_database(db_path, nullptr);
+    if (!r.ok()) smr::throw_internal("database invariants violated: " + r.faults.front());
+  }
+  return report;
+}
+
+// Meshes with --memory: the PLY is streamed (two passes), its triangles sorted by octree cell on
+// disk, blocks simplified and merged, ops assembled on disk and streamed to the writer.
+nlohmann::json ingest_mesh_blocks(const IngestArgs& a, const std::string& db_path,
+                                  smr::tools::GdalProgress& progress, bool verify) {
+  nlohmann::json report;
+  const auto t0 = Clock::now();
+  const std::unique_ptr<smr::MeshStream> mesh = smr::open_mesh_stream(a.dem);
+  smr::BlockPmOptions opt;
+  opt.tmp_dir = a.tmp_dir;
+  // The sorts take half the budget; the rest holds the vertices, the blocks and the writer.
+  opt.memory_bytes = a.memory_bytes() != 0 ? a.memory_bytes() / 2 : 0;
+  opt.progress = [&](double f) { progress.update(0.8 * f); };
+  smr::BlockPmStats st;
+  smr::WriteOptions wo = write_options(a, progress);
+  if (a.memory_bytes() != 0) {
+    wo.batch_bytes = a.memory_bytes() / 16;
+    wo.memory_bytes = a.memory_bytes() / 4;
+  }
+  smr::DatabaseStreamWriter writer(db_path, wo, a.tmp_dir);
+  IngestTap tap(writer, std::filesystem::path(a.dem).filename().string());
+  smr::build_block_pm(*mesh, tap, opt, &st);
+  const double build_seconds = seconds_since(t0);
+  const bool phase_rss = reset_peak_rss();
+  const smr::WriteReport w = writer.finish();
+  const double finish_rss = phase_rss ? phase_peak_rss_mb() : 0.0;
+  progress.done();
+  report["input"] = {
+      {"path", a.dem}, {"kind", "mesh"}, {"vertices", st.vertices}, {"triangles", st.triangles}};
+  report["blocks"] = {
+      {"leaf_blocks", st.leaf_blocks},
+      {"levels", st.levels},
+      {"rounds", st.rounds},
+      {"dag_height", st.dag_height},
+      {"collapses", st.collapses},
+      {"base_vertices", st.base_vertices},
+      {"base_triangles", st.base_triangles},
+      {"max_block_triangles", st.max_block_triangles},
+      {"triangles_per_second", double(st.triangles) / std::max(1e-9, build_seconds)},
+      {"temp_bytes", st.temp_bytes + w.spool_bytes + w.scratch_bytes},
+      {"seconds",
+       {{"sort", st.seconds_sort},
+        {"blocks", st.seconds_blocks},
+        {"assemble", st.seconds_assemble}}}};
+  report["crmr"] = tap.counts.json(build_seconds);
+  report["database"] = database_report(w, a, db_path, tap.counts.vertices);
+  if (phase_rss) report["database"]["finish_peak_rss_mb"] = finish_rss;
+  if (verify) {
     const smr::VerifyReport r = smr::verify_database(db_path, nullptr);
     if (!r.ok()) smr::throw_internal("database invariants violated: " + r.faults.front());
   }

@@ -955,51 +955,110 @@ class Builder {
 
   // Rounds of collapses whose bound is at most `tolerance`, cheapest quadric cost first; in a
   // round no two collapses touch (each takes its two vertices and their neighbours), so none
-  // depends on another of its round and the DAG height is at most the number of rounds.
-  // Returns the rounds that made a collapse.
+  // depends on another of its round and the DAG height is at most the number of rounds. Each
+  // vertex keeps its cheapest valid target and that collapse's bound between calls; both are
+  // recomputed only when its neighbourhood changes. Returns the rounds that made a collapse.
   std::uint64_t simplify_rounds(double tolerance) {
+    const std::size_t n = pos_.size();
+    if (best_.size() != n) {
+      best_.assign(n, Best{});
+      for (std::uint32_t v = 0; v < n; ++v) dirty_list_.push_back(v);
+      taken_.assign(n, 0);
+    }
     std::uint64_t rounds = 0;
-    std::vector<Candidate> cands;
-    std::vector<std::uint8_t> taken(pos_.size(), 0);
+    std::vector<std::pair<double, std::uint32_t>> cands;
     for (;;) {
+      for (std::uint32_t v : dirty_list_) refresh_best(v);
+      dirty_list_.clear();
       cands.clear();
-      for (std::uint32_t v = 0; v < pos_.size(); ++v) {
-        if (removed_[v] || is_locked(v)) continue;
-        neighbours(v, cand_);
-        ranked_.clear();
-        for (std::uint32_t to : cand_) ranked_.push_back({cost(v, to), to});
-        std::sort(ranked_.begin(), ranked_.end());
-        for (const auto& [c, to] : ranked_) {
-          if (!valid(v, to, cand_)) continue;
-          cands.push_back({c, v, to, 0});
-          break;
-        }
+      for (std::uint32_t v = 0; v < n; ++v) {
+        const Best& b = best_[v];
+        if (b.to == kNone || removed_[v] || (b.have_error && b.error > tolerance)) continue;
+        cands.push_back({b.cost, v});
       }
-      // Candidate's order puts the cheapest last (it serves a max-heap).
-      std::sort(cands.begin(), cands.end(),
-                [](const Candidate& a, const Candidate& b) { return b < a; });
-      std::fill(taken.begin(), taken.end(), 0);
+      std::sort(cands.begin(), cands.end());
+      ++taken_stamp_;
       std::uint64_t made = 0;
-      for (const Candidate& c : cands) {
-        if (taken[c.from] || taken[c.to]) continue;
-        neighbours(c.from, ring_);
+      auto taken = [&](std::uint32_t w) { return taken_[w] == taken_stamp_; };
+      for (const auto& [c, v] : cands) {
+        Best& b = best_[v];
+        if (removed_[v] || taken(v) || taken(b.to)) continue;
+        neighbours(v, ring_);
+        neighbours(b.to, local_);
         bool free = true;
-        for (std::uint32_t w : ring_) free = free && !taken[w];
-        neighbours(c.to, local_);
-        for (std::uint32_t w : local_) free = free && !taken[w];
+        for (std::uint32_t w : ring_) free = free && !taken(w);
+        for (std::uint32_t w : local_) free = free && !taken(w);
         if (!free) continue;
-        const double error = collapse_error(c.from, c.to);
-        if (error > tolerance) continue;
-        taken[c.from] = taken[c.to] = 1;
-        for (std::uint32_t w : ring_) taken[w] = 1;
-        for (std::uint32_t w : local_) taken[w] = 1;
-        apply(c.from, c.to, error);
+        if (!valid(v, b.to, ring_)) {  // its 2-ring changed since it was chosen
+          dirty_list_.push_back(v);
+          continue;
+        }
+        if (!b.have_error) {
+          // The bound is at least the star's own (collapse_error's floor): no need to compute
+          // it to know it is too large.
+          double floor = 0.0;
+          for (std::uint32_t id : star_[v]) floor = std::max(floor, tris_[id].e);
+          if (floor > tolerance) continue;
+          // Nor below the removed vertex's distance to the new star (a corner of the old star).
+          if (removed_distance(v, b.to) > tolerance) continue;
+          b.error = collapse_error(v, b.to);
+          b.have_error = true;
+        }
+        if (b.error > tolerance) continue;
+        const std::uint32_t to = b.to;
+        taken_[v] = taken_[to] = taken_stamp_;
+        for (std::uint32_t w : ring_) taken_[w] = taken_stamp_;
+        for (std::uint32_t w : local_) taken_[w] = taken_stamp_;
+        apply(v, to, b.error);
+        b = Best{};
+        dirty_list_.push_back(to);
+        neighbours(to, ring_);
+        dirty_list_.insert(dirty_list_.end(), ring_.begin(), ring_.end());
         ++made;
       }
+      std::sort(dirty_list_.begin(), dirty_list_.end());
+      dirty_list_.erase(std::unique(dirty_list_.begin(), dirty_list_.end()), dirty_list_.end());
       if (made == 0) return rounds;
       ++rounds;
     }
   }
+
+  // Distance from `from` to the triangles its star becomes when it collapses onto `to`.
+  double removed_distance(std::uint32_t from, std::uint32_t to) const {
+    double d = std::numeric_limits<double>::infinity();
+    for (std::uint32_t id : star_[from]) {
+      const Tri& t = tris_[id];
+      if (has(t, to)) continue;
+      std::array<Vec3, 3> p;
+      for (int k = 0; k < 3; ++k) p[k] = pos_[t.v[k] == from ? to : t.v[k]];
+      d = std::min(d, point_triangle_distance3d(pos_[from], p[0], p[1], p[2]));
+    }
+    return d;
+  }
+
+  struct Best {
+    double cost = 0.0, error = 0.0;
+    std::uint32_t to = kNone;
+    bool have_error = false;
+  };
+  void refresh_best(std::uint32_t v) {
+    Best& b = best_[v];
+    b = Best{};
+    if (removed_[v] || is_locked(v)) return;
+    neighbours(v, cand_);
+    ranked_.clear();
+    for (std::uint32_t to : cand_) ranked_.push_back({cost(v, to), to});
+    std::sort(ranked_.begin(), ranked_.end());
+    for (const auto& [c, to] : ranked_) {
+      if (!valid(v, to, cand_)) continue;
+      b.cost = c;
+      b.to = to;
+      return;
+    }
+  }
+  std::vector<Best> best_;
+  std::vector<std::uint32_t> dirty_list_, taken_;
+  std::uint32_t taken_stamp_ = 0;
 
   friend class BlockPmBuilder;
   QemPmOptions options_;
@@ -1257,17 +1316,12 @@ class BlockPmBuilder {
       tris.push_back(lt);
     }
     Builder b(qem_, std::move(pos), std::move(quad), std::move(locked), constrain, tris);
-    // Stages of growing tolerance: up to tolerance_fraction of the block's side (the root: as
-    // far as the rules allow).
-    const double top =
-        opt_.tolerance_fraction * side_ / double(std::uint64_t{1} << (levels_ - level));
-    double eps = level == 0 ? top / 1024.0 : top / 2.0;
-    std::uint64_t rounds = 0;
-    for (;; eps *= 2.0) {
-      const bool last = level < levels_ ? eps >= top : eps > 4.0 * side_;
-      rounds += b.simplify_rounds(last && level == levels_ ? kInfinity : std::min(eps, top));
-      if (last) break;
-    }
+    // Collapses up to tolerance_fraction of the block's side (the root: as far as the rules
+    // allow), cheapest quadric cost first within the bound, as the in-core builder orders them.
+    const double tolerance = level == levels_ ? kInfinity
+                                              : opt_.tolerance_fraction * side_ /
+                                                    double(std::uint64_t{1} << (levels_ - level));
+    const std::uint64_t rounds = b.simplify_rounds(tolerance);
     stats_.rounds += rounds;
     // The collapses, in order, as removals; new triangles get the next global ids.
     const std::uint32_t k0 = static_cast<std::uint32_t>(assembler_->removals());

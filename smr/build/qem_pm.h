@@ -66,48 +66,11 @@ struct QemPmStats {
   std::uint64_t rejected_link = 0, rejected_flip = 0, rejected_boundary = 0;
 };
 
-/// A triangle mesh read in passes, never held whole: the block builder's input. Indices are
-/// into the vertex order; the mesh must be manifold and consistently oriented (what read_mesh
-/// validates in memory).
-class MeshStream {
- public:
-  virtual ~MeshStream() = default;
-  virtual std::string name() const = 0;
-  virtual std::uint64_t vertex_count() const = 0;
-  virtual std::uint64_t triangle_count() const = 0;
-  /// Calls f with consecutive batches of the vertices' positions, in order.
-  virtual void vertices(const std::function<void(std::span<const Vec3>)>& f) const = 0;
-  /// Calls f with consecutive batches of the triangles, in order.
-  virtual void triangles(
-      const std::function<void(std::span<const std::array<std::uint32_t, 3>>)>& f) const = 0;
-};
-
-/// A mesh in memory as a MeshStream.
-class MemoryMeshStream final : public MeshStream {
- public:
-  MemoryMeshStream(const TriangleMesh& mesh, std::string name)
-      : mesh_(mesh), name_(std::move(name)) {}
-  std::string name() const override { return name_; }
-  std::uint64_t vertex_count() const override { return mesh_.positions.size(); }
-  std::uint64_t triangle_count() const override { return mesh_.triangles.size(); }
-  void vertices(const std::function<void(std::span<const Vec3>)>& f) const override {
-    f(mesh_.positions);
-  }
-  void triangles(
-      const std::function<void(std::span<const std::array<std::uint32_t, 3>>)>& f) const override {
-    f(mesh_.triangles);
-  }
-
- private:
-  const TriangleMesh& mesh_;
-  std::string name_;
-};
-
 // Out of core (DESIGN.md section 4; Hoppe 1998's block construction, in 3-D): the triangles are
 // sorted by the octree leaf cell of their centroid (an external sort), so each leaf block is read
 // on its own. A block is simplified by the collapses above with its locked vertices -- those with
-// triangles in another block of its level -- kept, in stages of growing tolerance (x2, up to
-// tolerance_fraction of the block's side, doubling per level as blocks do), each stage in
+// triangles in another block of its level -- kept, up to a bound of tolerance_fraction of the
+// block's side (doubling per level as blocks do), cheapest quadric cost first, in
 // independent-set rounds (no two collapses of a round touch, so the DAG height is at most the
 // number of rounds). Then 2x2x2 blocks merge, the borders between them unlock and simplification
 // goes on, up to the root, which simplifies as far as the rules allow. Every collapse goes to the

@@ -3,6 +3,10 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
+#include <span>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "smr/core/geometry.h"
@@ -14,6 +18,44 @@ struct TriangleMesh {
   std::vector<std::array<std::uint32_t, 3>> triangles;  // counter-clockwise seen from +z / outside
   /// Optional per-triangle scalar (e.g. death resolution) for colouring; empty or one per triangle.
   std::vector<float> triangle_values;
+};
+
+/// A triangle mesh read in passes, never held whole: the out-of-core builder's input
+/// (smr::build_block_pm). Indices are into the vertex order; the mesh must be manifold and
+/// consistently oriented (what read_mesh validates in memory). A file stream may know its counts
+/// only after its first vertices() pass.
+class MeshStream {
+ public:
+  virtual ~MeshStream() = default;
+  virtual std::string name() const = 0;
+  virtual std::uint64_t vertex_count() const = 0;
+  virtual std::uint64_t triangle_count() const = 0;
+  /// Calls f with consecutive batches of the vertices' positions, in order.
+  virtual void vertices(const std::function<void(std::span<const Vec3>)>& f) const = 0;
+  /// Calls f with consecutive batches of the triangles, in order.
+  virtual void triangles(
+      const std::function<void(std::span<const std::array<std::uint32_t, 3>>)>& f) const = 0;
+};
+
+/// A mesh in memory as a MeshStream.
+class MemoryMeshStream final : public MeshStream {
+ public:
+  MemoryMeshStream(const TriangleMesh& mesh, std::string name)
+      : mesh_(mesh), name_(std::move(name)) {}
+  std::string name() const override { return name_; }
+  std::uint64_t vertex_count() const override { return mesh_.positions.size(); }
+  std::uint64_t triangle_count() const override { return mesh_.triangles.size(); }
+  void vertices(const std::function<void(std::span<const Vec3>)>& f) const override {
+    f(mesh_.positions);
+  }
+  void triangles(
+      const std::function<void(std::span<const std::array<std::uint32_t, 3>>)>& f) const override {
+    f(mesh_.triangles);
+  }
+
+ private:
+  const TriangleMesh& mesh_;
+  std::string name_;
 };
 
 }  // namespace smr

@@ -23,12 +23,15 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <limits>
+#include <memory>
 #include <numeric>
 #include <span>
 #include <vector>
 
 #include "storage/error.h"
+#include "storage/mapped_file.h"
 
 namespace smr {
 
@@ -180,7 +183,31 @@ struct Source {
   int vertex_base = 0;  // 0 or 1 (OBJ); -1: vertices have no number in the file (STL)
   std::vector<std::uint32_t> face_of_triangle;  // empty: triangle t is face t
   std::vector<std::uint32_t> line_of_face;      // empty: no line numbers (binary formats)
+  // Streaming (open_mesh_stream, PLY): positions and triangles are handed over in batches and
+  // dropped, so the mesh is never held; faces get no line numbers.
+  std::function<void(std::span<const Vec3>)> vertex_batch;
+  std::function<void(std::span<const std::array<std::uint32_t, 3>>)> triangle_batch;
+  bool streaming() const { return static_cast<bool>(vertex_batch); }
 };
+
+constexpr std::size_t kStreamBatch = std::size_t{1} << 16;
+
+void push_vertex(TriangleMesh& mesh, Source& src, const Vec3& v) {
+  mesh.positions.push_back(v);
+  if (src.streaming() && mesh.positions.size() >= kStreamBatch) {
+    src.vertex_batch(mesh.positions);
+    mesh.positions.clear();
+  }
+}
+
+// Hands what is left of a streamed mesh over.
+void flush_stream(TriangleMesh& mesh, Source& src) {
+  if (!src.streaming()) return;
+  if (!mesh.positions.empty()) src.vertex_batch(mesh.positions);
+  if (!mesh.triangles.empty()) src.triangle_batch(mesh.triangles);
+  mesh.positions.clear();
+  mesh.triangles.clear();
+}
 
 std::string face_label(const Source& src, std::size_t t) {
   const std::size_t f = src.face_of_triangle.empty() ? t : src.face_of_triangle[t];
@@ -232,20 +259,38 @@ class FaceSink {
                     "; expected at least 3 (repairable: --repair drops degenerate faces)");
       }
       ++report_.degenerate_faces_dropped;
-      start_map();
+      if (!src_.streaming()) start_map();
       return;
     }
-    if (mesh_.triangles.size() + idx.size() - 2 > kMaxTriangles) {
+    if (triangles_ + idx.size() - 2 > kMaxTriangles) {
       throw_input("'" + src_.what + "' has more than " + num(std::uint64_t{kMaxTriangles}) +
                   " triangles, which is not supported");
     }
+    if (src_.streaming()) {
+      // Nothing validates a streamed mesh afterwards: what one face can show is checked here.
+      for (std::size_t i = 0; i < idx.size(); ++i) {
+        for (std::size_t j = i + 1; j < idx.size(); ++j) {
+          if (idx[i] == idx[j]) {
+            throw_input("'" + src_.what + "': " + face_label_for(f) + " uses vertex " +
+                        num(std::uint64_t{idx[i]}) +
+                        " twice (degenerate); a streamed mesh cannot be repaired: ingest it in "
+                        "memory (without --memory) with --repair");
+          }
+        }
+      }
+    }
     if (idx.size() > 3) {
       ++report_.polygons_triangulated;
-      start_map();
+      if (!src_.streaming()) start_map();
     }
     for (std::size_t i = 1; i + 1 < idx.size(); ++i) {
       mesh_.triangles.push_back({idx[0], idx[i], idx[i + 1]});
+      ++triangles_;
       if (mapped_) src_.face_of_triangle.push_back(f);
+    }
+    if (src_.streaming() && mesh_.triangles.size() >= kStreamBatch) {
+      src_.triangle_batch(mesh_.triangles);
+      mesh_.triangles.clear();
     }
   }
   std::size_t faces() const { return faces_; }
@@ -271,6 +316,7 @@ class FaceSink {
   bool lines_;
   bool mapped_ = false;
   std::size_t faces_ = 0;
+  std::uint64_t triangles_ = 0;
 };
 
 bool finite3(const Vec3& p) {
@@ -911,7 +957,7 @@ void parse_ply(std::string_view bytes, Source& src, TriangleMesh& mesh, const Me
   const std::uint64_t nv = elements[static_cast<std::size_t>(vertex_el)].count;
   if (nv > kMaxVertices) throw_input("'" + what + "' has too many vertices");
   mesh.positions.reserve(static_cast<std::size_t>(nv));
-  FaceSink sink(mesh, src, repair, report, !binary);
+  FaceSink sink(mesh, src, repair, report, !binary && !src.streaming());
   std::vector<std::uint32_t> idx;
   const auto bad_index = [&](std::uint64_t f, std::int64_t v, const std::string& where) {
     throw_input("'" + what + "': face " + num(f) + (where.empty() ? "" : " (" + where + ")") +
@@ -964,7 +1010,7 @@ void parse_ply(std::string_view bytes, Source& src, TriangleMesh& mesh, const Me
                          load_double(p[1]->type, r + offs[1], big),
                          load_double(p[2]->type, r + offs[2], big)};
             if (!finite3(v)) non_finite(what, "vertex " + num(i), v, "");
-            mesh.positions.push_back(v);
+            push_vertex(mesh, src, v);
           }
         }
         at += static_cast<std::size_t>(e.count) * stride;
@@ -1013,11 +1059,12 @@ void parse_ply(std::string_view bytes, Source& src, TriangleMesh& mesh, const Me
         }
         if (is_vertex) {
           if (!finite3(v)) non_finite(what, "vertex " + num(i), v, "");
-          mesh.positions.push_back(v);
+          push_vertex(mesh, src, v);
         }
         if (is_face) sink.add(idx, 0);
       }
     }
+    flush_stream(mesh, src);
     return;
   }
 
@@ -1087,11 +1134,12 @@ void parse_ply(std::string_view bytes, Source& src, TriangleMesh& mesh, const Me
       }
       if (is_vertex) {
         if (!finite3(v)) non_finite(what, "vertex " + num(i), v, at_line(line_of()));
-        mesh.positions.push_back(v);
+        push_vertex(mesh, src, v);
       }
       if (is_face) sink.add(idx, face_line);
     }
   }
+  flush_stream(mesh, src);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1851,6 +1899,59 @@ TriangleMesh read_mesh(const std::string& path, const MeshRepair& repair, MeshRe
   }
   validate_impl(mesh, src, repair, rep);
   return mesh;
+}
+
+namespace {
+
+// A PLY file streamed: each pass maps the file and parses it front to back, its pages dropped
+// from the resident set as it goes (storage::PageTrimmer), handing batches over.
+class PlyStream final : public MeshStream {
+ public:
+  explicit PlyStream(std::string path) : path_(std::move(path)) {}
+  std::string name() const override { return path_; }
+  std::uint64_t vertex_count() const override { return vertices_; }
+  std::uint64_t triangle_count() const override { return triangles_; }
+  void vertices(const std::function<void(std::span<const Vec3>)>& f) const override {
+    std::uint64_t nv = 0, nt = 0;
+    pass([&](std::span<const Vec3> b) { nv += b.size(), f(b); },
+         [&](std::span<const std::array<std::uint32_t, 3>> b) { nt += b.size(); });
+    vertices_ = nv;
+    triangles_ = nt;
+  }
+  void triangles(
+      const std::function<void(std::span<const std::array<std::uint32_t, 3>>)>& f) const override {
+    pass([](std::span<const Vec3>) {}, f);
+  }
+
+ private:
+  void pass(const std::function<void(std::span<const Vec3>)>& v,
+            const std::function<void(std::span<const std::array<std::uint32_t, 3>>)>& t) const {
+    const storage::MappedFile file(path_);
+    const storage::PageTrimmer trimmer(file.bytes().data(), file.bytes().size());
+    Source src;
+    src.what = path_;
+    src.vertex_batch = v;
+    src.triangle_batch = t;
+    MeshReport report;
+    TriangleMesh mesh;
+    parse_ply(file.bytes(), src, mesh, MeshRepair{}, report);
+  }
+
+  std::string path_;
+  mutable std::uint64_t vertices_ = 0, triangles_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<MeshStream> open_mesh_stream(const std::string& path) {
+  if (mesh_format_for_path(path) != MeshFormat::kPly) {
+    throw_input("'" + path +
+                "': only PLY meshes can be streamed (out-of-core ingest with --memory); "
+                "convert it to PLY or ingest it in memory");
+  }
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) throw_io("cannot open '" + path + "': no such file");
+  return std::make_unique<PlyStream>(path);
 }
 
 void validate_mesh(TriangleMesh& mesh, const std::string& what, const MeshRepair& repair,

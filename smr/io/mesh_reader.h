@@ -36,6 +36,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <string_view>
 
@@ -121,6 +122,15 @@ TriangleMesh read_mesh(const std::string& path, const MeshRepair& repair = {},
 /// read_mesh on bytes already in memory; `name` is used in messages in place of the path.
 TriangleMesh parse_mesh(std::string_view bytes, MeshFormat format, const std::string& name,
                         const MeshRepair& repair = {}, MeshReport* report = nullptr);
+
+/// A PLY file as a MeshStream for the out-of-core builder: each pass maps the file and parses it
+/// front to back with the reader above, handing vertices and triangles over in batches, so
+/// neither the file nor the mesh is held (the map's pages are dropped from the resident set as
+/// the parse goes). Counts are known after the first vertices() pass. Checks what one record
+/// can show (finite coordinates, indices in range, no vertex twice in a face, truncation); the
+/// whole-mesh checks of validate_mesh (manifold edges and fans, orientation) are not made, and
+/// nothing is repaired. Other formats: kInvalidInput.
+std::unique_ptr<MeshStream> open_mesh_stream(const std::string& path);
 
 /// Validates `mesh` in place, applying the repairs asked for; `what` names it in messages. Checks,
 /// in this order (each an error unless the repair in brackets is set):
