@@ -626,8 +626,9 @@ nlohmann::json ingest_mesh_blocks(const IngestArgs& a, const std::string& db_pat
   const std::unique_ptr<smr::MeshStream> mesh = smr::open_mesh_stream(a.dem);
   smr::BlockPmOptions opt;
   opt.tmp_dir = a.tmp_dir;
-  // The sorts take half the budget; the rest holds the vertices, the blocks and the writer.
-  opt.memory_bytes = a.memory_bytes() != 0 ? a.memory_bytes() / 2 : 0;
+  // The sorts take a quarter of the budget; the rest holds the vertices (24 + 8 bytes each), the
+  // assembler's 16 bytes a collapse, the blocks and the writer.
+  opt.memory_bytes = a.memory_bytes() != 0 ? a.memory_bytes() / 4 : 0;
   opt.progress = [&](double f) { progress.update(0.8 * f); };
   smr::BlockPmStats st;
   smr::WriteOptions wo = write_options(a, progress);

@@ -1089,10 +1089,9 @@ class Builder {
 
 // ---- out of core: octree blocks with locked borders (qem_pm.h, build_block_pm) -------------
 
-struct FaceRecord {  // a source triangle and its leaf cell
-  std::uint64_t cell = 0;
+struct FaceRecord {  // a source triangle and its leaf cell (Morton code)
+  std::uint32_t cell = 0;
   std::array<std::uint32_t, 3> v{};
-  std::uint32_t pad = 0;
   bool operator<(const FaceRecord& o) const { return cell < o.cell; }
 };
 
@@ -1148,23 +1147,27 @@ class BlockPmBuilder {
     ao.memory_bytes = budget_ / 2;
     ao.progress = [this](double f) { report(0.9 + 0.1 * f); };
     assembler_ = std::make_unique<OpAssembler>(ao);
-    storage::ExternalSorter<FaceRecord> faces(opt_.tmp_dir, budget_ / 2);
-    sort_faces(faces);
+    auto faces = std::make_unique<storage::ExternalSorter<FaceRecord>>(opt_.tmp_dir, budget_ / 2);
+    sort_faces(*faces);
     stats_.seconds_sort = since(t0);
     const auto t1 = Clock::now();
     FaceRecord f;
-    bool more = faces.next(f);
+    bool more = faces->next(f);
     std::vector<std::array<std::uint32_t, 3>> leaf;
     while (more) {
-      const std::uint64_t cell = f.cell;
+      const std::uint32_t cell = f.cell;
       leaf.clear();
-      for (; more && f.cell == cell; more = faces.next(f)) leaf.push_back(f.v);
+      for (; more && f.cell == cell; more = faces->next(f)) leaf.push_back(f.v);
       ++stats_.leaf_blocks;
       push(0, cell, leaf_state(leaf));
       report(0.9 * double(leaf_done_ += leaf.size()) / double(stats_.triangles));
     }
-    stats_.temp_bytes += faces.spilled_bytes();
+    stats_.temp_bytes += faces->spilled_bytes();
+    faces.reset();
     for (int l = 0; l < levels_; ++l) flush(l);
+    // The octree spans are done with (the root locks nothing): the assembly may use the room.
+    std::vector<std::uint32_t>().swap(vmin_);
+    std::vector<std::uint32_t>().swap(vmax_);
     if (pending_[levels_].size() != 1) throw_internal("block PM: the root block is missing");
     BlockState root = std::move(pending_[levels_].front());
     stats_.seconds_blocks = since(t1);
@@ -1203,7 +1206,7 @@ class BlockPmBuilder {
     const Vec3 ext = box_.hi - box_.lo;
     side_ = std::max({ext.x, ext.y, ext.z, 1e-300});
     const double cells = double(std::uint64_t{1} << levels_);
-    vmin_.assign(pos_.size(), ~std::uint64_t{0});
+    vmin_.assign(pos_.size(), ~std::uint32_t{0});
     vmax_.assign(pos_.size(), 0);
     std::uint64_t index = 0;
     mesh_.triangles([&](std::span<const std::array<std::uint32_t, 3>> batch) {
@@ -1215,22 +1218,28 @@ class BlockPmBuilder {
                         std::to_string(pos_.size()) + " vertices)");
         }
         const Vec3 c = (pos_[t[0]] + pos_[t[1]] + pos_[t[2]]) / 3.0;
-        std::uint64_t code = 0;
+        std::uint32_t code = 0;
         for (int a = 0; a < 3; ++a) {
           const double u = (c[a] - box_.lo[a]) / side_ * cells;
           const auto k = static_cast<std::uint64_t>(std::clamp(u, 0.0, cells - 1.0));
-          code |= spread3(k) << a;
+          code |= static_cast<std::uint32_t>(spread3(k) << a);
         }
         for (std::uint32_t v : t) {
           vmin_[v] = std::min(vmin_[v], code);
           vmax_[v] = std::max(vmax_[v], code);
         }
-        faces.add({code, t, 0});
+        faces.add({code, t});
         ++index;
       }
     });
     stats_.triangles = index;
     stats_.levels = levels_;
+    for (std::uint32_t v = 0; v < pos_.size(); ++v) {
+      if (vmax_[v] >= vmin_[v]) {
+        referenced_box_.add(pos_[v]);
+        ++referenced_;
+      }
+    }
     pending_.resize(levels_ + 1);
     pending_code_.assign(levels_ + 1, 0);
   }
@@ -1381,12 +1390,8 @@ class BlockPmBuilder {
       base.push_back({t.v, t.id, t.creator, false});
       info.err0 = std::max(info.err0, t.e);
     }
-    for (std::uint32_t v = 0; v < pos_.size(); ++v) {
-      if (vmax_[v] >= vmin_[v]) {
-        info.bounds.add(pos_[v]);
-        ++info.vertex_count;
-      }
-    }
+    info.bounds = referenced_box_;
+    info.vertex_count = referenced_;
     for (const BlockTriangle& t : root.tris) {
       for (std::uint32_t v : t.v) used[v] = 1;
     }
@@ -1410,7 +1415,9 @@ class BlockPmBuilder {
   Box3 box_;
   double side_ = 1.0;
   int levels_ = 0;
-  std::vector<std::uint64_t> vmin_, vmax_;        // leaf cells of each vertex's triangles
+  std::vector<std::uint32_t> vmin_, vmax_;  // leaf cells of each vertex's triangles (Morton)
+  Box3 referenced_box_;                     // of the vertices some triangle uses
+  std::uint64_t referenced_ = 0;
   std::vector<std::vector<BlockState>> pending_;  // per level: blocks waiting for siblings
   std::vector<std::uint64_t> pending_code_;
   std::uint32_t next_tri_ = 0;
