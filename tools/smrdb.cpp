@@ -332,6 +332,13 @@ struct IngestArgs {
       throw_input("--builder must be greedy or blocks, got '" + builder + "'");
     if (is_mesh() && builder == "greedy")
       throw_input("--builder greedy applies to DEMs; meshes are built by quadric edge collapse");
+    if (is_mesh() && effective_builder() == "blocks") {
+      if (threads != 0) throw_input("--threads: the mesh block builder runs on one thread");
+      if (block_cells != 256)
+        throw_input("--block-cells applies to DEMs; mesh blocks are octree cells");
+      if (coalesce != 32 || coalesce_ratio != 0.7)
+        throw_input("--coalesce and --coalesce-ratio apply to meshes built in memory");
+    }
     if (is_mesh() && repair && effective_builder() == "blocks")
       throw_input(
           "--repair needs the mesh in memory: drop --memory / --builder blocks (a streamed mesh "

@@ -155,7 +155,12 @@ std::uint32_t OpAssembler::add_removal(std::span<const std::uint32_t> vertices,
                                        std::span<const MadeTriangle> made, double error) {
   State& s = *s_;
   if (s.finished) throw_internal("op assembly: add_removal() after finish()");
-  if (s.err.size() >= kNone) throw_internal("op assembly: more than 2^32 - 1 removals");
+  if (s.err.size() >= kNone - 1) throw_internal("op assembly: more than 2^32 - 2 removals");
+  if (vertices.empty() || made.empty()) {
+    // An op with no PreF would have no parent to reach it from R^0 (spawned components need
+    // an op to hold them, which this assembler does not make).
+    throw_internal("op assembly: a removal must remove a vertex and make triangles");
+  }
   const auto k = static_cast<std::uint32_t>(s.err.size());
   double e = error;
   for (std::uint32_t j = 0; j < star.size(); ++j) {
@@ -301,15 +306,17 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
     if (it == vs.end() || *it != v) throw_internal("op assembly: a PreF corner is not in F");
     return static_cast<std::uint32_t>(it - vs.begin());
   };
-  // Fills the op's vertices (`first` introduced, then the rest of F's by id) and fragment.
+  // Fills the op's vertices (`first` introduced, then the rest of F's by id; R^0 introduces
+  // them all) and fragment.
   auto fill = [&](Op& op, std::span<const std::uint32_t> first,
                   std::span<const StarTriangle> frag) {
+    const bool base_op = op.id == kBaseOp;
     vs.clear();
     for (const StarTriangle& t : frag) vs.insert(vs.end(), t.v.begin(), t.v.end());
     std::sort(vs.begin(), vs.end());
     vs.erase(std::unique(vs.begin(), vs.end()), vs.end());
     lead = first.size();
-    if (!first.empty()) {
+    if (!base_op) {
       for (std::uint32_t v : first) {
         const auto it = std::lower_bound(vs.begin(), vs.end(), v);
         if (it == vs.end() || *it != v)
@@ -318,7 +325,7 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
       }
       vs.insert(vs.begin(), first.begin(), first.end());
     }
-    op.new_vertex_count = static_cast<std::uint32_t>(first.empty() ? vs.size() : first.size());
+    op.new_vertex_count = static_cast<std::uint32_t>(base_op ? vs.size() : first.size());
     op.vertices.reserve(vs.size());
     for (std::uint32_t v : vs) op.vertices.push_back({VertexId(v), position(v)});
     op.fragment.resize(frag.size());
@@ -385,9 +392,12 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
     op.birth_res = birth(oe.k);
     owner.assign(made.size(), {kNone, 0});
     fix.take(i, [&](const Fixup& f) {
+      bool found = false;
       for (std::size_t j = 0; j < made.size(); ++j) {
-        if (made[j].id == f.tri) owner[j] = {f.owner, f.local};
+        if (made[j].id == f.tri) owner[j] = {f.owner, f.local}, found = true;
       }
+      if (!found)
+        throw_internal("op assembly: a star triangle names a creator that did not make it");
     });
     for (std::size_t j = 0; j < made.size(); ++j) {
       if (owner[j].first == kNone)

@@ -160,7 +160,8 @@ class Builder {
   /// edges of v's that now have an unlocked end get their boundary constraint planes here.
   Builder(const QemPmOptions& options, std::vector<Vec3> pos, std::vector<Quadric> quad,
           std::vector<std::uint8_t> locked, const std::vector<std::uint8_t>& constrain,
-          const std::vector<Tri>& tris)
+          const std::vector<Tri>& tris, const std::string& what,
+          const std::vector<std::uint32_t>& ids)
       : options_(options) {
     pos_ = std::move(pos);
     quad_ = std::move(quad);
@@ -177,7 +178,18 @@ class Builder {
     directed.reserve(tris_.size() * 3);
     for (std::uint32_t id = 0; id < tris_.size(); ++id) {
       const Tri& t = tris_[id];
-      for (int k = 0; k < 3; ++k) directed.emplace(edge_key(t.v[k], t.v[(k + 1) % 3]), id);
+      for (int k = 0; k < 3; ++k) {
+        const std::uint32_t a = t.v[k], b = t.v[(k + 1) % 3];
+        // Both triangles with a directed edge meet in one block by the level that unlocks its
+        // ends, before any collapse touches them: the streamed mesh's manifold-edge and
+        // orientation check.
+        if (!directed.emplace(edge_key(a, b), id).second) {
+          throw_input("mesh '" + what + "': the edge from vertex " + std::to_string(ids[a]) +
+                      " to vertex " + std::to_string(ids[b]) +
+                      " is used twice in the same direction (a non-manifold edge or inconsistent "
+                      "orientation); ingest it in memory (without --memory) with --repair");
+        }
+      }
     }
     for (const Tri& t : tris_) {
       for (int k = 0; k < 3; ++k) {
@@ -380,7 +392,6 @@ class Builder {
     for (std::uint32_t id : star_[from]) {
       const Tri& t = tris_[id];
       if (has(t, to)) continue;
-      preimage_.push_back(static_cast<std::uint32_t>(old_targets_.size() - 1));
       std::array<std::uint32_t, 3> nv = t.v;
       for (std::uint32_t& w : nv) {
         if (w == from) w = to;
@@ -1018,8 +1029,8 @@ class Builder {
       }
       std::sort(dirty_list_.begin(), dirty_list_.end());
       dirty_list_.erase(std::unique(dirty_list_.begin(), dirty_list_.end()), dirty_list_.end());
-      if (made == 0) return rounds;
-      ++rounds;
+      if (made == 0 && dirty_list_.empty()) return rounds;
+      if (made != 0) ++rounds;
     }
   }
 
@@ -1324,7 +1335,8 @@ class BlockPmBuilder {
       lt.e = t.e;
       tris.push_back(lt);
     }
-    Builder b(qem_, std::move(pos), std::move(quad), std::move(locked), constrain, tris);
+    Builder b(qem_, std::move(pos), std::move(quad), std::move(locked), constrain, tris,
+              mesh_.name(), gid);
     // Collapses up to tolerance_fraction of the block's side (the root: as far as the rules
     // allow), cheapest quadric cost first within the bound, as the in-core builder orders them.
     const double tolerance = level == levels_ ? kInfinity

@@ -956,7 +956,7 @@ void parse_ply(std::string_view bytes, Source& src, TriangleMesh& mesh, const Me
   }
   const std::uint64_t nv = elements[static_cast<std::size_t>(vertex_el)].count;
   if (nv > kMaxVertices) throw_input("'" + what + "' has too many vertices");
-  mesh.positions.reserve(static_cast<std::size_t>(nv));
+  if (!src.streaming()) mesh.positions.reserve(static_cast<std::size_t>(nv));
   FaceSink sink(mesh, src, repair, report, !binary && !src.streaming());
   std::vector<std::uint32_t> idx;
   const auto bad_index = [&](std::uint64_t f, std::int64_t v, const std::string& where) {
@@ -1907,7 +1907,30 @@ namespace {
 // from the resident set as it goes (storage::PageTrimmer), handing batches over.
 class PlyStream final : public MeshStream {
  public:
-  explicit PlyStream(std::string path) : path_(std::move(path)) {}
+  explicit PlyStream(std::string path) : path_(std::move(path)) {
+    // The counts the header declares (the parse checks them against the data), so the
+    // builder can size its arrays before the first pass.
+    const storage::MappedFile file(path_);
+    const std::string_view b = file.bytes();
+    const std::string_view head = b.substr(0, std::min<std::size_t>(b.size(), 1 << 20));
+    std::size_t at = 0;
+    while (at < head.size()) {
+      const std::size_t nl = head.find('\n', at);
+      const std::string_view line =
+          head.substr(at, (nl == std::string_view::npos ? head.size() : nl) - at);
+      at = nl == std::string_view::npos ? head.size() : nl + 1;
+      if (line.starts_with("end_header")) break;
+      std::uint64_t n = 0;
+      for (const auto& [prefix, out] :
+           {std::pair{std::string_view("element vertex "), &vertices_},
+            std::pair{std::string_view("element face "), &triangles_}}) {
+        if (!line.starts_with(prefix)) continue;
+        std::string_view rest = line.substr(prefix.size());
+        while (!rest.empty() && (rest.back() == '\r' || rest.back() == ' ')) rest.remove_suffix(1);
+        if (parse_uint(rest, n)) *out = n;
+      }
+    }
+  }
   std::string name() const override { return path_; }
   std::uint64_t vertex_count() const override { return vertices_; }
   std::uint64_t triangle_count() const override { return triangles_; }

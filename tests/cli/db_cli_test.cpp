@@ -597,6 +597,17 @@ TEST_F(DbCli, StreamedMeshIngestIsCompleteDeterministicAndRejectsBrokenFiles) {
                         " --memory 64M -o " + path("o.smrdb"),
                     "only PLY");
   expect_user_error("ingest " + ply + " --memory 64M --repair -o " + path("r.smrdb"), "--repair");
+  expect_user_error("ingest " + ply + " --memory 64M --threads 2 -o " + path("r.smrdb"),
+                    "--threads");
+  // Two faces running the same edge the same way: the blocks' edge check (the whole-mesh
+  // validation does not run on a stream).
+  const std::string twice = path("twice.ply");
+  write_file(twice,
+             "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+             "property float z\nelement face 2\nproperty list uchar int vertex_indices\n"
+             "end_header\n0 0 0\n1 0 0\n0 1 0\n0 -1 0\n3 0 1 2\n3 0 1 3\n");
+  expect_user_error("ingest " + twice + " --memory 64M -o " + path("w.smrdb"), "same direction");
+  EXPECT_FALSE(fs::exists(path("w.smrdb")));
 }
 
 // The block builder (issue 5) end to end on a tiled GeoTIFF with a no-data hole, read by windows:
