@@ -5,8 +5,9 @@
 # core with `smrdb ingest --memory $MEMORY` (default 2G): the PLY is streamed, its triangles
 # sorted by octree cell on disk, blocks simplified with locked borders and merged up to the root,
 # ops assembled on disk. Reports peak RSS (/usr/bin/time) against the budget, triangles/s, temp
-# bytes, DAG height, ops and pages, then extraction on the database (bench_db's views at 1 px:
-# pages read and time). Writes benchmarks/results/block_mesh.json.
+# bytes, DAG height, ops and pages, then extraction on the database (bench_db's views at 1 px,
+# minimal surface -- reduced extraction is 2.5-D only -- pages read and time). Writes
+# benchmarks/results/block_mesh.json.
 #
 # Environment: BUILD_DIR (build/release), WORK_DIR ($BUILD_DIR/bench-mesh-blocks), SMRDB_DATA_DIR
 # (data), SUBDIVIDE (5), MEMORY (2G), OUT.
@@ -47,7 +48,8 @@ log "  $(cat "$WORK_DIR/ingest.time") (KiB, s)"
 log "extraction"
 views="[]"
 for view in oblique overview; do
-  r="$("$bench_db" extract "$db" --view "$view" --pixel-error 1 --cache-mb 64 --repeat 3)"
+  r="$("$bench_db" extract "$db" --view "$view" --pixel-error 1 --cache-mb 64 --repeat 3 \
+    --algorithms minimal)"
   views="$(jq --argjson r "$r" '. + [$r]' <<<"$views")"
 done
 

@@ -208,7 +208,10 @@ TEST_P(PerDataset, CoarserLinksAreTheNewerSideOfAReplay) {
 
 TEST_P(PerDataset, AssemblyThatSpillsGivesTheSameOps) {
   // The assembly's sorts under a budget of a few KiB (hundreds of runs) against the default.
-  if (std::get<1>(GetParam())) GTEST_SKIP() << "the exact configuration covers the assembly";
+  if (std::get<1>(GetParam()) ||
+      (std::get<0>(GetParam()) != "fbm257" && std::get<0>(GetParam()) != "elev")) {
+    GTEST_SKIP() << "CI time: fbm257 and elev (no-data holes) cover the assembly's spills";
+  }
   const test::Dataset& d = data();
   BlockTinOptions opt = options(d, false);
   opt.assembly_memory_bytes = 64 << 10;
