@@ -88,6 +88,32 @@ class DbCli : public ::testing::Test {
     EXPECT_NE(r.out.find(mention), std::string::npos) << args << "\n" << r.out;
     EXPECT_EQ(r.out.find("internal error"), std::string::npos) << r.out;
   }
+  // kill -9 at moments spread over an ingest (`ingest` writes `target` with --force): each
+  // leaves no database or the complete one (`bytes`), and a re-run gives `bytes`.
+  void expect_kills_then_reruns_give(const std::vector<std::string>& ingest,
+                                     const std::string& target, const std::string& bytes) {
+    const auto t0 = Clock::now();
+    ASSERT_EQ(wait_for(spawn_smrdb(ingest)), 0);
+    const double full = std::chrono::duration<double>(Clock::now() - t0).count();
+    int killed = 0;
+    for (int i = 0; i < 6; ++i) {
+      if (!smr::test::in_sample(std::size_t(i), 3)) continue;  // kills early and late
+      fs::remove(target);
+      const pid_t pid = spawn_smrdb(ingest);
+      std::this_thread::sleep_for(std::chrono::duration<double>(full * (i + 0.5) / 7.0));
+      ::kill(pid, SIGKILL);
+      const int status = wait_for(pid);
+      killed += WIFSIGNALED(status);
+      if (fs::exists(target)) {
+        EXPECT_EQ(read_file(target), bytes) << "run " << i << " left a different database";
+      }
+      // The re-run (--force: the killed run may have finished, leaving the complete database).
+      ASSERT_EQ(wait_for(spawn_smrdb(ingest)), 0);
+      EXPECT_EQ(read_file(target), bytes) << "the re-run after kill " << i << " differs";
+      for (const std::string& t : stale_temps(target)) fs::remove(t);
+    }
+    EXPECT_GT(killed, 0);
+  }
   std::vector<std::string> stale_temps(const std::string& db) const {
     std::vector<std::string> out;
     const std::string prefix = fs::path(db).filename().string() + ".tmp-";
@@ -553,8 +579,8 @@ TEST_F(DbCli, MeshIngestExtractInfoVerify) {
 
 // Out-of-core mesh ingest (issue 5): a PLY streamed through octree blocks under --memory. The
 // database verifies, a fully refined extraction gives every source triangle back, a second run
-// gives the same bytes, ASCII PLY works too, and broken or unsupported inputs are clear errors
-// that leave no database behind.
+// gives the same bytes, kill -9 then a re-run gives them too, ASCII PLY works, and broken or
+// unsupported inputs are clear errors that leave no database behind.
 TEST_F(DbCli, StreamedMeshIngestIsCompleteDeterministicAndRejectsBrokenFiles) {
   const smr::TriangleMesh src =
       smr::read_mesh(smr::test::data_path("meshes/elephant-with-holes.off"));
@@ -576,7 +602,10 @@ TEST_F(DbCli, StreamedMeshIngestIsCompleteDeterministicAndRejectsBrokenFiles) {
   EXPECT_NE(r.out.find("\"triangles\": " + std::to_string(src.triangles.size())), std::string::npos)
       << r.out;
   ASSERT_EQ(smrdb("ingest " + ply + " --memory 64M -q -o " + db2).code, 0);
-  EXPECT_TRUE(smr::test::read_file(db) == smr::test::read_file(db2)) << "two runs differ";
+  const std::string bytes = smr::test::read_file(db);
+  EXPECT_TRUE(bytes == smr::test::read_file(db2)) << "two runs differ";
+  expect_kills_then_reruns_give({"ingest", ply, "--memory", "64M", "-q", "--force", "-o", db2}, db2,
+                                bytes);
   r = smrdb("ingest " + ascii + " --memory 64M -q --json -o " + path("ascii.smrdb"));
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_EQ(nlohmann::json::parse(r.out)["input"]["triangles"], src.triangles.size());
@@ -650,27 +679,7 @@ TEST_F(DbCli, BlockIngestOfATiledGeoTiffIsDeterministicAndSurvivesKills) {
   const std::vector<std::string> ingest = {
       "ingest", tif,  "--builder", "blocks", "--block-cells", "16", "--max-error",
       "1",      "-q", "--force",   "-o",     target};
-  const auto t0 = Clock::now();
-  ASSERT_EQ(wait_for(spawn_smrdb(ingest)), 0);
-  const double full = std::chrono::duration<double>(Clock::now() - t0).count();
-  int killed = 0;
-  for (int i = 0; i < 6; ++i) {
-    if (!smr::test::in_sample(std::size_t(i), 3)) continue;  // kills early and late
-    fs::remove(target);
-    const pid_t pid = spawn_smrdb(ingest);
-    std::this_thread::sleep_for(std::chrono::duration<double>(full * (i + 0.5) / 7.0));
-    ::kill(pid, SIGKILL);
-    const int status = wait_for(pid);
-    killed += WIFSIGNALED(status);
-    if (fs::exists(target)) {
-      EXPECT_EQ(read_file(target), bytes) << "run " << i << " left a different database";
-    }
-    // The re-run (--force: the killed run may have finished, leaving the complete database).
-    ASSERT_EQ(wait_for(spawn_smrdb(ingest)), 0);
-    EXPECT_EQ(read_file(target), bytes) << "the re-run after kill " << i << " differs";
-    for (const std::string& t : stale_temps(target)) fs::remove(t);
-  }
-  EXPECT_GT(killed, 0);
+  expect_kills_then_reruns_give(ingest, target, bytes);
 
   expect_user_error("ingest " + tif + " --builder blocks --block-cells 12 -o " + path("d.smrdb"),
                     "--block-cells");
