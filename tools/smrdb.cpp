@@ -534,6 +534,22 @@ class IngestTap final : public smr::OpSink {
   std::string source_;
 };
 
+// The end of a streamed ingest's report: the CRMR counted as it streamed, the database, the
+// writer's own peak (its finish(): sorts, sweep, pages; < 0 when not measured) and, with
+// --verify, a check of what was written (the CRMR never exists in memory: checksums, DAG, links,
+// index).
+void report_streamed(nlohmann::json& report, const IngestTap& tap, const smr::WriteReport& w,
+                     const IngestArgs& a, const std::string& db_path, double build_seconds,
+                     double finish_rss, bool verify) {
+  report["crmr"] = tap.counts.json(build_seconds);
+  report["database"] = database_report(w, a, db_path, tap.counts.vertices);
+  if (finish_rss >= 0.0) report["database"]["finish_peak_rss_mb"] = finish_rss;
+  if (verify) {
+    const smr::VerifyReport r = smr::verify_database(db_path, nullptr);
+    if (!r.ok()) smr::throw_internal("database invariants violated: " + r.faults.front());
+  }
+}
+
 // --builder blocks: the builder streams its ops into the database writer, which spools them to
 // --tmp; neither the raster nor the CRMR is ever whole in memory.
 nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
@@ -612,15 +628,7 @@ nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
                         {"assembly_feed", st.seconds_feed},
                         {"assembly_join", st.seconds_join},
                         {"assembly_emit", st.seconds_emit}}}};
-  report["crmr"] = tap.counts.json(build_seconds);
-  report["database"] = database_report(w, a, db_path, tap.counts.vertices);
-  // The writer's own peak (its finish(): sorts, sweep, pages), the builder's memory given back.
-  if (phase_rss) report["database"]["finish_peak_rss_mb"] = finish_rss;
-  if (verify) {
-    // The CRMR never exists in memory: check what was written (checksums, DAG, links, index).
-    const smr::VerifyReport r = smr::verify_database(db_path, nullptr);
-    if (!r.ok()) smr::throw_internal("database invariants violated: " + r.faults.front());
-  }
+  report_streamed(report, tap, w, a, db_path, build_seconds, phase_rss ? finish_rss : -1.0, verify);
   return report;
 }
 
@@ -668,13 +676,7 @@ nlohmann::json ingest_mesh_blocks(const IngestArgs& a, const std::string& db_pat
        {{"sort", st.seconds_sort},
         {"blocks", st.seconds_blocks},
         {"assemble", st.seconds_assemble}}}};
-  report["crmr"] = tap.counts.json(build_seconds);
-  report["database"] = database_report(w, a, db_path, tap.counts.vertices);
-  if (phase_rss) report["database"]["finish_peak_rss_mb"] = finish_rss;
-  if (verify) {
-    const smr::VerifyReport r = smr::verify_database(db_path, nullptr);
-    if (!r.ok()) smr::throw_internal("database invariants violated: " + r.faults.front());
-  }
+  report_streamed(report, tap, w, a, db_path, build_seconds, phase_rss ? finish_rss : -1.0, verify);
   return report;
 }
 

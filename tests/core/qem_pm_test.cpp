@@ -365,25 +365,17 @@ TEST(BlockPmBuild, RejectsBadInput) {
   EXPECT_THROW((void)build_block_pm(MemoryMeshStream(mesh, "x"), o), Error);
 }
 
-INSTANTIATE_TEST_SUITE_P(CgalMeshes, BlockPm,
-                         ::testing::Values("blobby_3cc.off", "elephant-with-holes.off",
-                                           "mech-holes-shark.off", "ChineseDragon-10kv.off"),
-                         [](const auto& p) {
-                           std::string n = p.param;
-                           n = n.substr(0, n.find('.'));
-                           std::replace(n.begin(), n.end(), '-', '_');
-                           return n;
-                         });
+// blobby_3cc: three components; elephant-with-holes: boundaries; the shark: holes; the dragon.
+const auto kCgalMeshes = ::testing::Values("blobby_3cc.off", "elephant-with-holes.off",
+                                           "mech-holes-shark.off", "ChineseDragon-10kv.off");
+std::string mesh_test_name(const ::testing::TestParamInfo<std::string>& p) {
+  std::string n = p.param.substr(0, p.param.find('.'));
+  std::replace(n.begin(), n.end(), '-', '_');
+  return n;
+}
 
-INSTANTIATE_TEST_SUITE_P(CgalMeshes, QemPm,
-                         ::testing::Values("blobby_3cc.off", "elephant-with-holes.off",
-                                           "mech-holes-shark.off", "ChineseDragon-10kv.off"),
-                         [](const auto& p) {
-                           std::string n = p.param;
-                           n = n.substr(0, n.find('.'));
-                           std::replace(n.begin(), n.end(), '-', '_');
-                           return n;
-                         });
+INSTANTIATE_TEST_SUITE_P(CgalMeshes, BlockPm, kCgalMeshes, mesh_test_name);
+INSTANTIATE_TEST_SUITE_P(CgalMeshes, QemPm, kCgalMeshes, mesh_test_name);
 
 }  // namespace
 }  // namespace smr
