@@ -492,6 +492,12 @@ smr::WriteOptions write_options(const IngestArgs& a, smr::tools::GdalProgress& p
   wo.page_bytes = a.page_kb * 1024 - 16;
   wo.parameters = a.describe();
   wo.progress = [&progress](double f) { progress.update(0.8 + 0.2 * f); };
+  if (a.memory_bytes() != 0) {
+    // A streamed ingest: batches of a 16th; finish() runs once the builder has freed its
+    // records, and its sorts take a quarter.
+    wo.batch_bytes = a.memory_bytes() / 16;
+    wo.memory_bytes = a.memory_bytes() / 4;
+  }
   return wo;
 }
 
@@ -565,13 +571,7 @@ nlohmann::json ingest_blocks(const IngestArgs& a, const std::string& db_path,
   opt.threads = a.threads;
   opt.progress = [&](double f) { progress.update(0.8 * f); };
   smr::BlockTinStats st;
-  smr::WriteOptions wo = write_options(a, progress);
-  if (opt.memory_bytes != 0) {
-    wo.batch_bytes = opt.memory_bytes / 16;
-    // finish() runs once the builder has freed its records: its sorts take a quarter.
-    wo.memory_bytes = opt.memory_bytes / 4;
-  }
-  smr::DatabaseStreamWriter writer(db_path, wo, a.tmp_dir);
+  smr::DatabaseStreamWriter writer(db_path, write_options(a, progress), a.tmp_dir);
   IngestTap tap(writer, std::filesystem::path(a.dem).filename().string());
   smr::build_block_tin(*dem, tap, opt, &st);
   const double build_seconds = seconds_since(t0);
@@ -646,12 +646,7 @@ nlohmann::json ingest_mesh_blocks(const IngestArgs& a, const std::string& db_pat
   opt.memory_bytes = a.memory_bytes() != 0 ? a.memory_bytes() / 4 : 0;
   opt.progress = [&](double f) { progress.update(0.8 * f); };
   smr::BlockPmStats st;
-  smr::WriteOptions wo = write_options(a, progress);
-  if (a.memory_bytes() != 0) {
-    wo.batch_bytes = a.memory_bytes() / 16;
-    wo.memory_bytes = a.memory_bytes() / 4;
-  }
-  smr::DatabaseStreamWriter writer(db_path, wo, a.tmp_dir);
+  smr::DatabaseStreamWriter writer(db_path, write_options(a, progress), a.tmp_dir);
   IngestTap tap(writer, std::filesystem::path(a.dem).filename().string());
   smr::build_block_pm(*mesh, tap, opt, &st);
   const double build_seconds = seconds_since(t0);

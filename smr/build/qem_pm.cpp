@@ -49,6 +49,15 @@ struct Quadric {
   }
 };
 
+// The plane of triangle (a, b, c) weighted by its area; empty for a degenerate triangle.
+Quadric face_quadric(const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 n = glm::cross(b - a, c - a);
+  const double len = glm::length(n);
+  Quadric q;
+  if (len > 0.0) q.add_plane(n / len, -glm::dot(n / len, a), 0.5 * len);
+  return q;
+}
+
 struct Tri {
   std::array<std::uint32_t, 3> v{};
   double e = 0.0;                   // two-sided Hausdorff bound to the source (qem_pm.h)
@@ -138,19 +147,14 @@ class Builder {
   Builder(const TriangleMesh& mesh, const QemPmOptions& options) : options_(options) {
     pos_ = mesh.positions;
     const std::size_t n = pos_.size();
-    star_.resize(n);
     quad_.resize(n);
-    removed_.assign(n, 0);
-    boundary_.assign(n, 0);
-    stamp_.assign(n, 0);
-    tris_.reserve(mesh.triangles.size() * 2);
+    init_arrays(mesh.triangles.size());
     for (const auto& t : mesh.triangles) {
       for (std::uint32_t v : t) {
         if (v >= n) throw_input("mesh: a triangle references a vertex out of range");
       }
       add_triangle(Tri{t, 0.0, kNone, kNone});
     }
-    cos_max_turn_ = std::cos(options_.max_normal_turn_degrees * 3.14159265358979323846 / 180.0);
     init_quadrics_and_boundary();
     init_components();
   }
@@ -166,30 +170,17 @@ class Builder {
     pos_ = std::move(pos);
     quad_ = std::move(quad);
     locked_ = std::move(locked);
-    const std::size_t n = pos_.size();
-    star_.resize(n);
-    removed_.assign(n, 0);
-    boundary_.assign(n, 0);
-    stamp_.assign(n, 0);
-    tris_.reserve(tris.size() * 2);
+    init_arrays(tris.size());
     for (const Tri& t : tris) add_triangle(t);
-    cos_max_turn_ = std::cos(options_.max_normal_turn_degrees * 3.14159265358979323846 / 180.0);
-    std::unordered_map<std::uint64_t, std::uint32_t> directed;
-    directed.reserve(tris_.size() * 3);
-    for (std::uint32_t id = 0; id < tris_.size(); ++id) {
-      const Tri& t = tris_[id];
-      for (int k = 0; k < 3; ++k) {
-        const std::uint32_t a = t.v[k], b = t.v[(k + 1) % 3];
-        // Both triangles with a directed edge meet in one block by the level that unlocks its
-        // ends, before any collapse touches them: the streamed mesh's manifold-edge and
-        // orientation check.
-        if (!directed.emplace(edge_key(a, b), id).second) {
-          throw_input("mesh '" + what + "': the edge from vertex " + std::to_string(ids[a]) +
-                      " to vertex " + std::to_string(ids[b]) +
-                      " is used twice in the same direction (a non-manifold edge or inconsistent "
-                      "orientation); ingest it in memory (without --memory) with --repair");
-        }
-      }
+    // Both triangles with a directed edge meet in one block by the level that unlocks its ends,
+    // before any collapse touches them: the streamed mesh's manifold-edge and orientation check.
+    std::uint64_t twice = kNoEdge;
+    const auto directed = directed_edges(&twice);
+    if (twice != kNoEdge) {
+      throw_input("mesh '" + what + "': the edge from vertex " + std::to_string(ids[twice >> 32]) +
+                  " to vertex " + std::to_string(ids[twice & 0xffffffffu]) +
+                  " is used twice in the same direction (a non-manifold edge or inconsistent "
+                  "orientation); ingest it in memory (without --memory) with --repair");
     }
     for (const Tri& t : tris_) {
       for (int k = 0; k < 3; ++k) {
@@ -239,23 +230,42 @@ class Builder {
     return glm::cross(pos_[v[1]] - pos_[v[0]], pos_[v[2]] - pos_[v[0]]);
   }
 
-  void init_quadrics_and_boundary() {
-    // Face planes weighted by area; each boundary edge adds a constraint plane through it,
-    // perpendicular to its face (Garland & Heckbert 1997, section 6.1).
+  // The per-vertex arrays for pos_.size() vertices, room for the triangles and their
+  // replacements, and the normal-turn threshold.
+  void init_arrays(std::size_t triangles) {
+    const std::size_t n = pos_.size();
+    star_.resize(n);
+    removed_.assign(n, 0);
+    boundary_.assign(n, 0);
+    stamp_.assign(n, 0);
+    tris_.reserve(triangles * 2);
+    cos_max_turn_ = std::cos(options_.max_normal_turn_degrees * 3.14159265358979323846 / 180.0);
+  }
+
+  static constexpr std::uint64_t kNoEdge = ~std::uint64_t{0};
+  // Directed edge -> a triangle having it; `twice`, if given, gets an edge two triangles have.
+  std::unordered_map<std::uint64_t, std::uint32_t> directed_edges(std::uint64_t* twice) const {
     std::unordered_map<std::uint64_t, std::uint32_t> directed;
     directed.reserve(tris_.size() * 3);
     for (std::uint32_t id = 0; id < tris_.size(); ++id) {
       const Tri& t = tris_[id];
-      for (int k = 0; k < 3; ++k) directed.emplace(edge_key(t.v[k], t.v[(k + 1) % 3]), id);
+      for (int k = 0; k < 3; ++k) {
+        const std::uint64_t key = edge_key(t.v[k], t.v[(k + 1) % 3]);
+        if (!directed.emplace(key, id).second && twice != nullptr && *twice == kNoEdge) {
+          *twice = key;
+        }
+      }
     }
+    return directed;
+  }
+
+  void init_quadrics_and_boundary() {
+    // Face planes weighted by area; each boundary edge adds a constraint plane through it,
+    // perpendicular to its face (Garland & Heckbert 1997, section 6.1).
+    const auto directed = directed_edges(nullptr);
     for (const Tri& t : tris_) {
-      const Vec3 c = normal(t.v);
-      const double len = glm::length(c);
-      if (!(len > 0.0)) continue;
-      const Vec3 n = c / len;
-      const double d = -glm::dot(n, pos_[t.v[0]]);
-      Quadric q;
-      q.add_plane(n, d, 0.5 * len);
+      if (!(glm::length(normal(t.v)) > 0.0)) continue;
+      const Quadric q = face_quadric(pos_[t.v[0]], pos_[t.v[1]], pos_[t.v[2]]);
       for (std::uint32_t v : t.v) quad_[v] += q;
       for (int k = 0; k < 3; ++k) {
         const std::uint32_t a = t.v[k], b = t.v[(k + 1) % 3];
@@ -1264,10 +1274,7 @@ class BlockPmBuilder {
     std::unordered_map<std::uint32_t, Quadric> quads;
     for (const auto& t : leaf) {
       b.tris.push_back({t, 0.0, kNone, next_tri_++});
-      const Vec3 c = glm::cross(pos_[t[1]] - pos_[t[0]], pos_[t[2]] - pos_[t[0]]);
-      const double len = glm::length(c);
-      Quadric q;
-      if (len > 0.0) q.add_plane(c / len, -glm::dot(c / len, pos_[t[0]]), 0.5 * len);
+      const Quadric q = face_quadric(pos_[t[0]], pos_[t[1]], pos_[t[2]]);
       for (std::uint32_t v : t) quads[v] += q;
     }
     b.quads.assign(quads.begin(), quads.end());
