@@ -426,20 +426,24 @@ class Builder {
     return std::max(0.0, q.eval(pos_[to]));
   }
 
-  void push_best(std::uint32_t from) {
-    ++stamp_[from];
-    if (removed_[from] || is_locked(from)) return;
+  // The cheapest valid target of `from` and its cost (ties: the smaller id; kNone if none):
+  // validity, the costly test, is checked in order of cost until one passes.
+  std::pair<double, std::uint32_t> cheapest_valid(std::uint32_t from) {
+    if (removed_[from] || is_locked(from)) return {0.0, kNone};
     neighbours(from, cand_);
-    // The cheapest valid target (ties: the smaller id): validity, the costly test, is checked in
-    // order of cost until one passes.
     ranked_.clear();
     for (std::uint32_t to : cand_) ranked_.push_back({cost(from, to), to});
     std::sort(ranked_.begin(), ranked_.end());
     for (const auto& [c, to] : ranked_) {
-      if (!valid(from, to, cand_)) continue;
-      heap_.push({c, from, to, stamp_[from]});
-      return;
+      if (valid(from, to, cand_)) return {c, to};
     }
+    return {0.0, kNone};
+  }
+
+  void push_best(std::uint32_t from) {
+    ++stamp_[from];
+    const auto [c, to] = cheapest_valid(from);
+    if (to != kNone) heap_.push({c, from, to, stamp_[from]});
   }
 
   // ---- error bound --------------------------------------------------------------------------
@@ -1063,20 +1067,12 @@ class Builder {
     bool have_error = false;
   };
   void refresh_best(std::uint32_t v) {
-    Best& b = best_[v];
-    b = Best{};
-    if (removed_[v] || is_locked(v)) return;
-    neighbours(v, cand_);
-    ranked_.clear();
-    for (std::uint32_t to : cand_) ranked_.push_back({cost(v, to), to});
-    std::sort(ranked_.begin(), ranked_.end());
-    for (const auto& [c, to] : ranked_) {
-      if (!valid(v, to, cand_)) continue;
-      b.cost = c;
-      b.to = to;
-      return;
-    }
+    const auto [c, to] = cheapest_valid(v);
+    best_[v] = Best{};
+    best_[v].cost = c;
+    best_[v].to = to;
   }
+
   std::vector<Best> best_;
   std::vector<std::uint32_t> dirty_list_, taken_;
   std::uint32_t taken_stamp_ = 0;
