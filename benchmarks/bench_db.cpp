@@ -183,6 +183,7 @@ struct Timed {
   std::size_t mesh_vertices = 0, mesh_triangles = 0;
   double open_seconds = 0, extract_seconds = 0, mesh_seconds = 0;
   smr::DatabaseStats stats;
+  std::uint64_t pages_read_to_mesh = 0;  // of stats.pages_read, by to_mesh
 };
 
 Timed run_extraction(const smr::Database& db, const smr::Rcf& rcf, bool reduced) {
@@ -190,9 +191,11 @@ Timed run_extraction(const smr::Database& db, const smr::Rcf& rcf, bool reduced)
   std::uint64_t t0 = now_ns();
   t.e = reduced ? smr::extract_reduced(db, rcf) : smr::extract_minimal_surface(db, rcf);
   t.extract_seconds = seconds_since(t0);
+  const std::uint64_t pages_before_mesh = db.stats().pages_read;
   t0 = now_ns();
   const smr::TriangleMesh mesh = smr::to_mesh(db, t.e.triangles);
   t.mesh_seconds = seconds_since(t0);
+  t.pages_read_to_mesh = db.stats().pages_read - pages_before_mesh;
   t.mesh_vertices = mesh.positions.size();
   t.mesh_triangles = mesh.triangles.size();
   t.stats = db.stats();
@@ -377,8 +380,11 @@ json mode_extract(const ExtractArgs& a) {
                      {"mesh_triangles", first->mesh_triangles},
                      {"x", s.x},
                      {"x_plus", s.x_plus},
-                     {"ops_visited", s.ops_visited}};
+                     {"ops_visited", s.ops_visited},
+                     {"held_ops_peak", s.held_ops_peak},
+                     {"held_bytes_peak", s.held_bytes_peak}};
       c["io"] = stats_json(first->stats);
+      c["io"]["pages_read_to_mesh"] = first->pages_read_to_mesh;
       c["io_unbounded_cache"] = stats_json(unbounded);
       c["pages"] = {{"needed", needed.size()},
                     {"needed_bytes", needed_bytes},

@@ -223,6 +223,8 @@ nlohmann::json stats_json(const smr::ExtractStats& s) {
           {"triangles_per_fan", s.triangles_per_fan()},
           {"starting_points", s.starting_points},
           {"domain_tests", s.domain_tests},
+          {"held_ops_peak", s.held_ops_peak},
+          {"held_bytes_peak", s.held_bytes_peak},
           {"extract_seconds", s.extract_seconds},
           {"expand_seconds", s.expand_seconds}};
 }

@@ -2,10 +2,13 @@
 #include "smr/extract/extract.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <unordered_map>
 #include <unordered_set>
+#include <utility>
+#include <vector>
 
 #include "smr/extract/expansion.h"
 #include "storage/error.h"
@@ -72,31 +75,65 @@ std::vector<TriRef> set_formula(const OpSource& source, std::span<const OpId> x)
 }
 
 TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles, bool keep_void) {
-  TriangleMesh mesh;
-  // Sized once: a triangulated surface has about half as many vertices as triangles (Euler),
-  // plus its boundary; growing by doubling would hold up to twice the output for a moment.
+  // Triangles are read page by page (OpSource::locality): in expansion order, finest op first,
+  // they cross the pages of a resolution band in no spatial order and an LRU page cache smaller
+  // than the band decodes each page again for nearly every triangle (see HeldOps in
+  // expansion.cpp). The vertices are numbered in the given order afterwards, so the mesh does not
+  // depend on where its ops are stored.
   const std::size_t n = triangles.size();
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> order;  // (locality, triangle)
+  order.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint64_t place = i > 0 && triangles[i].op == triangles[i - 1].op
+                                    ? order.back().first
+                                    : source.locality(triangles[i].op);
+    order.push_back({place, static_cast<std::uint32_t>(i)});
+  }
+  std::stable_sort(order.begin(), order.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  constexpr std::uint64_t kDropped = ~std::uint64_t{0};
+  std::vector<std::array<std::uint64_t, 3>> corners(n);  // vertex ids; kDropped: a void triangle
+  std::vector<float> values(n);
+  std::unordered_map<std::uint64_t, Vec3> position;
+  // A triangulated surface has about half as many vertices as triangles (Euler), plus its
+  // boundary: sized once, since growing by doubling would hold up to twice the output a moment.
   const std::size_t vertices = n / 2 + 4 * static_cast<std::size_t>(std::sqrt(double(n))) + 16;
-  mesh.triangles.reserve(n);
-  mesh.triangle_values.reserve(n);
-  mesh.positions.reserve(vertices);
-  std::unordered_map<std::uint64_t, std::uint32_t> index;
-  index.reserve(vertices);
-  for (const TriRef& ref : triangles) {
-    const OpRef op_ref = source.op(ref.op);
+  position.reserve(vertices);
+  OpRef op_ref;
+  for (const auto& [place, i] : order) {
+    if (op_ref == nullptr || op_ref->id != triangles[i].op) op_ref = source.op(triangles[i].op);
     const Op& op = *op_ref;
-    const FragmentTriangle& t = op.fragment[ref.index];
-    if (t.is_void() && !keep_void) continue;
-    std::array<std::uint32_t, 3> tri{};
+    const FragmentTriangle& t = op.fragment.at(triangles[i].index);
+    if (t.is_void() && !keep_void) {
+      corners[i][0] = kDropped;
+      continue;
+    }
     for (int k = 0; k < 3; ++k) {
       const Vertex& v = op.vertices[t.v[k]];
+      corners[i][k] = v.id.value;
+      position.emplace(v.id.value, v.p);
+    }
+    values[i] = static_cast<float>(t.death_res);
+  }
+  op_ref.reset();
+  std::vector<std::pair<std::uint64_t, std::uint32_t>>().swap(order);
+  TriangleMesh mesh;
+  mesh.triangles.reserve(n);
+  mesh.triangle_values.reserve(n);
+  mesh.positions.reserve(position.size());
+  std::unordered_map<std::uint64_t, std::uint32_t> index;
+  index.reserve(position.size());
+  for (std::size_t i = 0; i < n; ++i) {
+    if (corners[i][0] == kDropped) continue;
+    std::array<std::uint32_t, 3> tri{};
+    for (int k = 0; k < 3; ++k) {
       auto [it, fresh] =
-          index.emplace(v.id.value, static_cast<std::uint32_t>(mesh.positions.size()));
-      if (fresh) mesh.positions.push_back(v.p);
+          index.emplace(corners[i][k], static_cast<std::uint32_t>(mesh.positions.size()));
+      if (fresh) mesh.positions.push_back(position.at(corners[i][k]));
       tri[k] = it->second;
     }
     mesh.triangles.push_back(tri);
-    mesh.triangle_values.push_back(static_cast<float>(t.death_res));
+    mesh.triangle_values.push_back(values[i]);
   }
   return mesh;
 }

@@ -4,6 +4,9 @@
 // topology across page boundaries (shared vertices decode bit-identically), and the same mesh
 // gives byte-identical files.
 #include <algorithm>
+#include <cstdio>
+#include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -73,6 +76,46 @@ TEST(MeshDb, SameMeshGivesByteIdenticalFiles) {
   write_database(a, dir.file("a.smrdb"), {});
   write_database(b, dir.file("b.smrdb"), {});
   EXPECT_TRUE(test::read_file(dir.file("a.smrdb")) == test::read_file(dir.file("b.smrdb")));
+}
+
+// Surface expansion visits X finest first, which crosses each resolution band's pages in no
+// spatial order; through a cache smaller than a band every op fetched could decode its page again.
+// Held ops (expansion.cpp) and to_mesh's page order read each page of the output about once.
+TEST(MeshDb, AWholeModelCutReadsEachPageAboutOnceThroughASmallCache) {
+  Crmr m = test::built_mesh("armadillo.off").crmr;
+  test::TempDir dir("smrdb-mesh-db-test");
+  const std::string path = dir.file("mesh.smrdb");
+  const WriteReport w = write_database(m, path, {});
+  std::size_t decoded = 0;
+  {
+    const auto whole = Database::open(path, {std::size_t{1} << 30});
+    for (std::uint64_t p = 0; p < whole->page_count(); ++p) (void)whole->page(p);
+    decoded = whole->stats().cache.bytes_decoded;
+  }
+  RcfSpec all;
+  all.floor = 1.0;  // every op: X is the whole DAG, the output the source mesh
+  const Rcf rcf = make_rcf(all, ModelKind::kMesh3d, nullptr);
+  const std::vector<OpId> x = add_to_list(m, rcf);
+  ASSERT_EQ(x.size(), m.ops.size());
+  const auto reads = [&](std::uint64_t max_held_bytes) {
+    const auto db = Database::open(path, {decoded / 8});
+    ExpansionOptions o;
+    o.max_held_bytes = max_held_bytes;
+    const Extraction e = expand(*db, x, o);
+    const std::uint64_t expansion = db->stats().pages_read;
+    const TriangleMesh mesh = to_mesh(*db, e.triangles);
+    EXPECT_EQ(mesh.triangles.size(), test::built_mesh("armadillo.off").source.triangles.size());
+    return std::pair{expansion, db->stats().pages_read - expansion};
+  };
+  const auto [expansion, meshing] = reads(ExpansionOptions{}.max_held_bytes);
+  EXPECT_LE(expansion, w.pages + w.pages / 10);
+  EXPECT_LE(meshing, w.pages + w.pages / 10);
+  // Without held ops (none may be copied) the same expansion reads pages again and again.
+  const auto [unheld, unused] = reads(0);
+  EXPECT_GT(unheld, 2 * w.pages);
+  std::printf("pages %llu: expansion reads %llu (%llu unheld), to_mesh %llu\n",
+              static_cast<unsigned long long>(w.pages), static_cast<unsigned long long>(expansion),
+              static_cast<unsigned long long>(unheld), static_cast<unsigned long long>(meshing));
 }
 
 INSTANTIATE_TEST_SUITE_P(CgalMeshes, MeshDb,
