@@ -182,6 +182,16 @@ class Builder {
                   " is used twice in the same direction (a non-manifold edge or inconsistent "
                   "orientation); ingest it in memory (without --memory) with --repair");
     }
+    // A vertex unlocked here for the first time (all of them in a leaf block: constrain is set
+    // at level 0) has all its faces in this block; collapses below kept its star's fans apart or
+    // together as they were, so this is the streamed mesh's non-manifold vertex check.
+    for (std::uint32_t v = 0; v < pos_.size(); ++v) {
+      if (locked_[v] || !constrain[v] || fans(v) <= 1) continue;
+      throw_input("mesh '" + what + "': vertex " + std::to_string(ids[v]) +
+                  " is non-manifold: its faces form more than one fan (they share it but are "
+                  "not connected through edges around it); expected one fan per vertex; ingest "
+                  "it in memory (without --memory) with --repair, which splits it");
+    }
     for (const Tri& t : tris_) {
       for (int k = 0; k < 3; ++k) {
         const std::uint32_t a = t.v[k], b = t.v[(k + 1) % 3];
@@ -222,6 +232,33 @@ class Builder {
       auto& s = star_[v];
       s.erase(std::find(s.begin(), s.end(), id));
     }
+  }
+  // Connected pieces of v's star, triangles joined through the edges around v.
+  std::size_t fans(std::uint32_t v) const {
+    const std::vector<std::uint32_t>& star = star_[v];
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> rim;  // (other corner, star index)
+    rim.reserve(2 * star.size());
+    for (std::uint32_t i = 0; i < star.size(); ++i) {
+      for (std::uint32_t w : tris_[star[i]].v) {
+        if (w != v) rim.push_back({w, i});
+      }
+    }
+    std::sort(rim.begin(), rim.end());
+    std::vector<std::uint32_t> parent(star.size());
+    std::iota(parent.begin(), parent.end(), 0u);
+    const auto root = [&](std::uint32_t i) {
+      while (parent[i] != i) i = parent[i] = parent[parent[i]];
+      return i;
+    };
+    std::size_t pieces = star.size();
+    for (std::size_t j = 1; j < rim.size(); ++j) {
+      if (rim[j].first != rim[j - 1].first) continue;
+      const std::uint32_t a = root(rim[j].second), b = root(rim[j - 1].second);
+      if (a == b) continue;
+      parent[a] = b;
+      --pieces;
+    }
+    return pieces;
   }
   static bool has(const Tri& t, std::uint32_t v) {
     return t.v[0] == v || t.v[1] == v || t.v[2] == v;

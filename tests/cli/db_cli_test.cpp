@@ -637,6 +637,15 @@ TEST_F(DbCli, StreamedMeshIngestIsCompleteDeterministicAndRejectsBrokenFiles) {
              "end_header\n0 0 0\n1 0 0\n0 1 0\n0 -1 0\n3 0 1 2\n3 0 1 3\n");
   expect_user_error("ingest " + twice + " --memory 64M -o " + path("w.smrdb"), "same direction");
   EXPECT_FALSE(fs::exists(path("w.smrdb")));
+  // Two fans meeting at vertex 0 (a bowtie): no edge is doubled, the blocks' fan check finds it.
+  const std::string bowtie = path("bowtie.ply");
+  write_file(bowtie,
+             "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+             "property float z\nelement face 2\nproperty list uchar int vertex_indices\n"
+             "end_header\n0 0 0\n1 0 0\n1 1 0\n-1 0 0\n-1 -1 0\n3 0 1 2\n3 0 3 4\n");
+  expect_user_error("ingest " + bowtie + " --memory 64M -o " + path("b.smrdb"),
+                    "vertex 0 is non-manifold");
+  EXPECT_FALSE(fs::exists(path("b.smrdb")));
 }
 
 // The block builder (issue 5) end to end on a tiled GeoTIFF with a no-data hole, read by windows:
