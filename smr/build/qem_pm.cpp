@@ -91,9 +91,22 @@ std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
 }
 
 // Upper bound of max over q in triangle (a, b, c) of min over targets k of
-// (dist(q, target k) + offset k): the distance to one triangle is convex, so over a piece it is
-// at most its largest value at the piece's corners. Pieces are split in four while their bound
-// could raise `floor` and depth remains (branch and bound).
+// (dist(q, target k) + offset k): the distance to one triangle is convex, so over a convex piece
+// it is at most its largest value at the piece's corners, and the piece's bound is the least of
+// these over the targets. A piece that straddles targets is also cut by the star's spoke planes
+// (below); pieces are then split in four while their bound could raise `floor` and depth
+// remains (branch and bound).
+//
+// Spoke planes. The targets are a star: triangles around one hub vertex (the new star around the
+// collapse's target vertex, or the old star around the removed one). Through each spoke (an edge
+// from the hub) goes a plane containing the spoke and the mean normal of the triangles on it. A
+// piece cut by every spoke plane falls into convex cells; each cell gets the bound above, and
+// the piece's bound is the largest cell's. This is valid for any planes (the cells cover the
+// piece); these make it tight: where the two stars cover the same flat region, each cell lies in
+// one target and its bound is 0, where one-target bounds over midpoint-split pieces never reach
+// 0 on a seam between targets (they stop at about the piece's size over 2^depth, and the seams'
+// slack added up over successive collapses: a 1 px cut of a midpoint-subdivided mesh grew 3x per
+// subdivision level).
 class StarDistance {
  public:
   struct Target {
@@ -103,7 +116,37 @@ class StarDistance {
     Target(const Vec3& pa, const Vec3& pb, const Vec3& pc, double off)
         : a(pa), b(pb), c(pc), offset(off), distance(pa, pb, pc) {}
   };
-  explicit StarDistance(const std::vector<Target>& targets) : targets_(targets) {}
+  StarDistance(const std::vector<Target>& targets, const Vec3& hub) : targets_(targets), hub_(hub) {
+    // Spokes: the corners other than the hub, each with the normals of the targets on it.
+    std::vector<std::pair<Vec3, Vec3>> spokes;  // (far end, sum of unit normals)
+    for (const Target& t : targets_) {
+      const std::array<const Vec3*, 3> corners{&t.a, &t.b, &t.c};
+      int at = -1;
+      for (int k = 0; k < 3; ++k) {
+        if (*corners[k] == hub) at = k;
+      }
+      if (at < 0) continue;
+      Vec3 n = glm::cross(t.b - t.a, t.c - t.a);
+      const double len = glm::length(n);
+      if (!(len > 0.0)) continue;
+      n /= len;
+      for (int k = 0; k < 3; ++k) {
+        if (k == at) continue;
+        auto it = std::find_if(spokes.begin(), spokes.end(),
+                               [&](const auto& sp) { return sp.first == *corners[k]; });
+        if (it == spokes.end()) {
+          spokes.push_back({*corners[k], n});
+        } else {
+          it->second += n;
+        }
+      }
+    }
+    for (const auto& [end, normals] : spokes) {
+      const Vec3 m = glm::cross(end - hub, normals);
+      const double len = glm::length(m);
+      if (len > 0.0) planes_.push_back(m / len);
+    }
+  }
 
   // `first`: the target likeliest to be nearest (the piece's image under the collapse), tried
   // before the others so that most pieces stop at their first target.
@@ -112,21 +155,13 @@ class StarDistance {
                std::size_t first, double known = std::numeric_limits<double>::infinity()) const {
     double ub = known;
     if (ub <= floor) return ub;
-    const std::size_t n = known < std::numeric_limits<double>::infinity() ? 0 : targets_.size();
-    for (std::size_t k = 0; k < n; ++k) {
-      const Target& t = targets_[k == 0 ? first : (k == first ? 0 : k)];
-      // Squared distances to the corners; stop once no better than a target already seen.
-      const double room = ub - t.offset;
-      const double room2 = room > 0.0 ? room * room : 0.0;
-      double d2 = 0.0;
-      for (const Vec3* q : {&a, &b, &c}) {
-        d2 = std::max(d2, t.distance.squared(*q));
-        if (d2 >= room2 && room < std::numeric_limits<double>::infinity()) break;
-      }
-      ub = std::min(ub, t.offset + std::sqrt(d2));
+    if (known == std::numeric_limits<double>::infinity()) {
+      const std::array<Vec3, 3> corners{a, b, c};
+      ub = convex_bound(corners, ub, floor, first);
       if (ub <= floor) return ub;
     }
-    if (depth == 0) return ub;
+    ub = std::min(ub, cells_bound(a, b, c, ub, first));
+    if (ub <= floor || depth == 0) return ub;
     const Vec3 ab = 0.5 * (a + b), bc = 0.5 * (b + c), ca = 0.5 * (c + a);
     double m = floor;
     m = std::max(m, bound(a, ab, ca, m, depth - 1, first));
@@ -137,7 +172,82 @@ class StarDistance {
   }
 
  private:
+  // min over targets of (offset + the largest distance from a corner of the convex polygon):
+  // at most `ub`; stops once at most `floor`.
+  template <class Corners>
+  double convex_bound(const Corners& corners, double ub, double floor, std::size_t first) const {
+    for (std::size_t k = 0; k < targets_.size(); ++k) {
+      const Target& t = targets_[k == 0 ? first : (k == first ? 0 : k)];
+      // Squared distances to the corners; stop once no better than a target already seen.
+      const double room = ub - t.offset;
+      if (room <= 0.0) continue;
+      const double room2 = room < std::numeric_limits<double>::infinity()
+                               ? room * room
+                               : std::numeric_limits<double>::infinity();
+      double d2 = 0.0;
+      for (const Vec3& q : corners) {
+        d2 = std::max(d2, t.distance.squared(q));
+        if (d2 >= room2) break;
+      }
+      if (d2 >= room2) continue;
+      ub = std::min(ub, t.offset + std::sqrt(d2));
+      if (ub <= floor) return ub;
+    }
+    return ub;
+  }
+
+  // The piece cut by the spoke planes: the largest of its cells' convex bounds, or `ub` as soon
+  // as one cell cannot do better.
+  double cells_bound(const Vec3& a, const Vec3& b, const Vec3& c, double ub,
+                     std::size_t first) const {
+    if (planes_.empty()) return ub;
+    cells_.assign(1, {a, b, c});
+    for (const Vec3& m : planes_) {
+      const std::size_t n = cells_.size();
+      for (std::size_t i = 0; i < n; ++i) split(i, m);
+    }
+    if (cells_.size() == 1) return ub;  // no plane crosses the piece: the one-cell bound
+    double worst = 0.0;
+    for (const std::vector<Vec3>& cell : cells_) {
+      worst = std::max(worst, convex_bound(cell, ub, worst, first));
+      if (worst >= ub) return ub;
+    }
+    return worst;
+  }
+
+  // Splits cell i by the plane through the hub with normal m: the part below stays at i, the
+  // part above is appended (when the plane crosses the cell).
+  void split(std::size_t i, const Vec3& m) const {
+    const std::vector<Vec3>& p = cells_[i];
+    side_.resize(p.size());
+    bool below = false, above = false;
+    for (std::size_t k = 0; k < p.size(); ++k) {
+      side_[k] = glm::dot(p[k] - hub_, m);
+      below |= side_[k] < 0.0;
+      above |= side_[k] > 0.0;
+    }
+    if (!below || !above) return;
+    std::vector<Vec3> lo, hi;
+    for (std::size_t k = 0; k < p.size(); ++k) {
+      const std::size_t j = (k + 1) % p.size();
+      if (side_[k] <= 0.0) lo.push_back(p[k]);
+      if (side_[k] >= 0.0) hi.push_back(p[k]);
+      if ((side_[k] < 0.0 && side_[j] > 0.0) || (side_[k] > 0.0 && side_[j] < 0.0)) {
+        const double t = side_[k] / (side_[k] - side_[j]);
+        const Vec3 x = p[k] + t * (p[j] - p[k]);
+        lo.push_back(x);
+        hi.push_back(x);
+      }
+    }
+    cells_[i] = std::move(lo);
+    cells_.push_back(std::move(hi));
+  }
+
   const std::vector<Target>& targets_;
+  Vec3 hub_;
+  std::vector<Vec3> planes_;  // unit normals of the spoke planes (all through the hub)
+  mutable std::vector<std::vector<Vec3>> cells_;
+  mutable std::vector<double> side_;
 };
 
 constexpr int kBoundDepth = 3;
@@ -506,7 +616,7 @@ class Builder {
       new_targets_.push_back({pos_[nv[0]], pos_[nv[1]], pos_[nv[2]], 0.0});
     }
     // Forward: source points assigned to an old triangle (within its e) to the new star.
-    const StarDistance to_new(new_targets_);
+    const StarDistance to_new(new_targets_, pos_[to]);
     double e = floor;
     // Largest first by an unrefined (depth 0) bound, so the floor rises early and prunes more.
     order_.clear();
@@ -524,7 +634,7 @@ class Builder {
                                               depth0_[i]));
     }
     // Backward: points of the new star to the old one, plus the old bounds.
-    const StarDistance to_old(old_targets_);
+    const StarDistance to_old(old_targets_, pos_[from]);
     for (std::size_t j = 0; j < new_targets_.size(); ++j) {
       const StarDistance::Target& t = new_targets_[j];
       e = std::max(e, to_old.bound(t.a, t.b, t.c, e, kBoundDepth, preimage_[j]));

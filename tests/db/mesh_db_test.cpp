@@ -80,7 +80,8 @@ TEST(MeshDb, SameMeshGivesByteIdenticalFiles) {
 
 // Surface expansion visits X finest first, which crosses each resolution band's pages in no
 // spatial order; through a cache smaller than a band every op fetched could decode its page again.
-// Held ops (expansion.cpp) and to_mesh's page order read each page of the output about once.
+// Held ops (expansion.cpp) and to_mesh's page order read each page of the output about once,
+// through a cache a 32nd of the decoded pages.
 TEST(MeshDb, AWholeModelCutReadsEachPageAboutOnceThroughASmallCache) {
   Crmr m = test::built_mesh("armadillo.off").crmr;
   test::TempDir dir("smrdb-mesh-db-test");
@@ -98,7 +99,7 @@ TEST(MeshDb, AWholeModelCutReadsEachPageAboutOnceThroughASmallCache) {
   const std::vector<OpId> x = add_to_list(m, rcf);
   ASSERT_EQ(x.size(), m.ops.size());
   const auto reads = [&](std::uint64_t max_held_bytes) {
-    const auto db = Database::open(path, {decoded / 8});
+    const auto db = Database::open(path, {decoded / 32});
     ExpansionOptions o;
     o.max_held_bytes = max_held_bytes;
     const Extraction e = expand(*db, x, o);
