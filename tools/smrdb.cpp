@@ -300,9 +300,10 @@ struct IngestArgs {
     app.add_option("--tmp", tmp_dir,
                    "DEMs, --builder blocks: directory for the scratch copy of the samples "
                    "(default: the system's temporary directory)");
-    app.add_option("--threads", threads,
-                   "DEMs, --builder blocks: threads reading, building and writing blocks (0 = one "
-                   "per core; the database is the same whatever the number)")
+    app.add_option(
+           "--threads", threads,
+           "--builder blocks (and --memory): threads reading, building and writing blocks (0 = one "
+           "per core; the database is the same whatever the number)")
         ->capture_default_str();
     app.add_option("--codec", codec, "Geometry codec of the pages: draco, zstd or raw")
         ->capture_default_str();
@@ -335,7 +336,6 @@ struct IngestArgs {
     if (is_mesh() && builder == "greedy")
       throw_input("--builder greedy applies to DEMs; meshes are built by quadric edge collapse");
     if (is_mesh() && effective_builder() == "blocks") {
-      if (threads != 0) throw_input("--threads: the mesh block builder runs on one thread");
       if (block_cells != 256)
         throw_input("--block-cells applies to DEMs; mesh blocks are octree cells");
       if (coalesce != 32 || coalesce_ratio != 0.7)
@@ -646,6 +646,7 @@ nlohmann::json ingest_mesh_blocks(const IngestArgs& a, const std::string& db_pat
   // The sorts take a quarter of the budget; the rest holds the vertices (24 + 8 bytes each), the
   // assembler's 16 bytes a collapse, the blocks and the writer.
   opt.memory_bytes = a.memory_bytes() != 0 ? a.memory_bytes() / 4 : 0;
+  opt.threads = a.threads;
   opt.progress = [&](double f) { progress.update(0.8 * f); };
   smr::BlockPmStats st;
   smr::DatabaseStreamWriter writer(db_path, write_options(a, progress), a.tmp_dir);

@@ -19,6 +19,7 @@
 //   bench_mesh_build MESH [--repeat 3] [--only ours,meshopt,meshopt-lockborder,cgal-lt,cgal-gh]
 //                         [--skip-db] [--db PATH] [--repair]
 //   bench_mesh_build MESH --subdivide K -o OUT.ply      midpoint (1-to-4) subdivision, K levels
+//                                                      (K = 0 or no --subdivide: the mesh as read)
 //
 // `--only` lets a script measure one contender's peak RSS per process (/usr/bin/time -v). Prints
 // one JSON object on stdout.
@@ -317,7 +318,7 @@ int main(int argc, char** argv) {
                "Print the contenders this build has (space-separated) and exit");
   app.add_option("--subdivide", subdivide_levels,
                  "Write MESH after K levels of midpoint 1-to-4 subdivision to -o and exit");
-  app.add_option("-o,--output", output, "Output mesh of --subdivide (.ply: binary)");
+  app.add_option("-o,--output", output, "Output mesh of --subdivide, or the mesh as read without it (.ply: binary)");
   CLI11_PARSE(app, argc, argv);
   if (repeat < 1) {
     std::cerr << "bench_mesh_build: --repeat must be at least 1\n";
@@ -365,7 +366,7 @@ int main(int argc, char** argv) {
                        {"summary", mr.summary()},
                        {"read_seconds", read_seconds}};
 
-    if (subdivide_levels > 0) {
+    if (subdivide_levels > 0 || !output.empty()) {  // -o alone: the mesh as read (0 levels)
       if (output.empty()) throw std::runtime_error("--subdivide needs -o OUT");
       t0 = now_ns();
       for (int i = 0; i < subdivide_levels; ++i) mesh = subdivide(mesh);

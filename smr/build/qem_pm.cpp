@@ -15,11 +15,13 @@
 #include <numeric>
 #include <queue>
 #include <unordered_map>
+#include <unordered_set>
 
 #include <glm/geometric.hpp>
 
 #include "smr/build/op_assembly.h"
 #include "smr/core/geometry.h"
+#include "smr/core/parallel.h"
 #include "storage/error.h"
 #include "storage/external_sort.h"
 
@@ -1315,17 +1317,39 @@ class BlockPmBuilder {
     sort_faces(*faces);
     stats_.seconds_sort = since(t0);
     const auto t1 = Clock::now();
+    // Leaf blocks are read in Morton order, simplified on the workers and handed over in order
+    // (parents are made as their last child is handed over, on this thread, while the workers go
+    // on with the next leaves): the database does not depend on the number of threads.
+    struct Leaf {
+      std::uint32_t cell = 0;
+      std::vector<std::array<std::uint32_t, 3>> faces;
+      BlockState state;
+      Simplified done;
+    };
     FaceRecord f;
     bool more = faces->next(f);
-    std::vector<std::array<std::uint32_t, 3>> leaf;
-    while (more) {
-      const std::uint32_t cell = f.cell;
-      leaf.clear();
-      for (; more && f.cell == cell; more = faces->next(f)) leaf.push_back(f.v);
-      ++stats_.leaf_blocks;
-      push(0, cell, leaf_state(leaf));
-      report(0.9 * double(leaf_done_ += leaf.size()) / double(stats_.triangles));
-    }
+    const unsigned threads = thread_count(opt_.threads);
+    ordered_pipeline(
+        leaf_cells_.size(), threads, threads + 1,
+        [&](std::size_t) {
+          if (!more) throw_internal("block PM: fewer leaf blocks than cells counted");
+          auto leaf = std::make_unique<Leaf>();
+          leaf->cell = f.cell;
+          for (; more && f.cell == leaf->cell; more = faces->next(f)) leaf->faces.push_back(f.v);
+          return leaf;
+        },
+        [&](Leaf& leaf) {
+          leaf.state = leaf_state(leaf.faces);
+          leaf.done = compute(0, leaf.state);
+        },
+        [&](Leaf& leaf, std::size_t) {
+          for (BlockTriangle& t : leaf.state.tris) t.id = next_tri_++;
+          ++stats_.leaf_blocks;
+          push(0, leaf.cell, commit(std::move(leaf.state), std::move(leaf.done)));
+          report(0.9 * double(leaf_done_ += leaf.faces.size()) / double(stats_.triangles));
+        });
+    if (more) throw_internal("block PM: more leaf blocks than cells counted");
+    std::unordered_set<std::uint32_t>().swap(leaf_cells_);
     stats_.temp_bytes += faces->spilled_bytes();
     faces.reset();
     for (int l = 0; l < levels_; ++l) flush(l);
@@ -1393,6 +1417,7 @@ class BlockPmBuilder {
           vmax_[v] = std::max(vmax_[v], code);
         }
         faces.add({code, t});
+        leaf_cells_.insert(code);
         ++index;
       }
     });
@@ -1412,18 +1437,19 @@ class BlockPmBuilder {
     return level < levels_ && (vmin_[v] >> (3 * level)) != (vmax_[v] >> (3 * level));
   }
 
-  BlockState leaf_state(const std::vector<std::array<std::uint32_t, 3>>& leaf) {
+  // A leaf's triangles (their ids are given when the leaf is handed over) and vertex quadrics.
+  BlockState leaf_state(const std::vector<std::array<std::uint32_t, 3>>& leaf) const {
     BlockState b;
     std::unordered_map<std::uint32_t, Quadric> quads;
     for (const auto& t : leaf) {
-      b.tris.push_back({t, 0.0, kNone, next_tri_++});
+      b.tris.push_back({t, 0.0, kNone, 0});
       const Quadric q = face_quadric(pos_[t[0]], pos_[t[1]], pos_[t[2]]);
       for (std::uint32_t v : t) quads[v] += q;
     }
     b.quads.assign(quads.begin(), quads.end());
     std::sort(b.quads.begin(), b.quads.end(),
               [](const auto& x, const auto& y) { return x.first < y.first; });
-    return simplify(0, std::move(b));
+    return b;
   }
 
   // A block of `level` done: it waits for its siblings; a parent is made when the next block
@@ -1459,8 +1485,18 @@ class BlockPmBuilder {
 
   // Simplifies one block and hands its collapses to the assembler.
   BlockState simplify(int level, BlockState in) {
-    stats_.max_block_triangles =
-        std::max<std::uint64_t>(stats_.max_block_triangles, in.tris.size());
+    Simplified done = compute(level, in);
+    return commit(std::move(in), std::move(done));
+  }
+
+  // A block simplified, not yet handed over: reads only what stays fixed while blocks are made
+  // (positions, octree spans, options), so blocks of a level run on several threads.
+  struct Simplified {
+    std::unique_ptr<Builder> b;
+    std::vector<std::uint32_t> gid;  // local vertex -> global
+    std::uint64_t rounds = 0;
+  };
+  Simplified compute(int level, const BlockState& in) const {
     const std::size_t n = in.quads.size();
     std::vector<std::uint32_t> gid(n);
     std::vector<Vec3> pos(n);
@@ -1485,16 +1521,28 @@ class BlockPmBuilder {
       lt.e = t.e;
       tris.push_back(lt);
     }
-    Builder b(qem_, std::move(pos), std::move(quad), std::move(locked), constrain, tris,
-              mesh_.name(), gid);
+    Simplified out;
+    out.b = std::make_unique<Builder>(qem_, std::move(pos), std::move(quad), std::move(locked),
+                                      constrain, tris, mesh_.name(), gid);
     // Collapses up to tolerance_fraction of the block's side (the root: as far as the rules
     // allow), cheapest quadric cost first within the bound, as the in-core builder orders them.
     const double tolerance = level == levels_ ? kInfinity
                                               : opt_.tolerance_fraction * side_ /
                                                     double(std::uint64_t{1} << (levels_ - level));
-    const std::uint64_t rounds = b.simplify_rounds(tolerance);
-    stats_.rounds += rounds;
-    // The collapses, in order, as removals; new triangles get the next global ids.
+    out.rounds = out.b->simplify_rounds(tolerance);
+    out.gid = std::move(gid);
+    return out;
+  }
+
+  // Hands a simplified block's collapses to the assembler, in order, as removals (new triangles
+  // get the next global ids), and returns what the block passes to its parent. In block order.
+  BlockState commit(BlockState in, Simplified done) {
+    stats_.max_block_triangles =
+        std::max<std::uint64_t>(stats_.max_block_triangles, in.tris.size());
+    stats_.rounds += done.rounds;
+    const Builder& b = *done.b;
+    const std::vector<std::uint32_t>& gid = done.gid;
+    const std::size_t n = gid.size();
     const std::uint32_t k0 = static_cast<std::uint32_t>(assembler_->removals());
     const std::size_t n_in = in.tris.size();
     std::vector<std::uint32_t> id_of(b.tris_.size()), creator_of(b.tris_.size());
@@ -1584,6 +1632,7 @@ class BlockPmBuilder {
   std::vector<std::uint64_t> pending_code_;
   std::uint32_t next_tri_ = 0;
   std::uint64_t leaf_done_ = 0;
+  std::unordered_set<std::uint32_t> leaf_cells_;  // non-empty leaf cells (sort_faces)
   std::unique_ptr<OpAssembler> assembler_;
 };
 

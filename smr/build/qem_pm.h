@@ -92,6 +92,9 @@ struct BlockPmOptions {
   std::uint64_t memory_bytes = 0;
   /// Scratch files' directory (empty = the system's temporary directory).
   std::string tmp_dir;
+  /// Threads simplifying leaf blocks (0 = one per core); the database does not depend on it.
+  /// Each holds one leaf block being simplified (and one more waits per thread).
+  unsigned threads = 0;
   std::function<void(double)> progress;
 };
 

@@ -331,17 +331,24 @@ TEST_P(BlockPm, ExtractionsAcrossBlockBordersAreManifoldAndHoldTheRcfAndTheBound
   expect_extractions_hold(block_built(GetParam()).crmr, built(GetParam()).source);
 }
 
-TEST(BlockPmBuild, DeterministicWhateverTheBudget) {
+TEST(BlockPmBuild, DeterministicWhateverTheBudgetAndTheThreads) {
   const TriangleMesh& mesh = built("elephant-with-holes.off").source;
+  BlockPmOptions one = tiny_blocks();
+  one.threads = 1;
+  const Crmr a = build_block_pm(MemoryMeshStream(mesh, "e"), one);
   BlockPmOptions roomy = tiny_blocks();
   roomy.memory_bytes = 512 << 20;
-  const Crmr a = build_block_pm(MemoryMeshStream(mesh, "e"), tiny_blocks());
-  const Crmr b = build_block_pm(MemoryMeshStream(mesh, "e"), roomy);
-  EXPECT_TRUE(a.header == b.header);
-  ASSERT_EQ(a.ops.size(), b.ops.size());
-  std::size_t differ = 0;
-  for (std::size_t i = 0; i < a.ops.size(); ++i) differ += a.ops[i] == b.ops[i] ? 0 : 1;
-  EXPECT_EQ(differ, 0u);
+  roomy.threads = 3;  // more workers than cores: leaves finish out of order
+  BlockPmOptions two = tiny_blocks();
+  two.threads = 2;
+  for (const BlockPmOptions& o : {roomy, two}) {
+    const Crmr b = build_block_pm(MemoryMeshStream(mesh, "e"), o);
+    EXPECT_TRUE(a.header == b.header);
+    ASSERT_EQ(a.ops.size(), b.ops.size());
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < a.ops.size(); ++i) differ += a.ops[i] == b.ops[i] ? 0 : 1;
+    EXPECT_EQ(differ, 0u) << o.threads << " threads";
+  }
 }
 
 TEST(BlockPmBuild, RejectsBadInput) {
