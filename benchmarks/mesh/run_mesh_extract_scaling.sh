@@ -25,13 +25,11 @@ OUT="${OUT:-$root/benchmarks/results/mesh_extract_scaling.json}"
 smrdb="$BUILD_DIR/tools/smrdb"
 bench_mesh="$BUILD_DIR/benchmarks/mesh/bench_mesh_build"
 bench_db="$BUILD_DIR/benchmarks/bench_db"
-for exe in "$smrdb" "$bench_mesh" "$bench_db"; do
-  [[ -x "$exe" ]] || { echo "missing $exe: build first (cmake --build $BUILD_DIR)" >&2; exit 1; }
-done
-command -v jq >/dev/null || { echo "jq is required to assemble the results" >&2; exit 1; }
-[[ -x /usr/bin/time ]] || { echo "/usr/bin/time (Debian package time) is required" >&2; exit 1; }
+# shellcheck source=../lib.sh
+source "$root/benchmarks/lib.sh"
+require_executables "$BUILD_DIR" "$smrdb" "$bench_mesh" "$bench_db"
+require_tools
 mkdir -p "$WORK_DIR" "$(dirname "$OUT")"
-log() { echo "[$(date +%H:%M:%S)] $*" >&2; }
 
 rows="[]"
 for level in $LEVELS; do

@@ -1,0 +1,18 @@
+# Sourced by the benchmark scripts: a timestamped log line on stderr, and the checks a run makes
+# before starting (built executables; jq and /usr/bin/time).
+log() { echo "[$(date +%H:%M:%S)] $*" >&2; }
+
+# require_executables BUILD_DIR EXE...: every EXE is built.
+require_executables() {
+  local build_dir="$1" exe
+  shift
+  for exe in "$@"; do
+    [[ -x "$exe" ]] || { echo "missing $exe: build first (cmake --build $build_dir)" >&2; exit 1; }
+  done
+}
+
+# require_tools: jq (results) and /usr/bin/time (peak RSS).
+require_tools() {
+  command -v jq >/dev/null || { echo "jq is required to assemble the results" >&2; exit 1; }
+  [[ -x /usr/bin/time ]] || { echo "/usr/bin/time (Debian package time) is required" >&2; exit 1; }
+}
