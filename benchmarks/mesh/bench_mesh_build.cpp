@@ -318,7 +318,8 @@ int main(int argc, char** argv) {
                "Print the contenders this build has (space-separated) and exit");
   app.add_option("--subdivide", subdivide_levels,
                  "Write MESH after K levels of midpoint 1-to-4 subdivision to -o and exit");
-  app.add_option("-o,--output", output, "Output mesh of --subdivide, or the mesh as read without it (.ply: binary)");
+  app.add_option("-o,--output", output,
+                 "Output mesh of --subdivide, or the mesh as read without it (.ply: binary)");
   CLI11_PARSE(app, argc, argv);
   if (repeat < 1) {
     std::cerr << "bench_mesh_build: --repeat must be at least 1\n";
