@@ -202,19 +202,29 @@ class StarDistance {
   // as one cell cannot do better.
   double cells_bound(const Vec3& a, const Vec3& b, const Vec3& c, double ub,
                      std::size_t first) const {
-    if (planes_.empty()) return ub;
+    if (!crossed(a, b, c)) return ub;  // one cell: the one-target bound already computed
     cells_.assign(1, {a, b, c});
     for (const Vec3& m : planes_) {
       const std::size_t n = cells_.size();
       for (std::size_t i = 0; i < n; ++i) split(i, m);
     }
-    if (cells_.size() == 1) return ub;  // no plane crosses the piece: the one-cell bound
     double worst = 0.0;
     for (const std::vector<Vec3>& cell : cells_) {
       worst = std::max(worst, convex_bound(cell, ub, worst, first));
       if (worst >= ub) return ub;
     }
     return worst;
+  }
+
+  // Whether some spoke plane has corners of the piece strictly on both sides (checked before
+  // any cell is made: most pieces of the branch and bound lie within one wedge).
+  bool crossed(const Vec3& a, const Vec3& b, const Vec3& c) const {
+    for (const Vec3& m : planes_) {
+      const double sa = glm::dot(a - hub_, m), sb = glm::dot(b - hub_, m),
+                   sc = glm::dot(c - hub_, m);
+      if (std::min({sa, sb, sc}) < 0.0 && std::max({sa, sb, sc}) > 0.0) return true;
+    }
+    return false;
   }
 
   // Splits cell i by the plane through the hub with normal m: the part below stays at i, the
@@ -1397,6 +1407,7 @@ class BlockPmBuilder {
     vmin_.assign(pos_.size(), ~std::uint32_t{0});
     vmax_.assign(pos_.size(), 0);
     std::uint64_t index = 0;
+    std::uint32_t last_code = 0;
     mesh_.triangles([&](std::span<const std::array<std::uint32_t, 3>> batch) {
       for (const auto& t : batch) {
         for (std::uint32_t v : t) {
@@ -1417,7 +1428,8 @@ class BlockPmBuilder {
           vmax_[v] = std::max(vmax_[v], code);
         }
         faces.add({code, t});
-        leaf_cells_.insert(code);
+        if (index == 0 || code != last_code) leaf_cells_.insert(code);  // runs share a cell
+        last_code = code;
         ++index;
       }
     });
