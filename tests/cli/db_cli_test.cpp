@@ -154,7 +154,7 @@ TEST_F(DbCli, KillNineDuringIngestLeavesThePreviousOrTheCompleteDatabase) {
   ASSERT_NE(new_bytes, old_bytes);
   ASSERT_TRUE(smr::verify_database(target, nullptr).ok());
 
-  constexpr int kRuns = smr::test::kSanitized ? 8 : 24;  // a sample under the sanitizers
+  constexpr int kRuns = smr::test::kSanitized ? 6 : 24;  // a sample under the sanitizers
   std::mt19937_64 rng(20261122);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   int absent = 0, old = 0, complete = 0, killed = 0, stale = 0;
@@ -200,7 +200,7 @@ TEST_F(DbCli, KillNineDuringIngestLeavesThePreviousOrTheCompleteDatabase) {
   }
   // Then kills at the very moment the path changes (polled with stat): a writer that exposed a
   // partly written file at the path, even briefly, would be caught here.
-  for (int i = 0; i < 8; ++i) {
+  for (int i = 0; i < (smr::test::kSanitized ? 4 : 8); ++i) {
     const bool over_old = i % 2 == 1;
     fs::remove(target);
     if (over_old) write_file(target, old_bytes);
@@ -237,7 +237,7 @@ TEST_F(DbCli, KillNineDuringIngestLeavesThePreviousOrTheCompleteDatabase) {
   // The kill moments span the ingest: some runs died early, some finished.
   EXPECT_GT(absent + old, 0);
   EXPECT_GT(complete, 0);
-  EXPECT_GT(killed, kRuns / 2);
+  EXPECT_GT(killed, (kRuns - 2) / 2);  // most of the spread runs
 }
 
 // (b) Damage through the CLI: a flipped bit in a page and in meta, and a truncated file.
@@ -654,11 +654,14 @@ TEST_F(DbCli, StreamedMeshIngestIsCompleteDeterministicAndRejectsBrokenFiles) {
 // bytes from a second run to another path, and kill -9 at moments spread over the ingest followed
 // by a re-run giving the complete database, byte for byte.
 TEST_F(DbCli, BlockIngestOfATiledGeoTiffIsDeterministicAndSurvivesKills) {
-  smr::Heightfield h = smr::make_fbm(257, 193, 11, 800.0);
+  // A quarter of the samples under the sanitizers: still 4 block levels with 16-cell blocks.
+  const int s = kSanitized ? 2 : 1;
+  smr::Heightfield h = smr::make_fbm(256 / s + 1, 192 / s + 1, 11, 800.0);
   h.valid.assign(h.z.size(), 1);
   for (int r = 0; r < h.height; ++r) {
     for (int c = 0; c < h.width; ++c) {
-      if ((c - 170) * (c - 170) + (r - 60) * (r - 60) < 400) h.valid[h.index(c, r)] = 0;
+      const int dc = c * s - 170, dr = r * s - 60;
+      if (dc * dc + dr * dr < 400) h.valid[h.index(c, r)] = 0;
     }
   }
   const std::string tif = path("dem.tif");
@@ -669,7 +672,8 @@ TEST_F(DbCli, BlockIngestOfATiledGeoTiffIsDeterministicAndSurvivesKills) {
   ASSERT_EQ(r.code, 0) << r.out;
   const nlohmann::json j = nlohmann::json::parse(r.out.substr(r.out.find('{')));
   EXPECT_GE(j.at("blocks").at("levels").get<int>(), 3);
-  EXPECT_EQ(j.at("input").at("largest_window_samples").get<std::uint64_t>(), 257u * 193u);
+  EXPECT_EQ(j.at("input").at("largest_window_samples").get<std::uint64_t>(),
+            std::uint64_t(h.width) * std::uint64_t(h.height));
   EXPECT_LE(j.at("blocks").at("dag_height").get<std::uint64_t>(),
             j.at("blocks").at("rounds").get<std::uint64_t>());
   ASSERT_TRUE(smr::verify_database(first, nullptr).ok());
