@@ -74,7 +74,7 @@ struct Collapse {
   std::vector<std::uint32_t> spawn_vertices;
   std::uint32_t old_begin = 0, old_end = 0;  // into old_tris_: the star of `removed` before
   std::uint32_t new_begin = 0, new_end = 0;  // into new_tris_: the triangles that replaced it
-  double error = 0.0;                        // bound of the new triangles
+  double error = 0.0;  // the largest bound of its new triangles, at least its creators' errors
 };
 
 struct Candidate {
@@ -173,7 +173,80 @@ class StarDistance {
     return std::min(m, ub);
   }
 
+  // The forward bound per target. Source points lie within `offset` of the piece (a, b, c); the
+  // piece is cut by the spoke planes and each cell is handed to its nearest target by the corner
+  // bound: that target's charge rises to offset + the bound, and its points are now assigned to
+  // that target. A cell already within its nearest target's charge costs nothing; otherwise the
+  // piece is split in four while depth remains. Each new triangle gets its own charge, so a
+  // collapse no longer spreads the worst old bound over its whole new star.
+  void charge(const Vec3& a, const Vec3& b, const Vec3& c, double offset, int depth,
+              std::size_t first, std::vector<double>& charges, double& ceiling) const {
+    // The cells that would raise a charge, and whether one would raise the ceiling (the
+    // largest charge so far): only then is the piece split, as in bound().
+    raised_.clear();
+    if (!crossed(a, b, c)) {
+      const std::array<Vec3, 3> corners{a, b, c};
+      const auto [v, k] = nearest(corners, offset, first, charges, ceiling);
+      if (k != kFree) raised_.push_back({v, k});
+    } else {
+      cut(a, b, c);
+      for (const std::vector<Vec3>& cell : cells_) {
+        const auto [v, k] = nearest(cell, offset, first, charges, ceiling);
+        if (k != kFree) raised_.push_back({v, k});
+      }
+    }
+    bool above = false;
+    for (const auto& [v, k] : raised_) above = above || offset + v > ceiling;
+    if (!above || depth == 0) {
+      for (const auto& [v, k] : raised_) {
+        charges[k] = std::max(charges[k], offset + v);
+        ceiling = std::max(ceiling, charges[k]);
+      }
+      return;
+    }
+    const Vec3 ab = 0.5 * (a + b), bc = 0.5 * (b + c), ca = 0.5 * (c + a);
+    charge(a, ab, ca, offset, depth - 1, first, charges, ceiling);
+    charge(ab, b, bc, offset, depth - 1, first, charges, ceiling);
+    charge(ca, bc, c, offset, depth - 1, first, charges, ceiling);
+    charge(ab, bc, ca, offset, depth - 1, first, charges, ceiling);
+  }
+
  private:
+  static constexpr std::size_t kFree = std::numeric_limits<std::size_t>::max();
+
+  // The target nearest the convex polygon by the corner bound (target offset + its largest
+  // corner distance), or kFree as soon as a target holds it within its charge.
+  template <class Corners>
+  std::pair<double, std::size_t> nearest(const Corners& corners, double offset, std::size_t first,
+                                         const std::vector<double>& charges, double ceiling) const {
+    double best = std::numeric_limits<double>::infinity();
+    std::size_t at = kFree;
+    for (std::size_t i = 0; i < targets_.size(); ++i) {
+      const std::size_t k = i == 0 ? first : (i == first ? 0 : i);
+      const Target& t = targets_[k];
+      const double free_room = charges[k] - offset - t.offset;   // within it: free
+      const double room = std::max(free_room, best - t.offset);  // beyond it: no use
+      if (!(room >= 0.0)) continue;
+      const double room2 = room < std::numeric_limits<double>::infinity()
+                               ? room * room
+                               : std::numeric_limits<double>::infinity();
+      double d2 = 0.0;
+      for (const Vec3& q : corners) {
+        d2 = std::max(d2, t.distance.squared(q));
+        if (d2 > room2) break;
+      }
+      if (d2 > room2) continue;
+      if (free_room >= 0.0 && d2 <= free_room * free_room) return {0.0, kFree};
+      const double v = t.offset + std::sqrt(d2);
+      if (v < best) {
+        best = v;
+        at = k;
+        if (offset + v <= ceiling) break;  // good enough: it raises no bound past the ceiling
+      }
+    }
+    return {best, at};
+  }
+
   // min over targets of (offset + the largest distance from a corner of the convex polygon):
   // at most `ub`; stops once at most `floor`.
   template <class Corners>
@@ -203,17 +276,22 @@ class StarDistance {
   double cells_bound(const Vec3& a, const Vec3& b, const Vec3& c, double ub,
                      std::size_t first) const {
     if (!crossed(a, b, c)) return ub;  // one cell: the one-target bound already computed
-    cells_.assign(1, {a, b, c});
-    for (const Vec3& m : planes_) {
-      const std::size_t n = cells_.size();
-      for (std::size_t i = 0; i < n; ++i) split(i, m);
-    }
+    cut(a, b, c);
     double worst = 0.0;
     for (const std::vector<Vec3>& cell : cells_) {
       worst = std::max(worst, convex_bound(cell, ub, worst, first));
       if (worst >= ub) return ub;
     }
     return worst;
+  }
+
+  // cells_ = the triangle (a, b, c) cut by every spoke plane.
+  void cut(const Vec3& a, const Vec3& b, const Vec3& c) const {
+    cells_.assign(1, {a, b, c});
+    for (const Vec3& m : planes_) {
+      const std::size_t n = cells_.size();
+      for (std::size_t i = 0; i < n; ++i) split(i, m);
+    }
   }
 
   // Whether some spoke plane has corners of the piece strictly on both sides (checked before
@@ -260,6 +338,7 @@ class StarDistance {
   std::vector<Vec3> planes_;  // unit normals of the spoke planes (all through the hub)
   mutable std::vector<std::vector<Vec3>> cells_;
   mutable std::vector<double> side_;
+  mutable std::vector<std::pair<double, std::size_t>> raised_;
 };
 
 constexpr int kBoundDepth = 3;
@@ -616,7 +695,9 @@ class Builder {
     for (std::uint32_t id : star_[from]) {
       const Tri& t = tris_[id];
       old_targets_.push_back({pos_[t.v[0]], pos_[t.v[1]], pos_[t.v[2]], t.e});
-      floor = std::max(floor, t.e);
+      // At least the bound of every collapse this one depends on, so that the splits' order
+      // (largest error first) keeps their errors monotone.
+      floor = std::max(floor, t.creator == kNone ? t.e : collapses_[t.creator].error);
       // The two triangles on the edge vanish; their nearest new one is a guess (the first).
       image_.push_back(has(t, to) ? 0u : static_cast<std::uint32_t>(new_targets_.size()));
       if (has(t, to)) continue;
@@ -627,36 +708,38 @@ class Builder {
       }
       new_targets_.push_back({pos_[nv[0]], pos_[nv[1]], pos_[nv[2]], 0.0});
     }
-    // Forward: source points assigned to an old triangle (within its e) to the new star.
+    // Forward: the source points assigned to each old triangle (within its e) go to their
+    // nearest new triangles, whose bounds rise to hold them (StarDistance::charge). Largest
+    // first by an unrefined (depth 0) bound, so the bounds rise early and more cells are free.
     const StarDistance to_new(new_targets_, pos_[to]);
-    double e = floor;
-    // Largest first by an unrefined (depth 0) bound, so the floor rises early and prunes more.
     order_.clear();
-    depth0_.resize(old_targets_.size());
     for (std::size_t i = 0; i < old_targets_.size(); ++i) {
       const StarDistance::Target& t = old_targets_[i];
-      depth0_[i] = to_new.bound(t.a, t.b, t.c, 0.0, 0, image_[i]);
-      order_.push_back({t.offset + depth0_[i], i});
+      order_.push_back({t.offset + to_new.bound(t.a, t.b, t.c, 0.0, 0, image_[i]), i});
     }
     std::sort(order_.begin(), order_.end(), std::greater<>());
+    new_e_.assign(new_targets_.size(), 0.0);
+    double e = floor;  // every old triangle's points are charged at least its own bound
     for (const auto& [estimate, i] : order_) {
-      if (estimate <= e) break;  // this bound and the ones after it cannot raise e
       const StarDistance::Target& t = old_targets_[i];
-      e = std::max(e, t.offset + to_new.bound(t.a, t.b, t.c, e - t.offset, kBoundDepth, image_[i],
-                                              depth0_[i]));
+      to_new.charge(t.a, t.b, t.c, t.offset, kBoundDepth, image_[i], new_e_, e);
     }
-    // Backward: points of the new star to the old one, plus the old bounds.
+    // Backward, per new triangle: its points to the old star, plus the old bounds (refined
+    // while they could raise its forward bound).
     const StarDistance to_old(old_targets_, pos_[from]);
     for (std::size_t j = 0; j < new_targets_.size(); ++j) {
       const StarDistance::Target& t = new_targets_[j];
-      e = std::max(e, to_old.bound(t.a, t.b, t.c, e, kBoundDepth, preimage_[j]));
+      new_e_[j] =
+          std::max(new_e_[j], to_old.bound(t.a, t.b, t.c, new_e_[j], kBoundDepth, preimage_[j]));
+      e = std::max(e, new_e_[j]);
     }
     return e;
   }
 
   // ---- simplification -----------------------------------------------------------------------
 
-  void apply(std::uint32_t from, std::uint32_t to, double error) {
+  // `new_e`: the bounds of the new triangles, in star order (collapse_error's new_e_).
+  void apply(std::uint32_t from, std::uint32_t to, double error, const std::vector<double>& new_e) {
     const auto c = static_cast<std::uint32_t>(collapses_.size());
     Collapse col;
     col.removed = from;
@@ -672,6 +755,7 @@ class Builder {
     col.old_end = static_cast<std::uint32_t>(old_tris_.size());
     star_[from].clear();
     col.new_begin = static_cast<std::uint32_t>(new_tris_.size());
+    std::size_t made = 0;
     for (std::uint32_t id : old) {
       if (has(tris_[id], to)) continue;
       Tri t;
@@ -679,7 +763,7 @@ class Builder {
       for (std::uint32_t& w : t.v) {
         if (w == from) w = to;
       }
-      t.e = error;
+      t.e = new_e[made++];
       t.creator = c;
       new_tris_.push_back(add_triangle(t));
     }
@@ -711,7 +795,7 @@ class Builder {
         ++stamp_[top.from];  // retried only when its neighbourhood changes
         continue;
       }
-      apply(top.from, top.to, error);
+      apply(top.from, top.to, error, new_e_);
       --alive;
       neighbours(top.to, ring_);
       const std::vector<std::uint32_t> ring = ring_;
@@ -1039,7 +1123,7 @@ class Builder {
       const auto op_id = static_cast<std::uint32_t>(i + 1);
       Op& op = crmr.ops[op_id];
       op.id = OpId(op_id);
-      double local = 0.0;  // the op's own bound: its PreF triangles', and spawned components'
+      double local = 0.0;  // the op's own bound: its members', and spawned components'
       // F: the members' stars, PreF: their replacements, less the triangles one member makes
       // and another removes (inside the group they never appear).
       for (std::uint32_t c : group) in_group[c] = 1;
@@ -1054,6 +1138,7 @@ class Builder {
           local = std::max(local, col.error);
         } else {
           removed.push_back(col.removed);
+          local = std::max(local, col.error);
         }
         for (std::uint32_t k = col.old_begin; k < col.old_end; ++k) {
           const std::uint32_t id = old_tris_[k];
@@ -1063,7 +1148,6 @@ class Builder {
           const std::uint32_t id = new_tris_[k];
           if (tris_[id].destroyer == kNone || !in_group[tris_[id].destroyer]) {
             pre.push_back(id);
-            local = std::max(local, tris_[id].e);
           }
         }
       }
@@ -1186,6 +1270,7 @@ class Builder {
           // Nor below the removed vertex's distance to the new star (a corner of the old star).
           if (removed_distance(v, b.to) > tolerance) continue;
           b.error = collapse_error(v, b.to);
+          b.new_e = new_e_;
           b.have_error = true;
         }
         if (b.error > tolerance) continue;
@@ -1193,7 +1278,7 @@ class Builder {
         taken_[v] = taken_[to] = taken_stamp_;
         for (std::uint32_t w : ring_) taken_[w] = taken_stamp_;
         for (std::uint32_t w : local_) taken_[w] = taken_stamp_;
-        apply(v, to, b.error);
+        apply(v, to, b.error, b.new_e);
         b = Best{};
         dirty_list_.push_back(to);
         neighbours(to, ring_);
@@ -1222,6 +1307,7 @@ class Builder {
 
   struct Best {
     double cost = 0.0, error = 0.0;
+    std::vector<double> new_e;  // collapse_error's bounds of the new triangles
     std::uint32_t to = kNone;
     bool have_error = false;
   };
@@ -1256,7 +1342,7 @@ class Builder {
   std::vector<std::uint32_t> image_;     // old star index -> its new triangle (collapse_error)
   std::vector<std::uint32_t> preimage_;  // new triangle -> its old star index
   std::vector<std::pair<double, std::size_t>> order_;
-  std::vector<double> depth0_;  // old star index -> its unrefined forward bound
+  std::vector<double> new_e_;  // new triangle -> its bound (collapse_error)
   std::vector<std::uint32_t> nf_, nt_, cand_, ring_, local_;
   std::vector<std::pair<double, std::uint32_t>> ranked_;
   std::unordered_map<std::uint64_t, std::uint32_t> frag_edges_;

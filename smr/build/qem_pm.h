@@ -12,12 +12,15 @@
 //
 // Error: each triangle carries a guaranteed two-sided Hausdorff bound e(T) to the source surface
 // (every source point is within e(T) of the triangle it is assigned to, every point of T within
-// e(T) of the source). A collapse maps its old star onto the new one; e of the new triangles is
-// the old bound plus an upper bound of the distance between the two stars, computed from the
-// convexity of the distance to one triangle over subdivided pieces (branch and bound, the
-// piece's image under the collapse tried first). An op's error is its own bound (the largest e of
-// its PreF triangles, or what a spawned component's absence costs), raised to its children's
-// errors, so birth_res never falls from parent to child.
+// e(T) of the source). A collapse maps its old star onto the new one, and each new triangle gets
+// its own e: backward, its points' distance to the old star plus the old bounds there; forward,
+// the source points of each old triangle are handed, cell by cell, to their nearest new triangle,
+// whose e rises to the old bound plus that cell's distance. Distances come from the convexity of
+// the distance to one triangle over pieces cut by the stars' spoke planes and subdivided (branch
+// and bound, the piece's image under the collapse tried first). A collapse's error is the largest
+// e of its new triangles and at least the errors of the collapses it depends on. An op's error is
+// its members' (or what a spawned component's absence costs), raised to its children's errors,
+// so birth_res never falls from parent to child.
 //
 // Order (Brown 4.4.3.3 reordering): splits are emitted in a topological order of their
 // dependencies (a split needs the splits that created its PreF), largest bound first, so the
