@@ -686,6 +686,12 @@ class Builder {
 
   // ---- error bound --------------------------------------------------------------------------
 
+  // The bound of the collapse that made triangle id (a source triangle's own).
+  double creator_error(std::uint32_t id) const {
+    const Tri& t = tris_[id];
+    return t.creator == kNone ? t.e : collapses_[t.creator].error;
+  }
+
   double collapse_error(std::uint32_t from, std::uint32_t to) {
     old_targets_.clear();
     new_targets_.clear();
@@ -697,7 +703,7 @@ class Builder {
       old_targets_.push_back({pos_[t.v[0]], pos_[t.v[1]], pos_[t.v[2]], t.e});
       // At least the bound of every collapse this one depends on, so that the splits' order
       // (largest error first) keeps their errors monotone.
-      floor = std::max(floor, t.creator == kNone ? t.e : collapses_[t.creator].error);
+      floor = std::max(floor, creator_error(id));
       // The two triangles on the edge vanish; their nearest new one is a guess (the first).
       image_.push_back(has(t, to) ? 0u : static_cast<std::uint32_t>(new_targets_.size()));
       if (has(t, to)) continue;
@@ -775,6 +781,11 @@ class Builder {
     quad_[to] += qf;
   }
 
+  // Cheapest quadric cost first, in bands of the bound: a collapse whose bound exceeds the
+  // band's tolerance waits for the next band (twice the least bound that waited). A collapse's
+  // bound is at least those of the collapses it depends on, so one early large bound would
+  // raise every later one in its region; in bands, small bounds go first (the block builder's
+  // rising tolerances do the same).
   void simplify() {
     const std::size_t n = pos_.size();
     for (std::uint32_t v = 0; v < n; ++v) push_best(v);
@@ -782,17 +793,59 @@ class Builder {
     std::uint64_t alive = start;
     const std::uint64_t floor_vertices = options_.base_vertices;
     std::uint64_t next_report = 0;
-    while (!heap_.empty() && alive > floor_vertices) {
+    double tolerance = 0.0;
+    struct Waiting {
+      Candidate c;
+      double error;
+    };
+    std::vector<Waiting> waiting;
+    struct Waited {
+      std::uint32_t stamp = 0, to = kNone;
+      double error = 0.0;
+    };
+    std::vector<Waited> waited(n);  // the bound of a candidate that waited (its stamp and target)
+    const auto current = [&](const Candidate& c) {
+      return !removed_[c.from] && c.stamp == stamp_[c.from];
+    };
+    while (alive > floor_vertices) {
+      if (heap_.empty()) {
+        double least = std::numeric_limits<double>::infinity();
+        for (const Waiting& w : waiting) {
+          if (current(w.c)) least = std::min(least, w.error);
+        }
+        if (least == std::numeric_limits<double>::infinity()) break;
+        tolerance = 2.0 * least;
+        for (const Waiting& w : waiting) {
+          if (!current(w.c)) continue;
+          waited[w.c.from] = {w.c.stamp, w.c.to, w.error};
+          heap_.push(w.c);
+        }
+        waiting.clear();
+        continue;
+      }
       const Candidate top = heap_.top();
       heap_.pop();
-      if (removed_[top.from] || top.stamp != stamp_[top.from]) continue;
+      if (!current(top)) continue;
       if (removed_[top.to] || !valid(top.from, top.to)) {
         push_best(top.from);
         continue;
       }
-      const double error = collapse_error(top.from, top.to);
+      // The bound, or a lower bound of it when that already exceeds the band: the bound of a
+      // collapse it depends on, or the removed vertex's distance to the new star.
+      const Waited& w = waited[top.from];
+      double error = w.to == top.to && w.stamp == top.stamp ? w.error : -1.0;
+      if (error <= tolerance) {
+        error = 0.0;
+        for (std::uint32_t id : star_[top.from]) error = std::max(error, creator_error(id));
+        if (error <= tolerance) error = std::max(error, removed_distance(top.from, top.to));
+        if (error <= tolerance) error = collapse_error(top.from, top.to);
+      }
       if (options_.max_base_error > 0.0 && error > options_.max_base_error) {
         ++stamp_[top.from];  // retried only when its neighbourhood changes
+        continue;
+      }
+      if (error > tolerance) {
+        waiting.push_back({top, error});
         continue;
       }
       apply(top.from, top.to, error, new_e_);
@@ -800,13 +853,13 @@ class Builder {
       neighbours(top.to, ring_);
       const std::vector<std::uint32_t> ring = ring_;
       push_best(top.to);
-      for (std::uint32_t w : ring) push_best(w);
+      for (std::uint32_t r : ring) push_best(r);
       if (options_.progress && start - alive >= next_report) {
         options_.progress(0.8 * double(start - alive) / double(start));
         next_report += std::max<std::uint64_t>(1, start / 200);
       }
     }
-    exhausted_ = heap_.empty() && options_.max_base_error == 0.0;
+    exhausted_ = heap_.empty() && waiting.empty() && options_.max_base_error == 0.0;
   }
 
   // ---- spawned components -------------------------------------------------------------------
@@ -1265,7 +1318,7 @@ class Builder {
           // The bound is at least the star's own (collapse_error's floor): no need to compute
           // it to know it is too large.
           double floor = 0.0;
-          for (std::uint32_t id : star_[v]) floor = std::max(floor, tris_[id].e);
+          for (std::uint32_t id : star_[v]) floor = std::max(floor, creator_error(id));
           if (floor > tolerance) continue;
           // Nor below the removed vertex's distance to the new star (a corner of the old star).
           if (removed_distance(v, b.to) > tolerance) continue;
@@ -1624,10 +1677,16 @@ class BlockPmBuilder {
                                       constrain, tris, mesh_.name(), gid);
     // Collapses up to tolerance_fraction of the block's side (the root: as far as the rules
     // allow), cheapest quadric cost first within the bound, as the in-core builder orders them.
-    const double tolerance = level == levels_ ? kInfinity
-                                              : opt_.tolerance_fraction * side_ /
-                                                    double(std::uint64_t{1} << (levels_ - level));
-    out.rounds = out.b->simplify_rounds(tolerance);
+    // The tolerance rises in steps of 2 from an 8th of it, so that within a block collapses
+    // with small bounds go first: a collapse's bound is at least those of the collapses it
+    // depends on, and one early large bound would raise all that come after it in its region.
+    // The root goes on doubling up to the model's size, then as far as the rules allow.
+    const int below = std::min(level, levels_ - 1);
+    const double top =
+        opt_.tolerance_fraction * side_ / double(std::uint64_t{1} << (levels_ - below));
+    const double last = level == levels_ ? side_ : top;
+    for (double t = top / 8.0; t <= last; t *= 2.0) out.rounds += out.b->simplify_rounds(t);
+    if (level == levels_) out.rounds += out.b->simplify_rounds(kInfinity);
     out.gid = std::move(gid);
     return out;
   }

@@ -2,13 +2,15 @@
 // 4.4.3.3; Hoppe's progressive meshes; Garland & Heckbert's quadric error metric).
 //
 // Simplification runs half-edge collapses v' -> v (v' disappears, v keeps its source position),
-// cheapest quadric cost first, under the link condition, with no normal flip, boundaries kept
-// (a boundary vertex only moves along its boundary, boundary edges carry constraint quadrics) and
-// no component shrunk below a tetrahedron (closed) or a triangle (open); at the end all
-// components but one are removed whole, so refinement spawns them (Brown 4.4.1, Fig. 4.9d).
-// Reversed, every collapse is a vertex split op: F = the triangles around v' before the collapse,
-// PreF = the triangles that replaced them; the op introduces one vertex, v'. Because a half-edge
-// collapse keeps source positions, the fully refined mesh is the source mesh exactly.
+// cheapest quadric cost first within bands of the error bound (a collapse whose bound exceeds
+// the band waits for the next one, twice the least bound that waited), under the link condition,
+// with no normal flip, boundaries kept (a boundary vertex only moves along its boundary, boundary
+// edges carry constraint quadrics) and no component shrunk below a tetrahedron (closed) or a
+// triangle (open); at the end all components but one are removed whole, so refinement spawns them
+// (Brown 4.4.1, Fig. 4.9d). Reversed, every collapse is a vertex split op: F = the triangles around
+// v' before the collapse, PreF = the triangles that replaced them; the op introduces one vertex,
+// v'. Because a half-edge collapse keeps source positions, the fully refined mesh is the source
+// mesh exactly.
 //
 // Error: each triangle carries a guaranteed two-sided Hausdorff bound e(T) to the source surface
 // (every source point is within e(T) of the triangle it is assigned to, every point of T within
@@ -73,7 +75,8 @@ struct QemPmStats {
 // sorted by the octree leaf cell of their centroid (an external sort), so each leaf block is read
 // on its own. A block is simplified by the collapses above with its locked vertices -- those with
 // triangles in another block of its level -- kept, up to a bound of tolerance_fraction of the
-// block's side (doubling per level as blocks do), cheapest quadric cost first, in
+// block's side (doubling per level as blocks do; within a block it rises in steps of 2 from an
+// 8th of it, and the root's on to the model's size), cheapest quadric cost first, in
 // independent-set rounds (no two collapses of a round touch, so the DAG height is at most the
 // number of rounds). Then 2x2x2 blocks merge, the borders between them unlock and simplification
 // goes on, up to the root, which simplifies as far as the rules allow. Every collapse goes to the
