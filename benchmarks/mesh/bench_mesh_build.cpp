@@ -176,6 +176,7 @@ json ours_json(const smr::Crmr& crmr, const smr::QemPmStats& stats) {
           {"base_vertices", stats.base_vertices},
           {"base_triangles", stats.base_triangles},
           {"collapses", stats.collapses},
+          {"bounds_computed", stats.bounds_computed},
           {"rejected_link", stats.rejected_link},
           {"rejected_flip", stats.rejected_flip},
           {"rejected_boundary", stats.rejected_boundary},

@@ -693,6 +693,7 @@ class Builder {
   }
 
   double collapse_error(std::uint32_t from, std::uint32_t to) {
+    ++stats_.bounds_computed;
     old_targets_.clear();
     new_targets_.clear();
     image_.clear();
@@ -793,17 +794,21 @@ class Builder {
     std::uint64_t alive = start;
     const std::uint64_t floor_vertices = options_.base_vertices;
     std::uint64_t next_report = 0;
-    double tolerance = 0.0;
+    double tolerance = options_.bound_band > 0.0 ? 0.0 : std::numeric_limits<double>::infinity();
     struct Waiting {
       Candidate c;
       double error;
     };
     std::vector<Waiting> waiting;
+    // Per vertex, the bound its candidate last waited with: exact while its star and target
+    // are unchanged (stamp, to); after a change, a prediction that keeps it waiting without a
+    // new bound until the band reaches it (bounds only grow as a region coarsens; a wrong guess
+    // only delays the collapse, whose bound is computed before it is made).
     struct Waited {
       std::uint32_t stamp = 0, to = kNone;
       double error = 0.0;
     };
-    std::vector<Waited> waited(n);  // the bound of a candidate that waited (its stamp and target)
+    std::vector<Waited> waited(n);
     const auto current = [&](const Candidate& c) {
       return !removed_[c.from] && c.stamp == stamp_[c.from];
     };
@@ -814,11 +819,9 @@ class Builder {
           if (current(w.c)) least = std::min(least, w.error);
         }
         if (least == std::numeric_limits<double>::infinity()) break;
-        tolerance = 2.0 * least;
+        tolerance = options_.bound_band * least;
         for (const Waiting& w : waiting) {
-          if (!current(w.c)) continue;
-          waited[w.c.from] = {w.c.stamp, w.c.to, w.error};
-          heap_.push(w.c);
+          if (current(w.c)) heap_.push(w.c);
         }
         waiting.clear();
         continue;
@@ -832,19 +835,22 @@ class Builder {
       }
       // The bound, or a lower bound of it when that already exceeds the band: the bound of a
       // collapse it depends on, or the removed vertex's distance to the new star.
-      const Waited& w = waited[top.from];
-      double error = w.to == top.to && w.stamp == top.stamp ? w.error : -1.0;
+      Waited& w = waited[top.from];
+      double error = w.error;
+      bool known = w.to == top.to && w.stamp == top.stamp;
       if (error <= tolerance) {
+        known = true;
         error = 0.0;
         for (std::uint32_t id : star_[top.from]) error = std::max(error, creator_error(id));
         if (error <= tolerance) error = std::max(error, removed_distance(top.from, top.to));
         if (error <= tolerance) error = collapse_error(top.from, top.to);
       }
-      if (options_.max_base_error > 0.0 && error > options_.max_base_error) {
+      if (known && options_.max_base_error > 0.0 && error > options_.max_base_error) {
         ++stamp_[top.from];  // retried only when its neighbourhood changes
         continue;
       }
       if (error > tolerance) {
+        if (known) w = {top.stamp, top.to, error};
         waiting.push_back({top, error});
         continue;
       }
@@ -1109,7 +1115,8 @@ class Builder {
                 " coalesce-ratio=" + std::to_string(options_.coalesce_error_ratio) +
                 " boundary-weight=" + std::to_string(options_.boundary_weight) +
                 " base-vertices=" + std::to_string(options_.base_vertices) +
-                " max-base-error=" + std::to_string(options_.max_base_error);
+                " max-base-error=" + std::to_string(options_.max_base_error) +
+                " bound-band=" + std::to_string(options_.bound_band);
 
     const std::vector<std::vector<std::uint32_t>> groups = coalesce(split_order());
     const std::size_t nt = tris_.size();
@@ -1803,6 +1810,10 @@ Crmr build_qem_pm(const TriangleMesh& mesh, const std::string& name, const QemPm
   }
   if (!(options.coalesce_error_ratio >= 0.0 && options.coalesce_error_ratio <= 1.0)) {
     throw_input("QEM PM: the coalescing error ratio must be in [0, 1]");
+  }
+  if (!(options.bound_band == 0.0 ||
+        (options.bound_band >= 1.0 && std::isfinite(options.bound_band)))) {
+    throw_input("QEM PM: the bound band must be 0 (none) or a finite factor of at least 1");
   }
   Builder b(mesh, options);
   return b.run(name, stats);
