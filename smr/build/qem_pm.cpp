@@ -227,15 +227,8 @@ class StarDistance {
       const double free_room = charges[k] - offset - t.offset;   // within it: free
       const double room = std::max(free_room, best - t.offset);  // beyond it: no use
       if (!(room >= 0.0)) continue;
-      const double room2 = room < std::numeric_limits<double>::infinity()
-                               ? room * room
-                               : std::numeric_limits<double>::infinity();
-      double d2 = 0.0;
-      for (const Vec3& q : corners) {
-        d2 = std::max(d2, t.distance.squared(q));
-        if (d2 > room2) break;
-      }
-      if (d2 > room2) continue;
+      const double d2 = corner_distance2(t, corners, room);
+      if (d2 == std::numeric_limits<double>::infinity()) continue;
       if (free_room >= 0.0 && d2 <= free_room * free_room) return {0.0, kFree};
       const double v = t.offset + std::sqrt(d2);
       if (v < best) {
@@ -247,6 +240,21 @@ class StarDistance {
     return {best, at};
   }
 
+  // The largest squared distance from a corner to target t, or infinity once it exceeds room
+  // (the corners' distances are not all needed then).
+  template <class Corners>
+  static double corner_distance2(const Target& t, const Corners& corners, double room) {
+    const double room2 = room < std::numeric_limits<double>::infinity()
+                             ? room * room
+                             : std::numeric_limits<double>::infinity();
+    double d2 = 0.0;
+    for (const Vec3& q : corners) {
+      d2 = std::max(d2, t.distance.squared(q));
+      if (d2 > room2) return std::numeric_limits<double>::infinity();
+    }
+    return d2;
+  }
+
   // min over targets of (offset + the largest distance from a corner of the convex polygon):
   // at most `ub`; stops once at most `floor`.
   template <class Corners>
@@ -256,15 +264,8 @@ class StarDistance {
       // Squared distances to the corners; stop once no better than a target already seen.
       const double room = ub - t.offset;
       if (room <= 0.0) continue;
-      const double room2 = room < std::numeric_limits<double>::infinity()
-                               ? room * room
-                               : std::numeric_limits<double>::infinity();
-      double d2 = 0.0;
-      for (const Vec3& q : corners) {
-        d2 = std::max(d2, t.distance.squared(q));
-        if (d2 >= room2) break;
-      }
-      if (d2 >= room2) continue;
+      const double d2 = corner_distance2(t, corners, room);
+      if (!(d2 < room * room)) continue;
       ub = std::min(ub, t.offset + std::sqrt(d2));
       if (ub <= floor) return ub;
     }
