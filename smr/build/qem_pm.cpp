@@ -1173,7 +1173,11 @@ class Builder {
       while (!errors.empty() && !current[errors.top().second]) errors.pop();
       return errors.empty() ? 0.0 : errors.top().first;
     };
+    // R^0's error, the top of the resolution scale: its triangles' bounds, and no less than any
+    // op's error (a collapse's error can exceed its new triangles' own bounds: it is at least its
+    // creators'), so that no op's resolution is clamped to 0 below its error.
     h.err0 = mesh_error();
+    for (const Collapse& col : collapses_) h.err0 = std::max(h.err0, col.error);
     r0.error = h.err0;
     r0.birth_res = 0.0;
 
@@ -1764,6 +1768,10 @@ class BlockPmBuilder {
     for (const BlockTriangle& t : root.tris) {
       base.push_back({t.v, t.id, t.creator, false});
       info.err0 = std::max(info.err0, t.e);
+    }
+    // No op's error above R^0's (their resolutions would be clamped to 0 below their error).
+    for (std::uint64_t k = 0; k < assembler_->removals(); ++k) {
+      info.err0 = std::max(info.err0, assembler_->error(static_cast<std::uint32_t>(k)));
     }
     info.bounds = referenced_box_;
     info.vertex_count = referenced_;

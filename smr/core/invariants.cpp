@@ -459,6 +459,11 @@ InvariantReport check_crmr(const Crmr& crmr) {
     if (i > 0 && std::abs(resolution_of(crmr.header, op.error) - op.birth_res) > 1e-12) {
       r.fail(op_name(op.id) + ": birth_res does not match its error");
     }
+    // Above err0 its resolution would be clamped to 0 and the RCF would read a smaller error.
+    if (op.error > crmr.header.err0) {
+      r.fail(op_name(op.id) + ": error " + std::to_string(op.error) + " above err0 " +
+             std::to_string(crmr.header.err0));
+    }
     if (op.fragment.empty()) r.fail(op_name(op.id) + ": empty fragment");
     if (i > 0 && op.pre.empty()) r.fail(op_name(op.id) + ": empty pre-operation set");
     std::vector<OpId> parents;

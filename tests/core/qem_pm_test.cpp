@@ -9,6 +9,7 @@
 #include <cmath>
 #include <map>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
@@ -20,6 +21,7 @@
 #include "tests/support/mesh_distance.h"
 #include "tests/support/meshes.h"
 #include "tests/support/oracles.h"
+#include "tests/support/sanitized.h"
 
 namespace smr {
 namespace {
@@ -276,12 +278,14 @@ TEST(QemPmOptions, OneOpPerSplitWithoutCoalescing) {
 // Bands of the bound (the default) against none: both CRMRs are valid and hold their bounds in
 // every extraction, and the bands' cuts at the same uniform resolutions use fewer triangles (an
 // early large bound no longer raises every later collapse in its region). Factors below 1 could
-// never reach the least bound that waited: an input error.
+// never reach the least bound that waited: an input error. (The shark under the sanitizers:
+// 9 372 against 11 385 triangles.)
 TEST(QemPmOptions, BandsOfTheBoundGiveSmallerUniformCuts) {
-  const Built& banded = built("ChineseDragon-10kv.off");
+  const char* name = test::kSanitized ? "mech-holes-shark.off" : "ChineseDragon-10kv.off";
+  const Built& banded = built(name);
   QemPmOptions o;
   o.bound_band = 0.0;
-  const Crmr plain = build_qem_pm(banded.source, "ChineseDragon-10kv.off", o);
+  const Crmr plain = build_qem_pm(banded.source, name, o);
   const InvariantReport r = check_crmr(plain);
   ASSERT_TRUE(r.ok()) << r.summary();
   expect_extractions_hold(plain, banded.source);
@@ -404,9 +408,16 @@ TEST(BlockPmBuild, RejectsBadInput) {
   EXPECT_THROW((void)build_block_pm(MemoryMeshStream(mesh, "x"), o), Error);
 }
 
-// blobby_3cc: three components; elephant-with-holes: boundaries; the shark: holes; the dragon.
-const auto kCgalMeshes = ::testing::Values("blobby_3cc.off", "elephant-with-holes.off",
-                                           "mech-holes-shark.off", "ChineseDragon-10kv.off");
+// blobby_3cc: three components; elephant-with-holes: boundaries; the shark: holes; the dragon
+// (not under the sanitizers: every test process builds it again, and the other three cover
+// components, boundaries and holes there).
+std::vector<std::string> cgal_meshes() {
+  std::vector<std::string> m = {"blobby_3cc.off", "elephant-with-holes.off",
+                                "mech-holes-shark.off"};
+  if (!test::kSanitized) m.push_back("ChineseDragon-10kv.off");
+  return m;
+}
+const auto kCgalMeshes = ::testing::ValuesIn(cgal_meshes());
 std::string mesh_test_name(const ::testing::TestParamInfo<std::string>& p) {
   std::string n = p.param.substr(0, p.param.find('.'));
   std::replace(n.begin(), n.end(), '-', '_');
