@@ -819,7 +819,10 @@ class Builder {
         for (const Waiting& w : waiting) {
           if (current(w.c)) least = std::min(least, w.error);
         }
-        if (least == std::numeric_limits<double>::infinity()) break;
+        if (least == std::numeric_limits<double>::infinity()) {
+          waiting.clear();  // only stale entries: nothing is left to collapse
+          break;
+        }
         tolerance = options_.bound_band * least;
         for (const Waiting& w : waiting) {
           if (current(w.c)) heap_.push(w.c);
