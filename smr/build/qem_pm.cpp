@@ -693,6 +693,19 @@ class Builder {
     return t.creator == kNone ? t.e : collapses_[t.creator].error;
   }
 
+  // The collapse's bound (exact = true; new_e_ then holds its new triangles'), or a lower bound
+  // of it once one exceeds `tolerance`, found without computing it: the bound of a collapse it
+  // depends on (collapse_error's floor), or the removed vertex's distance to the new star (a
+  // corner of the old star).
+  std::pair<double, bool> bound_within(std::uint32_t from, std::uint32_t to, double tolerance) {
+    double lower = 0.0;
+    for (std::uint32_t id : star_[from]) lower = std::max(lower, creator_error(id));
+    if (lower > tolerance) return {lower, false};
+    lower = std::max(lower, removed_distance(from, to));
+    if (lower > tolerance) return {lower, false};
+    return {collapse_error(from, to), true};
+  }
+
   double collapse_error(std::uint32_t from, std::uint32_t to) {
     ++stats_.bounds_computed;
     old_targets_.clear();
@@ -837,17 +850,13 @@ class Builder {
         push_best(top.from);
         continue;
       }
-      // The bound, or a lower bound of it when that already exceeds the band: the bound of a
-      // collapse it depends on, or the removed vertex's distance to the new star.
+      // The bound, or a lower bound of it when that already exceeds the band (bound_within).
       Waited& w = waited[top.from];
       double error = w.error;
       bool known = w.to == top.to && w.stamp == top.stamp;
       if (error <= tolerance) {
         known = true;
-        error = 0.0;
-        for (std::uint32_t id : star_[top.from]) error = std::max(error, creator_error(id));
-        if (error <= tolerance) error = std::max(error, removed_distance(top.from, top.to));
-        if (error <= tolerance) error = collapse_error(top.from, top.to);
+        error = bound_within(top.from, top.to, tolerance).first;
       }
       if (known && options_.max_base_error > 0.0 && error > options_.max_base_error) {
         ++stamp_[top.from];  // retried only when its neighbourhood changes
@@ -1330,14 +1339,9 @@ class Builder {
           continue;
         }
         if (!b.have_error) {
-          // The bound is at least the star's own (collapse_error's floor): no need to compute
-          // it to know it is too large.
-          double floor = 0.0;
-          for (std::uint32_t id : star_[v]) floor = std::max(floor, creator_error(id));
-          if (floor > tolerance) continue;
-          // Nor below the removed vertex's distance to the new star (a corner of the old star).
-          if (removed_distance(v, b.to) > tolerance) continue;
-          b.error = collapse_error(v, b.to);
+          const auto [error, exact] = bound_within(v, b.to, tolerance);
+          if (!exact) continue;  // a lower bound is already too large
+          b.error = error;
           b.new_e = new_e_;
           b.have_error = true;
         }
