@@ -730,13 +730,13 @@ class Builder {
       new_targets_.push_back({pos_[nv[0]], pos_[nv[1]], pos_[nv[2]], 0.0});
     }
     // Forward: the source points assigned to each old triangle (within its e) go to their
-    // nearest new triangles, whose bounds rise to hold them (StarDistance::charge). Largest
-    // first by an unrefined (depth 0) bound, so the bounds rise early and more cells are free.
+    // nearest new triangles, whose bounds rise to hold them (StarDistance::charge). The largest
+    // old bounds first, so the new ones rise early and more cells are free. (Ordering by a
+    // depth-0 bound of each old triangle instead did that work twice and gave larger bounds.)
     const StarDistance to_new(new_targets_, pos_[to]);
     order_.clear();
     for (std::size_t i = 0; i < old_targets_.size(); ++i) {
-      const StarDistance::Target& t = old_targets_[i];
-      order_.push_back({t.offset + to_new.bound(t.a, t.b, t.c, 0.0, 0, image_[i]), i});
+      order_.push_back({old_targets_[i].offset, i});
     }
     std::sort(order_.begin(), order_.end(), std::greater<>());
     new_e_.assign(new_targets_.size(), 0.0);
