@@ -14,6 +14,7 @@
 #include <limits>
 #include <numeric>
 #include <queue>
+#include <span>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -190,8 +191,8 @@ class StarDistance {
       if (k != kFree) raised_.push_back({v, k});
     } else {
       cut(a, b, c);
-      for (const std::vector<Vec3>& cell : cells_) {
-        const auto [v, k] = nearest(cell, offset, first, charges, ceiling);
+      for (std::size_t i = 0; i < cells_.size(); ++i) {
+        const auto [v, k] = nearest(cell(i), offset, first, charges, ceiling);
         if (k != kFree) raised_.push_back({v, k});
       }
     }
@@ -279,17 +280,25 @@ class StarDistance {
     if (!crossed(a, b, c)) return ub;  // one cell: the one-target bound already computed
     cut(a, b, c);
     double worst = 0.0;
-    for (const std::vector<Vec3>& cell : cells_) {
-      worst = std::max(worst, convex_bound(cell, ub, worst, first));
+    for (std::size_t i = 0; i < cells_.size(); ++i) {
+      worst = std::max(worst, convex_bound(cell(i), ub, worst, first));
       if (worst >= ub) return ub;
     }
     return worst;
   }
 
-  // cells_ = the triangle (a, b, c) cut by every spoke plane.
+  // Cell i of the last cut: a convex polygon.
+  std::span<const Vec3> cell(std::size_t i) const {
+    return {corners_.data() + cells_[i].first, cells_[i].second};
+  }
+
+  // cells_ = the triangle (a, b, c) cut by every spoke plane. A plane that does not cross the
+  // triangle crosses none of its cells.
   void cut(const Vec3& a, const Vec3& b, const Vec3& c) const {
-    cells_.assign(1, {a, b, c});
+    corners_.assign({a, b, c});
+    cells_.assign(1, {0, 3});
     for (const Vec3& m : planes_) {
+      if (!crosses(a, b, c, m)) continue;
       const std::size_t n = cells_.size();
       for (std::size_t i = 0; i < n; ++i) split(i, m);
     }
@@ -298,46 +307,54 @@ class StarDistance {
   // Whether some spoke plane has corners of the piece strictly on both sides (checked before
   // any cell is made: most pieces of the branch and bound lie within one wedge).
   bool crossed(const Vec3& a, const Vec3& b, const Vec3& c) const {
-    for (const Vec3& m : planes_) {
-      const double sa = glm::dot(a - hub_, m), sb = glm::dot(b - hub_, m),
-                   sc = glm::dot(c - hub_, m);
-      if (std::min({sa, sb, sc}) < 0.0 && std::max({sa, sb, sc}) > 0.0) return true;
-    }
-    return false;
+    return std::any_of(planes_.begin(), planes_.end(),
+                       [&](const Vec3& m) { return crosses(a, b, c, m); });
+  }
+  bool crosses(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& m) const {
+    const double sa = glm::dot(a - hub_, m), sb = glm::dot(b - hub_, m), sc = glm::dot(c - hub_, m);
+    return std::min({sa, sb, sc}) < 0.0 && std::max({sa, sb, sc}) > 0.0;
   }
 
-  // Splits cell i by the plane through the hub with normal m: the part below stays at i, the
-  // part above is appended (when the plane crosses the cell).
+  // Splits cell i by the plane through the hub with normal m: the part below replaces it, the
+  // part above is appended (when the plane crosses the cell). Both go to the end of corners_.
   void split(std::size_t i, const Vec3& m) const {
-    const std::vector<Vec3>& p = cells_[i];
-    side_.resize(p.size());
+    const auto [first, count] = cells_[i];
+    side_.resize(count);
     bool below = false, above = false;
-    for (std::size_t k = 0; k < p.size(); ++k) {
-      side_[k] = glm::dot(p[k] - hub_, m);
+    for (std::size_t k = 0; k < count; ++k) {
+      side_[k] = glm::dot(corners_[first + k] - hub_, m);
       below |= side_[k] < 0.0;
       above |= side_[k] > 0.0;
     }
     if (!below || !above) return;
-    std::vector<Vec3> lo, hi;
-    for (std::size_t k = 0; k < p.size(); ++k) {
-      const std::size_t j = (k + 1) % p.size();
-      if (side_[k] <= 0.0) lo.push_back(p[k]);
-      if (side_[k] >= 0.0) hi.push_back(p[k]);
+    // A convex polygon crosses a plane twice: each part has at most count + 2 corners. With
+    // that room reserved, the cell's corners stay in place while the part below is appended.
+    const std::size_t lo = corners_.size();
+    corners_.reserve(lo + 2 * count + 4);
+    high_.clear();
+    for (std::size_t k = 0; k < count; ++k) {
+      const std::size_t j = k + 1 == count ? 0 : k + 1;
+      const Vec3& p = corners_[first + k];
+      if (side_[k] <= 0.0) corners_.push_back(p);
+      if (side_[k] >= 0.0) high_.push_back(p);
       if ((side_[k] < 0.0 && side_[j] > 0.0) || (side_[k] > 0.0 && side_[j] < 0.0)) {
         const double t = side_[k] / (side_[k] - side_[j]);
-        const Vec3 x = p[k] + t * (p[j] - p[k]);
-        lo.push_back(x);
-        hi.push_back(x);
+        const Vec3 x = p + t * (corners_[first + j] - p);
+        corners_.push_back(x);
+        high_.push_back(x);
       }
     }
-    cells_[i] = std::move(lo);
-    cells_.push_back(std::move(hi));
+    cells_[i] = {lo, corners_.size() - lo};
+    cells_.push_back({corners_.size(), high_.size()});
+    corners_.insert(corners_.end(), high_.begin(), high_.end());
   }
 
   const std::vector<Target>& targets_;
   Vec3 hub_;
   std::vector<Vec3> planes_;  // unit normals of the spoke planes (all through the hub)
-  mutable std::vector<std::vector<Vec3>> cells_;
+  // The cells of the last cut: (first, count) in corners_ (one pool: no allocation per cell).
+  mutable std::vector<std::pair<std::size_t, std::size_t>> cells_;
+  mutable std::vector<Vec3> corners_, high_;
   mutable std::vector<double> side_;
   mutable std::vector<std::pair<double, std::size_t>> raised_;
 };

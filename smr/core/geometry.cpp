@@ -45,34 +45,11 @@ TriangleDistance::TriangleDistance(const Vec3& a, const Vec3& b, const Vec3& c)
   acac_ = glm::dot(ac_, ac_);
 }
 
-double TriangleDistance::squared(const Vec3& p) const {
-  // The closest point by the Voronoi region of p (Ericson, Real-Time Collision Detection 5.1.5).
-  // With ap = p - a: bp = ap - ab and cp = ap - ac, so the six dot products follow from two.
-  // Degenerate triangles: the nearest edge.
-  const auto sq = [](const Vec3& v) { return glm::dot(v, v); };
-  if (degenerate_) {
-    const double d =
-        std::min({point_segment_distance3d(p, a_, b_), point_segment_distance3d(p, b_, c_),
-                  point_segment_distance3d(p, c_, a_)});
-    return d * d;
-  }
-  const Vec3 ap = p - a_;
-  const double d1 = glm::dot(ab_, ap), d2 = glm::dot(ac_, ap);
-  if (d1 <= 0.0 && d2 <= 0.0) return sq(ap);
-  const double d3 = d1 - abab_, d4 = d2 - abac_;
-  if (d3 >= 0.0 && d4 <= d3) return sq(p - b_);
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) return sq(ap - (d1 / (d1 - d3)) * ab_);
-  const double d5 = d1 - abac_, d6 = d2 - acac_;
-  if (d6 >= 0.0 && d5 <= d6) return sq(p - c_);
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) return sq(ap - (d2 / (d2 - d6)) * ac_);
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0) {
-    return sq((p - b_) - ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c_ - b_));
-  }
-  const double inv = 1.0 / (va + vb + vc);
-  return sq(ap - ab_ * (vb * inv) - ac_ * (vc * inv));
+double TriangleDistance::degenerate_squared(const Vec3& p) const {
+  const double d =
+      std::min({point_segment_distance3d(p, a_, b_), point_segment_distance3d(p, b_, c_),
+                point_segment_distance3d(p, c_, a_)});
+  return d * d;
 }
 
 Sphere bounding_sphere(std::span<const Vec3> points) {
