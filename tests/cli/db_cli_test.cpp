@@ -99,10 +99,7 @@ class DbCli : public ::testing::Test {
     for (int i = 0; i < 6; ++i) {
       if (!smr::test::in_sample(std::size_t(i), 3)) continue;  // kills early and late
       fs::remove(target);
-      const pid_t pid = spawn_smrdb(ingest);
-      std::this_thread::sleep_for(std::chrono::duration<double>(full * (i + 0.5) / 7.0));
-      ::kill(pid, SIGKILL);
-      const int status = wait_for(pid);
+      const int status = smr::test::kill_after(spawn_smrdb(ingest), full * (i + 0.5) / 7.0).status;
       killed += WIFSIGNALED(status);
       if (fs::exists(target)) {
         EXPECT_EQ(read_file(target), bytes) << "run " << i << " left a different database";
@@ -167,10 +164,7 @@ TEST_F(DbCli, KillNineDuringIngestLeavesThePreviousOrTheCompleteDatabase) {
     const double at = i >= kRuns - 2 ? 3.0 * full : full * 1.1 * (i + u(rng)) / (kRuns - 2);
     SCOPED_TRACE("run " + std::to_string(i) + (over_old ? " over the old database" : "") +
                  ", killed after " + std::to_string(at) + " s of " + std::to_string(full));
-    const pid_t pid = spawn_smrdb(ingest);
-    std::this_thread::sleep_for(std::chrono::duration<double>(at));
-    ::kill(pid, SIGKILL);  // a no-op on a process that already exited (not yet reaped)
-    const int status = wait_for(pid);
+    const int status = smr::test::kill_after(spawn_smrdb(ingest), at).status;
     killed += WIFSIGNALED(status);
     if (!WIFSIGNALED(status)) {
       EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);

@@ -1,14 +1,18 @@
 #include "tests/support/process.h"
 
 #include <fcntl.h>
+#include <signal.h>
 #include <spawn.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <array>
 #include <cerrno>
+#include <chrono>
 #include <cstdio>
 #include <stdexcept>
+#include <thread>
 
 extern char** environ;
 
@@ -50,6 +54,25 @@ Exit wait_for(pid_t pid) {
   }
   e.max_rss_kib = ru.ru_maxrss;
   return e;
+}
+
+Exit kill_after(pid_t pid, double seconds) {
+  const auto deadline =
+      std::chrono::steady_clock::now() + std::chrono::duration<double>(std::max(seconds, 0.0));
+  for (;;) {
+    Exit e;
+    struct rusage ru {};
+    const pid_t r = ::wait4(pid, &e.status, WNOHANG, &ru);
+    if (r == pid) {
+      e.max_rss_kib = ru.ru_maxrss;
+      return e;
+    }
+    if (r < 0 && errno != EINTR) throw std::runtime_error("wait4 failed");
+    if (std::chrono::steady_clock::now() >= deadline) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  ::kill(pid, SIGKILL);
+  return wait_for(pid);
 }
 
 }  // namespace smr::test

@@ -26,5 +26,8 @@ struct Exit {
 };
 /// Waits for `pid` (retrying on EINTR).
 Exit wait_for(pid_t pid);
+/// Waits up to `seconds` for `pid` to end, then kills it (SIGKILL) and waits for that: a kill at
+/// a moment that does not sleep on after the process has ended by itself.
+Exit kill_after(pid_t pid, double seconds);
 
 }  // namespace smr::test
