@@ -712,13 +712,18 @@ class Builder {
 
   // The collapse's bound (exact = true; new_e_ then holds its new triangles'), or a lower bound
   // of it once one exceeds `tolerance`, found without computing it: the bound of a collapse it
-  // depends on (collapse_error's floor), or the removed vertex's distance to the new star (a
-  // corner of the old star).
+  // depends on (collapse_error's floor), or the largest bound of an old triangle plus the
+  // removed vertex's distance to the new star (the removed vertex is a corner of every old
+  // triangle, so the cell holding it is charged at least that triangle's bound plus that
+  // distance, free or not: StarDistance::charge).
   std::pair<double, bool> bound_within(std::uint32_t from, std::uint32_t to, double tolerance) {
-    double lower = 0.0;
-    for (std::uint32_t id : star_[from]) lower = std::max(lower, creator_error(id));
+    double lower = 0.0, own = 0.0;
+    for (std::uint32_t id : star_[from]) {
+      lower = std::max(lower, creator_error(id));
+      own = std::max(own, tris_[id].e);
+    }
     if (lower > tolerance) return {lower, false};
-    lower = std::max(lower, removed_distance(from, to));
+    lower = std::max(lower, own + removed_distance(from, to));
     if (lower > tolerance) return {lower, false};
     return {collapse_error(from, to), true};
   }
