@@ -494,6 +494,7 @@ class Builder {
     removed_.assign(n, 0);
     boundary_.assign(n, 0);
     stamp_.assign(n, 0);
+    mark_.assign(n, 0);
     tris_.reserve(triangles * 2);
     cos_max_turn_ = std::cos(options_.max_normal_turn_degrees * 3.14159265358979323846 / 180.0);
   }
@@ -586,15 +587,27 @@ class Builder {
   // ---- candidates ---------------------------------------------------------------------------
 
   // Neighbours of v (sorted, unique) from its star.
+  // The vertices sharing a triangle with v, each once, in the order the star meets them (every
+  // user is indifferent to the order: candidates are ranked by (cost, id), the heap orders by
+  // (cost, from, to), dirty lists are sorted).
   void neighbours(std::uint32_t v, std::vector<std::uint32_t>& out) const {
     out.clear();
+    const std::uint32_t seen = next_mark();
     for (std::uint32_t id : star_[v]) {
       for (std::uint32_t w : tris_[id].v) {
-        if (w != v) out.push_back(w);
+        if (w == v || mark_[w] == seen) continue;
+        mark_[w] = seen;
+        out.push_back(w);
       }
     }
-    std::sort(out.begin(), out.end());
-    out.erase(std::unique(out.begin(), out.end()), out.end());
+  }
+  // A fresh value for mark_ (set semantics without sorting or clearing).
+  std::uint32_t next_mark() const {
+    if (++mark_value_ == 0) {
+      std::fill(mark_.begin(), mark_.end(), 0u);
+      mark_value_ = 1;
+    }
+    return mark_value_;
   }
 
   // Whether collapsing from -> to keeps the mesh a manifold of the same topology with no
@@ -634,20 +647,19 @@ class Builder {
     if (comp_vertices_[comp] <= (comp_open_[comp] ? 3u : 4u)) return false;
     // Link condition: the common neighbours of from and to are exactly the edge's opposite
     // vertices (with a virtual vertex joined to the boundary, Dey et al.).
-    neighbours(to, nt_);
+    const std::uint32_t in_nf = next_mark();
+    for (std::uint32_t w : nf) mark_[w] = in_nf;
+    const std::uint32_t counted = next_mark();
     std::uint32_t common = 0;
-    for (std::size_t i = 0, j = 0; i < nf.size() && j < nt_.size();) {
-      if (nf[i] < nt_[j]) {
-        ++i;
-      } else if (nt_[j] < nf[i]) {
-        ++j;
-      } else {
-        if (nf[i] != opposite[0] && nf[i] != opposite[1]) {
+    for (std::uint32_t id : star_[to]) {
+      for (std::uint32_t w : tris_[id].v) {
+        if (w == to || mark_[w] != in_nf) continue;
+        mark_[w] = counted;
+        if (w != opposite[0] && w != opposite[1]) {
           ++stats_.rejected_link;
           return false;
         }
         ++common;
-        ++i, ++j;
       }
     }
     if (common != shared) {
@@ -1437,7 +1449,9 @@ class Builder {
   std::vector<std::uint32_t> preimage_;  // new triangle -> its old star index
   std::vector<std::pair<double, std::size_t>> order_;
   std::vector<double> new_e_;  // new triangle -> its bound (collapse_error)
-  std::vector<std::uint32_t> nf_, nt_, cand_, ring_, local_;
+  std::vector<std::uint32_t> nf_, cand_, ring_, local_;
+  mutable std::vector<std::uint32_t> mark_;  // per vertex: next_mark()'s values
+  mutable std::uint32_t mark_value_ = 0;
   std::vector<std::pair<double, std::uint32_t>> ranked_;
   std::unordered_map<std::uint64_t, std::uint32_t> frag_edges_;
   std::vector<std::uint32_t> tri_op_, tri_local_;
