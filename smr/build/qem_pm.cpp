@@ -119,10 +119,15 @@ class StarDistance {
     Target(const Vec3& pa, const Vec3& pb, const Vec3& pc, double off)
         : a(pa), b(pb), c(pc), offset(off), distance(pa, pb, pc) {}
   };
-  StarDistance(const std::vector<Target>& targets, const Vec3& hub) : targets_(targets), hub_(hub) {
+  // Bounds to `targets` (kept by reference) around `hub`. The builder keeps one StarDistance per
+  // direction and resets it for every collapse, so its buffers are allocated once.
+  void reset(const std::vector<Target>& targets, const Vec3& hub) {
+    targets_ = &targets;
+    hub_ = hub;
+    planes_.clear();
     // Spokes: the corners other than the hub, each with the normals of the targets on it.
-    std::vector<std::pair<Vec3, Vec3>> spokes;  // (far end, sum of unit normals)
-    for (const Target& t : targets_) {
+    spokes_.clear();
+    for (const Target& t : targets) {
       const std::array<const Vec3*, 3> corners{&t.a, &t.b, &t.c};
       int at = -1;
       for (int k = 0; k < 3; ++k) {
@@ -135,16 +140,16 @@ class StarDistance {
       n /= len;
       for (int k = 0; k < 3; ++k) {
         if (k == at) continue;
-        auto it = std::find_if(spokes.begin(), spokes.end(),
+        auto it = std::find_if(spokes_.begin(), spokes_.end(),
                                [&](const auto& sp) { return sp.first == *corners[k]; });
-        if (it == spokes.end()) {
-          spokes.push_back({*corners[k], n});
+        if (it == spokes_.end()) {
+          spokes_.push_back({*corners[k], n});
         } else {
           it->second += n;
         }
       }
     }
-    for (const auto& [end, normals] : spokes) {
+    for (const auto& [end, normals] : spokes_) {
       const Vec3 m = glm::cross(end - hub, normals);
       const double len = glm::length(m);
       if (len > 0.0) planes_.push_back(m / len);
@@ -222,9 +227,9 @@ class StarDistance {
                                          const std::vector<double>& charges, double ceiling) const {
     double best = std::numeric_limits<double>::infinity();
     std::size_t at = kFree;
-    for (std::size_t i = 0; i < targets_.size(); ++i) {
+    for (std::size_t i = 0; i < targets_->size(); ++i) {
       const std::size_t k = i == 0 ? first : (i == first ? 0 : i);
-      const Target& t = targets_[k];
+      const Target& t = (*targets_)[k];
       const double free_room = charges[k] - offset - t.offset;   // within it: free
       const double room = std::max(free_room, best - t.offset);  // beyond it: no use
       if (!(room >= 0.0)) continue;
@@ -260,8 +265,8 @@ class StarDistance {
   // at most `ub`; stops once at most `floor`.
   template <class Corners>
   double convex_bound(const Corners& corners, double ub, double floor, std::size_t first) const {
-    for (std::size_t k = 0; k < targets_.size(); ++k) {
-      const Target& t = targets_[k == 0 ? first : (k == first ? 0 : k)];
+    for (std::size_t k = 0; k < targets_->size(); ++k) {
+      const Target& t = (*targets_)[k == 0 ? first : (k == first ? 0 : k)];
       // Squared distances to the corners; stop once no better than a target already seen.
       const double room = ub - t.offset;
       if (room <= 0.0) continue;
@@ -349,8 +354,9 @@ class StarDistance {
     corners_.insert(corners_.end(), high_.begin(), high_.end());
   }
 
-  const std::vector<Target>& targets_;
-  Vec3 hub_;
+  const std::vector<Target>* targets_ = nullptr;
+  Vec3 hub_{0.0};
+  std::vector<std::pair<Vec3, Vec3>> spokes_;  // (far end, sum of unit normals of its targets)
   std::vector<Vec3> planes_;  // unit normals of the spoke planes (all through the hub)
   // The cells of the last cut: (first, count) in corners_ (one pool: no allocation per cell).
   mutable std::vector<std::pair<std::size_t, std::size_t>> cells_;
@@ -767,7 +773,8 @@ class Builder {
     // nearest new triangles, whose bounds rise to hold them (StarDistance::charge). The largest
     // old bounds first, so the new ones rise early and more cells are free. (Ordering by a
     // depth-0 bound of each old triangle instead did that work twice and gave larger bounds.)
-    const StarDistance to_new(new_targets_, pos_[to]);
+    to_new_.reset(new_targets_, pos_[to]);
+    const StarDistance& to_new = to_new_;
     order_.clear();
     for (std::size_t i = 0; i < old_targets_.size(); ++i) {
       order_.push_back({old_targets_[i].offset, i});
@@ -781,7 +788,8 @@ class Builder {
     }
     // Backward, per new triangle: its points to the old star, plus the old bounds (refined
     // while they could raise its forward bound).
-    const StarDistance to_old(old_targets_, pos_[from]);
+    to_old_.reset(old_targets_, pos_[from]);
+    const StarDistance& to_old = to_old_;
     for (std::size_t j = 0; j < new_targets_.size(); ++j) {
       const StarDistance::Target& t = new_targets_[j];
       new_e_[j] =
@@ -1445,6 +1453,7 @@ class Builder {
   std::vector<Collapse> collapses_;
   std::vector<std::uint32_t> old_tris_, new_tris_;
   std::vector<StarDistance::Target> old_targets_, new_targets_;
+  StarDistance to_new_, to_old_;         // collapse_error's forward and backward bounds
   std::vector<std::uint32_t> image_;     // old star index -> its new triangle (collapse_error)
   std::vector<std::uint32_t> preimage_;  // new triangle -> its old star index
   std::vector<std::pair<double, std::size_t>> order_;
