@@ -735,39 +735,51 @@ class Builder {
   // triangle, so the cell holding it is charged at least that triangle's bound plus that
   // distance, free or not: StarDistance::charge).
   std::pair<double, bool> bound_within(std::uint32_t from, std::uint32_t to, double tolerance) {
-    double lower = 0.0, own = 0.0;
+    // At least the bound of every collapse this one depends on, so that the splits' order
+    // (largest error first) keeps their errors monotone: collapse_error's floor.
+    double floor = 0.0, own = 0.0;
     for (std::uint32_t id : star_[from]) {
-      lower = std::max(lower, creator_error(id));
+      floor = std::max(floor, creator_error(id));
       own = std::max(own, tris_[id].e);
     }
+    if (floor > tolerance) return {floor, false};
+    new_star(from, to);
+    double d2 = std::numeric_limits<double>::infinity();
+    for (const StarDistance::Target& t : new_targets_)
+      d2 = std::min(d2, t.distance.squared(pos_[from]));
+    const double lower = std::max(floor, own + std::sqrt(d2));
     if (lower > tolerance) return {lower, false};
-    lower = std::max(lower, own + removed_distance(from, to));
-    if (lower > tolerance) return {lower, false};
-    return {collapse_error(from, to), true};
+    return {collapse_error(from, to, floor), true};
   }
 
-  double collapse_error(std::uint32_t from, std::uint32_t to) {
-    ++stats_.bounds_computed;
-    old_targets_.clear();
+  // new_targets_ = the triangles the star of `from` becomes when it collapses onto `to`, and
+  // preimage_ = the old star's index of each.
+  void new_star(std::uint32_t from, std::uint32_t to) {
     new_targets_.clear();
-    image_.clear();
     preimage_.clear();
-    double floor = 0.0;
-    for (std::uint32_t id : star_[from]) {
-      const Tri& t = tris_[id];
-      old_targets_.push_back({pos_[t.v[0]], pos_[t.v[1]], pos_[t.v[2]], t.e});
-      // At least the bound of every collapse this one depends on, so that the splits' order
-      // (largest error first) keeps their errors monotone.
-      floor = std::max(floor, creator_error(id));
-      // The two triangles on the edge vanish; their nearest new one is a guess (the first).
-      image_.push_back(has(t, to) ? 0u : static_cast<std::uint32_t>(new_targets_.size()));
+    for (std::uint32_t i = 0; i < star_[from].size(); ++i) {
+      const Tri& t = tris_[star_[from][i]];
       if (has(t, to)) continue;
-      preimage_.push_back(static_cast<std::uint32_t>(old_targets_.size() - 1));
+      preimage_.push_back(i);
       std::array<std::uint32_t, 3> nv = t.v;
       for (std::uint32_t& w : nv) {
         if (w == from) w = to;
       }
       new_targets_.push_back({pos_[nv[0]], pos_[nv[1]], pos_[nv[2]], 0.0});
+    }
+  }
+
+  // The collapse's bound, with new_star(from, to) made and `floor` its creators' largest error.
+  double collapse_error(std::uint32_t from, std::uint32_t to, double floor) {
+    ++stats_.bounds_computed;
+    old_targets_.clear();
+    image_.clear();
+    std::uint32_t made = 0;
+    for (std::uint32_t id : star_[from]) {
+      const Tri& t = tris_[id];
+      old_targets_.push_back({pos_[t.v[0]], pos_[t.v[1]], pos_[t.v[2]], t.e});
+      // The two triangles on the edge vanish; their nearest new one is a guess (the first).
+      image_.push_back(has(t, to) ? 0u : made++);
     }
     // Forward: the source points assigned to each old triangle (within its e) go to their
     // nearest new triangles, whose bounds rise to hold them (StarDistance::charge). The largest
@@ -1404,19 +1416,6 @@ class Builder {
       if (made == 0 && dirty_list_.empty()) return rounds;
       if (made != 0) ++rounds;
     }
-  }
-
-  // Distance from `from` to the triangles its star becomes when it collapses onto `to`.
-  double removed_distance(std::uint32_t from, std::uint32_t to) const {
-    double d = std::numeric_limits<double>::infinity();
-    for (std::uint32_t id : star_[from]) {
-      const Tri& t = tris_[id];
-      if (has(t, to)) continue;
-      std::array<Vec3, 3> p;
-      for (int k = 0; k < 3; ++k) p[k] = pos_[t.v[k] == from ? to : t.v[k]];
-      d = std::min(d, point_triangle_distance3d(pos_[from], p[0], p[1], p[2]));
-    }
-    return d;
   }
 
   struct Best {

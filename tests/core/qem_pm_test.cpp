@@ -409,8 +409,8 @@ TEST(BlockPmBuild, RejectsBadInput) {
 }
 
 // blobby_3cc: three components; elephant-with-holes: boundaries; the shark: holes; the dragon
-// (not under the sanitizers: every test process builds it again, and the other three cover
-// components, boundaries and holes there).
+// (not under the sanitizers, for the suite's time: the other three cover components, boundaries
+// and holes there).
 std::vector<std::string> cgal_meshes() {
   std::vector<std::string> m = {"blobby_3cc.off", "elephant-with-holes.off",
                                 "mech-holes-shark.off"};
