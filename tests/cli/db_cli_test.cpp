@@ -420,9 +420,9 @@ Measured measure_smrdb(std::vector<std::string> args, const std::string& out) {
 // ASan's shadow memory and quarantine make RSS meaningless: the RSS checks need a plain build.
 using smr::test::kSanitized;
 
-// --cache-mb 8 on a database over 20 times larger (lossless, raw pages): the same output as with
-// a cache that holds everything, a tiling output, a cache that never held more than 8 MiB, and a
-// peak RSS within the budget: what an idle smrdb process maps (its libraries) + 8 MiB + the
+// --cache-mb 4 on a database over 20 times larger (lossless, raw pages): the same output as with
+// a cache that holds everything, a tiling output, a cache that never held more than 4 MiB, and a
+// peak RSS within the budget: what an idle smrdb process maps (its libraries) + 4 MiB + the
 // output + 32 MiB.
 TEST_F(DbCli, ExtractionStaysWithinCacheMb) {
   if (kSanitized) {
@@ -430,18 +430,18 @@ TEST_F(DbCli, ExtractionStaysWithinCacheMb) {
                     "page_cache_test";
   }
   const std::string dem = path("big.npy");
-  ASSERT_EQ(smrdb("synth --size 881 -q -o " + dem).code, 0);
+  ASSERT_EQ(smrdb("synth --size 641 -q -o " + dem).code, 0);
   const std::string big = path("big.smrdb");
   ASSERT_EQ(smrdb("ingest " + dem + " --max-error 0 --codec raw -q -o " + big).code, 0);
-  ASSERT_GE(fs::file_size(big), 20u * (8u << 20)) << "the database must be at least 20x the budget";
-  const std::vector<std::string> rcf = {"--eye",         "100,-300,2500", "--target", "440,440,400",
+  ASSERT_GE(fs::file_size(big), 20u * (4u << 20)) << "the database must be at least 20x the budget";
+  const std::vector<std::string> rcf = {"--eye",         "100,-300,2500", "--target", "320,320,400",
                                         "--pixel-error", "0.5",           "--json",   "-q"};
   const auto run = [&](const char* cache_mb, const std::string& obj, const std::string& out) {
     std::vector<std::string> args = {"extract", big, "--cache-mb", cache_mb, "--verify", "-o", obj};
     args.insert(args.end(), rcf.begin(), rcf.end());
     return measure_smrdb(args, out);
   };
-  const Measured small = run("8", path("small.obj"), path("small.json"));
+  const Measured small = run("4", path("small.obj"), path("small.json"));
   ASSERT_EQ(small.code, 0) << read_file(path("small.json"));
   const Measured large = run("512", path("large.obj"), path("large.json"));
   ASSERT_EQ(large.code, 0) << read_file(path("large.json"));
@@ -450,9 +450,9 @@ TEST_F(DbCli, ExtractionStaysWithinCacheMb) {
   EXPECT_EQ(read_file(path("small.obj")), read_file(path("large.obj")));
   const auto s = nlohmann::json::parse(read_file(path("small.json")));
   const auto l = nlohmann::json::parse(read_file(path("large.json")));
-  EXPECT_LE(s["io"]["cache_peak_bytes"].get<std::uint64_t>(), 8u << 20);
+  EXPECT_LE(s["io"]["cache_peak_bytes"].get<std::uint64_t>(), 4u << 20);
   EXPECT_GT(s["io"]["cache_evictions"].get<std::uint64_t>(), 0u);
-  EXPECT_GT(l["io"]["cache_peak_bytes"].get<std::uint64_t>(), 8u << 20);  // the budget mattered
+  EXPECT_GT(l["io"]["cache_peak_bytes"].get<std::uint64_t>(), 4u << 20);  // the budget mattered
   EXPECT_GT(s["io"]["pages_read"].get<std::uint64_t>(), l["io"]["pages_read"].get<std::uint64_t>());
   EXPECT_EQ(s["output"]["triangles"], l["output"]["triangles"]);
   const auto triangles = s["output"]["triangles"].get<std::uint64_t>();
@@ -460,9 +460,9 @@ TEST_F(DbCli, ExtractionStaysWithinCacheMb) {
   // The output in memory: the extraction's triangle list and fans, the mesh and its id map,
   // generously 200 bytes per triangle.
   const double output_mib = double(triangles) * 200.0 / double(1 << 20);
-  const double budget_mib = double(idle.max_rss_kib) / 1024.0 + 8.0 + output_mib + 32.0;
+  const double budget_mib = double(idle.max_rss_kib) / 1024.0 + 4.0 + output_mib + 32.0;
   std::printf(
-      "peak RSS %.1f MiB with --cache-mb 8 (idle process %.1f MiB, %llu triangles, budget "
+      "peak RSS %.1f MiB with --cache-mb 4 (idle process %.1f MiB, %llu triangles, budget "
       "%.1f MiB); %.1f MiB with --cache-mb 512; database %.1f MiB\n",
       double(small.max_rss_kib) / 1024.0, double(idle.max_rss_kib) / 1024.0,
       static_cast<unsigned long long>(triangles), budget_mib, double(large.max_rss_kib) / 1024.0,
@@ -648,14 +648,13 @@ TEST_F(DbCli, StreamedMeshIngestIsCompleteDeterministicAndRejectsBrokenFiles) {
 // bytes from a second run to another path, and kill -9 at moments spread over the ingest followed
 // by a re-run giving the complete database, byte for byte.
 TEST_F(DbCli, BlockIngestOfATiledGeoTiffIsDeterministicAndSurvivesKills) {
-  // A quarter of the samples under the sanitizers: still 4 block levels with 16-cell blocks.
-  const int s = kSanitized ? 2 : 1;
-  smr::Heightfield h = smr::make_fbm(256 / s + 1, 192 / s + 1, 11, 800.0);
+  // 129 x 97 samples: 4 block levels with 16-cell blocks (8 x 6 leaves, then 4 x 3, 2 x 2, 1).
+  smr::Heightfield h = smr::make_fbm(129, 97, 11, 800.0);
   h.valid.assign(h.z.size(), 1);
   for (int r = 0; r < h.height; ++r) {
     for (int c = 0; c < h.width; ++c) {
-      const int dc = c * s - 170, dr = r * s - 60;
-      if (dc * dc + dr * dr < 400) h.valid[h.index(c, r)] = 0;
+      const int dc = c - 85, dr = r - 30;
+      if (dc * dc + dr * dr < 100) h.valid[h.index(c, r)] = 0;
     }
   }
   const std::string tif = path("dem.tif");

@@ -6,7 +6,7 @@
 // last node, and a few payload bytes; and, in every page where it can occur, the damage that
 // crashed LMDB 0.9 itself before storage/lmdb_env.cpp checked pages ahead of it (a zero page
 // size, F_DUPDATA on a node of a plain table, a wrong mp_lower, a value running past the file).
-// Each damaged file is verified, walked with cursors and extracted from in a child process, so
+// Each damaged file is verified, walked with cursors and extracted from in a worker process, so
 // that a crash (SIGSEGV, SIGBUS, abort) or a hang is a test failure instead of the end of the
 // test. Every case either reports an smr::Error naming the file (exit code 1), or is harmless:
 // verify clean and every extraction equal to the undamaged one. Never "verify says OK" with a
@@ -14,6 +14,7 @@
 // missed.
 #include <gtest/gtest.h>
 
+#include <poll.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -26,6 +27,7 @@
 #include <fstream>
 #include <iterator>
 #include <map>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <string>
@@ -52,7 +54,7 @@ using Clock = std::chrono::steady_clock;
 
 constexpr std::size_t kPage = 4096;          // LMDB's page size on the platforms the suite runs on
 constexpr int kChildSeconds = 120;           // a child still running after this is a hang
-constexpr std::size_t kSanitizedStride = 7;  // the sweeps' sample under the sanitizers
+constexpr std::size_t kSanitizedStride = 5;  // the sweeps' sample under the sanitizers
 
 using test::read_file;
 using test::write_file;
@@ -263,69 +265,100 @@ void examine(const std::string& path, const SmallDb& clean, std::string& out) {
   }
 }
 
-struct Child {
+// The file `c` describes: the clean bytes with one bit flipped, or cut short.
+std::string damaged(const std::string& clean, const Case& c) {
+  std::string bytes = clean;
+  if (c.bit < 0) {
+    bytes.resize(c.offset);
+  } else {
+    bytes[c.offset] = static_cast<char>(bytes[c.offset] ^ (1 << c.bit));
+  }
+  return bytes;
+}
+
+void write_all(int fd, const std::string& s) {
+  for (std::size_t done = 0; done < s.size();) {
+    const ssize_t n = ::write(fd, s.data() + done, s.size() - done);
+    if (n > 0) {
+      done += static_cast<std::size_t>(n);
+    } else if (n < 0 && errno != EINTR) {
+      return;
+    }
+  }
+}
+
+// A worker process examines case after case: the parent writes a case's index to `to`; the
+// worker writes that damaged file to `path`, examines it and answers on `from`, ending with the
+// line "end". Forking once per worker rather than once per case keeps the sweep's cost in the
+// examination (a fork per case spent more time in copy-on-write page faults than in the test).
+// A worker that dies (a crash, a sanitizer's abort, the alarm of a hang) takes only its current
+// case with it: that case's outcome is the death, and the next case gets a new worker. A case
+// that corrupted memory without a crash could disturb the worker's later cases; that can only
+// add failures, and under the sanitizers the corruption itself is the failure.
+struct Worker {
   pid_t pid = -1;
-  int fd = -1;  // the read end of its pipe
+  int to = -1, from = -1;
+  std::string path;            // its damaged copy of the file
+  const Case* busy = nullptr;  // the case it is examining
+  std::string answer;          // its answer to that case so far
 };
 
-// Forks; the child examines `path`, writes its lines to a pipe and exits.
-Child start_child(const std::string& path, const SmallDb& clean) {
-  int fds[2];
-  if (::pipe(fds) != 0) throw std::runtime_error("pipe failed");
+[[noreturn]] void work(int in, int out, const std::vector<Case>& cases, const std::string& path,
+                       const SmallDb& clean) {
+  for (;;) {
+    std::size_t i = 0;
+    if (::read(in, &i, sizeof i) != static_cast<ssize_t>(sizeof i) || i >= cases.size()) {
+      ::_exit(0);  // no atexit handlers or static destructors: those belong to the parent
+    }
+    ::alarm(kChildSeconds);
+    std::string answer;
+    try {
+      write_file(path, damaged(clean.bytes, cases[i]));
+      examine(path, clean, answer);
+    } catch (const std::exception& e) {
+      answer += "problem\tan exception that is not an smr::Error: " + one_line(e.what()) + "\n";
+    } catch (...) {
+      answer += "problem\tan unknown exception\n";
+    }
+    answer += "end\t\n";
+    ::alarm(0);
+    write_all(out, answer);
+  }
+}
+
+void close_pipes(Worker& w) {
+  for (int* fd : {&w.to, &w.from}) {
+    if (*fd >= 0) ::close(*fd);
+    *fd = -1;
+  }
+}
+
+// Forks worker `w` (closing, in the child, every other worker's pipes, so that a worker's death
+// is seen as the end of its pipe).
+void start_worker(Worker& w, std::vector<Worker>& all, const std::vector<Case>& cases,
+                  const SmallDb& clean) {
+  int commands[2], answers[2];
+  if (::pipe(commands) != 0 || ::pipe(answers) != 0) throw std::runtime_error("pipe failed");
   std::fflush(nullptr);
   const pid_t pid = ::fork();
   if (pid < 0) throw std::runtime_error("fork failed");
   if (pid == 0) {
-    ::close(fds[0]);
-    ::alarm(kChildSeconds);
-    std::string out;
-    try {
-      examine(path, clean, out);
-    } catch (const std::exception& e) {
-      out += "problem\tan exception that is not an smr::Error: " + one_line(e.what()) + "\n";
-    } catch (...) {
-      out += "problem\tan unknown exception\n";
-    }
-    out += "end\t\n";
-    for (std::size_t done = 0; done < out.size();) {
-      const ssize_t n = ::write(fds[1], out.data() + done, out.size() - done);
-      if (n <= 0) break;
-      done += static_cast<std::size_t>(n);
-    }
-    ::_exit(0);  // no atexit handlers or static destructors: those belong to the parent
+    for (Worker& other : all) close_pipes(other);
+    ::close(commands[1]);
+    ::close(answers[0]);
+    work(commands[0], answers[1], cases, w.path, clean);
   }
-  ::close(fds[1]);
-  return {pid, fds[0]};
+  ::close(commands[0]);
+  ::close(answers[1]);
+  w.pid = pid;
+  w.to = commands[1];
+  w.from = answers[0];
 }
 
-Outcome finish_child(const Child& c) {
-  std::string text;
-  char buf[4096];
-  for (;;) {
-    const ssize_t n = ::read(c.fd, buf, sizeof buf);
-    if (n > 0) {
-      text.append(buf, static_cast<std::size_t>(n));
-    } else if (n == 0 || errno != EINTR) {
-      break;
-    }
-  }
-  ::close(c.fd);
-  int status = 0;
-  while (::waitpid(c.pid, &status, 0) < 0 && errno == EINTR) {
-  }
+// The outcome of a worker's complete answer.
+Outcome parse(const std::string& answer) {
   Outcome o;
-  if (WIFSIGNALED(status)) {
-    const int sig = WTERMSIG(status);
-    o.death = sig == SIGALRM ? "hung (no result after " + std::to_string(kChildSeconds) + " s)"
-                             : "killed by signal " + std::to_string(sig) + " (" +
-                                   std::string(strsignal(sig)) + ")";
-    return o;
-  }
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-    o.death = "exited with status " + std::to_string(WEXITSTATUS(status));
-    return o;
-  }
-  std::istringstream in(text);
+  std::istringstream in(answer);
   for (std::string l; std::getline(in, l);) {
     const std::size_t tab = l.find('\t');
     const std::string tag = l.substr(0, tab);
@@ -336,7 +369,40 @@ Outcome finish_child(const Child& c) {
     if (tag == "problem") o.problems.push_back(rest);
     if (tag == "end") o.finished = true;
   }
-  if (!o.finished) o.death = "ended without reporting";
+  return o;
+}
+
+// The outcome of a worker that ended in the middle of a case (reaped here).
+Outcome death(Worker& w) {
+  close_pipes(w);
+  int status = 0;
+  while (::waitpid(w.pid, &status, 0) < 0 && errno == EINTR) {
+  }
+  w.pid = -1;
+  Outcome o;
+  if (WIFSIGNALED(status)) {
+    const int sig = WTERMSIG(status);
+    o.death = sig == SIGALRM ? "hung (no result after " + std::to_string(kChildSeconds) + " s)"
+                             : "killed by signal " + std::to_string(sig) + " (" +
+                                   std::string(strsignal(sig)) + ")";
+  } else {
+    o.death = "exited with status " + std::to_string(WEXITSTATUS(status)) + " without reporting";
+  }
+  return o;
+}
+
+// Reads what worker `w` has to say; returns its outcome once the case is complete.
+std::optional<Outcome> hear(Worker& w) {
+  char buf[4096];
+  const ssize_t n = ::read(w.from, buf, sizeof buf);
+  if (n < 0 && errno == EINTR) return std::nullopt;
+  if (n <= 0) return death(w);
+  w.answer.append(buf, static_cast<std::size_t>(n));
+  if (w.answer.size() < 5 || w.answer.compare(w.answer.size() - 5, 5, "end\t\n") != 0) {
+    return std::nullopt;
+  }
+  Outcome o = parse(w.answer);
+  w.answer.clear();
   return o;
 }
 
@@ -381,11 +447,11 @@ void print_summary(const std::string& label, const std::map<std::string, Tally>&
   }
 }
 
-// Runs every case, as many children at a time as there are cores (up to four; each with its own
-// damaged copy of the file), judges each outcome and counts them, overall ("all") and per group.
+// Runs every case, in as many workers as there are cores (up to four; each with its own damaged
+// copy of the file), judges each outcome and counts them, overall ("all") and per group.
 std::map<std::string, Tally> sweep(const std::vector<Case>& all, const std::string& label) {
-  // Under the sanitizers a sample: every 7th case, so that each kind of damage still occurs and,
-  // 7 being prime to the 8 bytes of a field, every byte of a field somewhere.
+  // Under the sanitizers a sample: every 5th case, so that each kind of damage still occurs and,
+  // 5 being prime to the 8 bytes of a field, every byte of a field somewhere.
   std::vector<Case> cases;
   for (std::size_t i = 0; i < all.size(); ++i) {
     if (smr::test::in_sample(i, kSanitizedStride)) cases.push_back(all[i]);
@@ -394,20 +460,15 @@ std::map<std::string, Tally> sweep(const std::vector<Case>& all, const std::stri
   const SmallDb& clean = small_db();
   TempDir dir;
   const std::size_t slots = std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, 4);
-  std::vector<std::string> paths;
+  std::vector<Worker> workers(slots);
   for (std::size_t s = 0; s < slots; ++s) {
-    paths.push_back(dir.file("damaged" + std::to_string(s) + ".smrdb"));
+    workers[s].path = dir.file("damaged" + std::to_string(s) + ".smrdb");
   }
-  std::vector<Child> running(slots);
-  std::vector<const Case*> running_case(slots, nullptr);
   std::map<std::string, Tally> tally;
   std::size_t failing = 0;
 
-  auto collect = [&](std::size_t slot) {
-    const Case& c = *running_case[slot];
-    running_case[slot] = nullptr;
-    const Outcome o = finish_child(running[slot]);
-    const std::vector<std::string> failures = judge(c, o, paths[slot]);
+  auto count = [&](const Case& c, const Outcome& o, const std::string& path) {
+    const std::vector<std::string> failures = judge(c, o, path);
     const std::string first = !o.errors.empty()   ? o.errors.front()
                               : !o.faults.empty() ? o.faults.front()
                                                   : "";
@@ -434,28 +495,51 @@ std::map<std::string, Tally> sweep(const std::vector<Case>& all, const std::stri
     }
   };
 
+  // A worker that died is gone before the next case is sent, so a write to a closed pipe
+  // cannot happen; SIGPIPE is ignored all the same, as a kill from outside could race it.
+  struct sigaction ignore {
+  }, before{};
+  ignore.sa_handler = SIG_IGN;
+  ::sigaction(SIGPIPE, &ignore, &before);
   std::size_t next = 0, busy = 0;
   while (next < cases.size() || busy > 0) {
-    for (std::size_t s = 0; s < slots; ++s) {
-      if (running_case[s] != nullptr) {
-        collect(s);
-        --busy;
+    for (Worker& w : workers) {
+      if (w.busy != nullptr || next >= cases.size()) continue;
+      if (w.pid < 0) start_worker(w, workers, cases, clean);
+      const std::size_t i = next++;
+      if (::write(w.to, &i, sizeof i) != static_cast<ssize_t>(sizeof i)) {
+        throw std::runtime_error("cannot send a case to a worker");
       }
-      if (next < cases.size()) {
-        const Case& c = cases[next++];
-        std::string bytes = clean.bytes;
-        if (c.bit < 0) {
-          bytes.resize(c.offset);
-        } else {
-          bytes[c.offset] = static_cast<char>(bytes[c.offset] ^ (1 << c.bit));
-        }
-        write_file(paths[s], bytes);
-        running[s] = start_child(paths[s], clean);
-        running_case[s] = &c;
-        ++busy;
+      w.busy = &cases[i];
+      ++busy;
+    }
+    std::vector<pollfd> fds;
+    std::vector<Worker*> polled;
+    for (Worker& w : workers) {
+      if (w.busy == nullptr) continue;
+      fds.push_back({w.from, POLLIN, 0});
+      polled.push_back(&w);
+    }
+    if (::poll(fds.data(), fds.size(), -1) < 0 && errno != EINTR) {
+      throw std::runtime_error("poll failed");
+    }
+    for (std::size_t k = 0; k < fds.size(); ++k) {
+      if (fds[k].revents == 0) continue;
+      Worker& w = *polled[k];
+      if (const std::optional<Outcome> o = hear(w)) {
+        count(*w.busy, *o, w.path);
+        w.busy = nullptr;
+        --busy;
       }
     }
   }
+  for (Worker& w : workers) {
+    if (w.pid < 0) continue;
+    close_pipes(w);  // the end of its commands: the worker exits
+    while (::waitpid(w.pid, nullptr, 0) < 0 && errno == EINTR) {
+    }
+  }
+  ::sigaction(SIGPIPE, &before, nullptr);
   if (failing > 40) ADD_FAILURE() << label << ": " << failing - 40 << " more failing cases";
   print_summary(label, tally, start);
   return tally;
