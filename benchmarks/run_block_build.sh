@@ -2,7 +2,8 @@
 # The block builder (smrdb ingest --builder blocks, issue 5) against delatin and our in-core
 # greedy builder, on the same DEM in one run:
 #   1. a deterministic SIZE^2 fBm (default 8193^2 = 67 M samples, seed 1, range 1600 m), written
-#      as a tiled GeoTIFF (read by windows by the block builder) and as .npy (for delatin);
+#      as .npy (delatin's input) and, with INPUT=tif, also as a tiled GeoTIFF (DEFLATE); the block
+#      builder reads INPUT (default npy: the same file as delatin) by windows;
 #   2. `smrdb ingest --memory $MEMORY` (the block builder; peak RSS from /usr/bin/time) and,
 #      unless GREEDY=0,
 #      `smrdb ingest` (greedy, the DEM in memory), at max error = 0.1 % of the range;
@@ -13,7 +14,7 @@
 #      RSS, the block builder's phases, DAG height, rounds, ops, and the ratios.
 #
 # Environment: BUILD_DIR (build/release), WORK_DIR ($BUILD_DIR/bench-blocks), SIZE (8193),
-# SEED (1), RANGE (1600), MAX_ERROR_FRACTION (0.001), REPEAT (1), BLOCK_CELLS (256),
+# SEED (1), RANGE (1600), MAX_ERROR_FRACTION (0.001), REPEAT (1), BLOCK_CELLS (256), INPUT (npy),
 # MEMORY (256M), THREADS (0 = one per core), GREEDY (1), DELATIN (1), CHECK_BLOCKS (1), OUT
 # (results file).
 set -euo pipefail
@@ -33,6 +34,7 @@ MEMORY="${MEMORY:-256M}"
 THREADS="${THREADS:-0}"
 DELATIN="${DELATIN:-1}"
 CHECK_BLOCKS="${CHECK_BLOCKS:-1}"
+INPUT="${INPUT:-npy}"
 OUT="${OUT:-$here/results/block_build.json}"
 
 smrdb="$BUILD_DIR/tools/smrdb"
@@ -52,12 +54,20 @@ log() { echo "[$(date +%H:%M:%S)] $*" >&2; }
 max_error="$(awk -v r="$RANGE" -v f="$MAX_ERROR_FRACTION" 'BEGIN { printf "%.12g", r * f }')"
 tif="$WORK_DIR/fbm${SIZE}_seed${SEED}.tif"
 npy="$WORK_DIR/fbm${SIZE}_seed${SEED}.npy"
-[[ -f "$tif" ]] || { log "generating $tif"; "$smrdb" synth --size "$SIZE" --seed "$SEED" --range "$RANGE" -o "$tif" -q; }
+case "$INPUT" in
+  npy) input="$npy"; input_text=".npy (float32), the same file as delatin's" ;;
+  tif) input="$tif"; input_text="tiled GeoTIFF (256 x 256, DEFLATE) for smrdb, .npy for delatin" ;;
+  *) echo "INPUT must be npy or tif, got $INPUT" >&2; exit 1 ;;
+esac
+if [[ "$INPUT" == tif && ! -f "$tif" ]]; then
+  log "generating $tif"
+  "$smrdb" synth --size "$SIZE" --seed "$SEED" --range "$RANGE" -o "$tif" -q
+fi
 [[ -f "$npy" ]] || { log "generating $npy"; "$smrdb" synth --size "$SIZE" --seed "$SEED" --range "$RANGE" -o "$npy" -q; }
 
 # Runs smrdb with /usr/bin/time; writes $2.json (smrdb's --json) and $2.time ("rss_kb seconds").
 timed_ingest() {  # $1 = extra args, $2 = output prefix, $3 = database
-  /usr/bin/time -f "%M %e" -o "$2.time" "$smrdb" ingest "$tif" $1 --max-error "$max_error" \
+  /usr/bin/time -f "%M %e" -o "$2.time" "$smrdb" ingest "$input" $1 --max-error "$max_error" \
     -o "$3" --force -q --json >"$2.json"
 }
 
@@ -112,7 +122,7 @@ jq -n \
   --arg nproc "$(nproc)" --arg cpu "$cpu_model" --arg la0 "$loadavg_before" --arg la1 "$loadavg_after" \
   --argjson size "$SIZE" --argjson seed "$SEED" --argjson range "$RANGE" \
   --argjson max_error "$max_error" --argjson block_cells "$BLOCK_CELLS" \
-  --arg memory "$MEMORY" --arg threads "$THREADS" '
+  --arg memory "$MEMORY" --arg threads "$THREADS" --arg input_text "$input_text" '
   def median: sort | if length % 2 == 1 then .[length / 2 | floor] else (.[length / 2 - 1] + .[length / 2]) / 2 end;
   ($blocks[0]) as $b | ($greedy[0] | map(select(. != null))) as $g | ($delatin[0]) as $d |
   ($b | map(.report.crmr.build_seconds) | median) as $b_build |
@@ -123,7 +133,7 @@ jq -n \
     date: $date, commit: $commit, uncommitted_files: ($dirty | tonumber),
     machine: {nproc: ($nproc | tonumber), cpu_model: $cpu, loadavg_before: $la0, loadavg_after: $la1},
     dem: {generator: "smrdb synth --size \($size) --seed \($seed) --range \($range)",
-          samples: ($size * $size), file: "tiled GeoTIFF (256 x 256, DEFLATE) for smrdb, .npy for delatin"},
+          samples: ($size * $size), file: $input_text},
     max_error: $max_error, memory: $memory, threads: ($threads | tonumber),
     repeats: ($b | length),
     blocks: {block_cells: $block_cells,
@@ -140,10 +150,12 @@ jq -n \
                 peak_rss_mb: ($g | map(.rss_mb) | max), crmr: $g[0].report.crmr}
              else null end),
     delatin: {seconds: $d_s, seconds_all: ($d | map(.seconds)), rss_mb: ($d | map(.rss_mb) | max),
+              read_seconds: ($d | map(.read_seconds) | median),
               triangles: $d[0].triangles, error_check: $dcheck[0].error_check},
     ratios: {
       blocks_build_over_delatin: ($b_build / $d_s),
       blocks_ingest_over_delatin: ($b_wall / $d_s),
+      blocks_ingest_over_delatin_with_its_read: ($b_wall / ($d_s + ($d | map(.read_seconds) | median))),
       finest_triangles_blocks_over_delatin: ($b[0].report.crmr.finest_triangles / $d[0].triangles)
     },
     targets: {

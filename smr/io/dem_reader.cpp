@@ -46,7 +46,8 @@ Heightfield read_dem(const std::string& path) {
 
 std::unique_ptr<RasterWindows> open_dem(const std::string& path) {
   const std::string ext = lower_extension(path);
-  if (ext == ".npy" || ext == ".npz") return std::make_unique<OwnedWindows>(read_dem(path));
+  if (ext == ".npy") return open_npy(path);
+  if (ext == ".npz") return std::make_unique<OwnedWindows>(read_npz(path));
   return open_gdal_raster(path);
 }
 

@@ -36,9 +36,14 @@ Heightfield read_gdal_raster(const std::string& path);
 /// sample is no data is found only by the reader of the last window).
 std::unique_ptr<RasterWindows> open_gdal_raster(const std::string& path);
 
-/// read_dem's choice of reader, by windows: GDAL rasters are read window by window; .npy and
-/// .npz files are read whole (NumPy arrays are small) and served from memory.
+/// read_dem's choice of reader, by windows: GDAL rasters and .npy files are read window by window;
+/// .npz archives (whose members may be deflated) are read whole and served from memory.
 std::unique_ptr<RasterWindows> open_dem(const std::string& path);
+
+/// The same .npy opened for reading by windows: the header is read and checked here (shape,
+/// dtype, and a file size that fits them), and each window's samples are read and checked (NaN,
+/// infinities, integers that are not exact float32s, naming their index) when it is read.
+std::unique_ptr<RasterWindows> open_npy(const std::string& path);
 
 /// A NumPy .npy file holding one 2-D array (shape (rows, cols)); see smr/io/npy.h for the dtypes.
 /// A plain .npy has no georeferencing: x0 = y0 = 0, dx = dy = 1, and rows are taken as stored

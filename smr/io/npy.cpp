@@ -2,6 +2,9 @@
 // Everything read from the input is bounds-checked; every malformed thing throws kInvalidInput.
 #include "smr/io/npy.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <zlib.h>
 
 #include <algorithm>
@@ -14,8 +17,11 @@
 #include <filesystem>
 #include <limits>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string_view>
+#include <tuple>
+#include <utility>
 
 #include "smr/io/dem_reader.h"
 #include "smr/io/mesh_writer.h"
@@ -304,7 +310,8 @@ bool integer_fits_float(std::uint64_t magnitude) {
   return magnitude < (std::uint64_t{1} << 24);
 }
 
-Grid to_grid(const NpyArray& a, const std::string& what) {
+// The (rows, cols) of a 2-D array that fits a heightfield.
+std::pair<std::size_t, std::size_t> grid_shape(const NpyArray& a, const std::string& what) {
   if (a.shape.size() != 2) {
     throw_input("'" + what + "' has shape " + shape_text(a.shape) +
                 "; expected a 2-D array (rows, cols) of elevations");
@@ -318,74 +325,80 @@ Grid to_grid(const NpyArray& a, const std::string& what) {
     throw_input("'" + what + "' has shape " + shape_text(a.shape) +
                 ", too large for a heightfield");
   }
+  return {rows, cols};
+}
+
+// True when the elements are native float32s, which are copied as they are.
+bool native_float32(const NpyArray& a) {
+  return a.kind == NpyKind::kFloat && a.item_size == 4 &&
+         a.big_endian == (std::endian::native == std::endian::big);
+}
+
+// Checks that float32 samples copied as they are, elevation [r][c] at z[(r - r0) * w + c - c0]
+// for the rectangle [r0, r0 + h) x [c0, c0 + w), are finite.
+void check_finite(std::span<const float> z, std::size_t r0, std::size_t c0, std::size_t w,
+                  const std::string& what) {
+  for (std::size_t i = 0; i < z.size(); ++i) {
+    if (!std::isfinite(z[i])) {
+      bad_sample(what, r0 + i / w, c0 + i % w, std::isnan(z[i]) ? "NaN" : "an infinite value");
+    }
+  }
+}
+
+// The element at `p` of array `a` as a float32 elevation; (r, c) name it in errors.
+float element(const NpyArray& a, const std::uint8_t* p, const std::string& what, std::size_t r,
+              std::size_t c) {
+  const int n = a.item_size;
+  const std::uint64_t bits = a.big_endian ? load_be(p, n) : load_le(p, n);
+  switch (a.kind) {
+    case NpyKind::kFloat: {
+      const double v = n == 4 ? double(std::bit_cast<float>(static_cast<std::uint32_t>(bits)))
+                              : std::bit_cast<double>(bits);
+      if (std::isnan(v)) bad_sample(what, r, c, "NaN");
+      if (std::isinf(v)) bad_sample(what, r, c, "an infinite value");
+      if (std::fabs(v) > double(std::numeric_limits<float>::max())) {
+        bad_sample(what, r, c, "a value outside the float32 range");
+      }
+      return static_cast<float>(v);
+    }
+    case NpyKind::kBool:
+      return bits != 0 ? 1.0f : 0.0f;
+    case NpyKind::kUInt:
+      if (!integer_fits_float(bits)) {
+        bad_sample(what, r, c, "the integer " + std::to_string(bits) + ", not exactly a float32");
+      }
+      return static_cast<float>(bits);
+    case NpyKind::kInt: {
+      const int shift = 64 - 8 * n;
+      const std::int64_t v = static_cast<std::int64_t>(bits << shift) >> shift;  // sign-extend
+      const std::uint64_t magnitude =
+          v < 0 ? static_cast<std::uint64_t>(-(v + 1)) + 1 : static_cast<std::uint64_t>(v);
+      if (!integer_fits_float(magnitude)) {
+        bad_sample(what, r, c, "the integer " + std::to_string(v) + ", not exactly a float32");
+      }
+      return static_cast<float>(v);
+    }
+  }
+  return 0.0f;  // unreachable: every kind is handled above
+}
+
+Grid to_grid(const NpyArray& a, const std::string& what) {
+  const auto [rows, cols] = grid_shape(a, what);
   Grid g;
   g.width = static_cast<int>(cols);
   g.height = static_cast<int>(rows);
   g.z.resize(rows * cols);
-  const auto storage_index = [&](std::size_t r, std::size_t c) {
-    return a.fortran_order ? c * rows + r : r * cols + c;
-  };
-  const int n = a.item_size;
   const std::uint8_t* base = a.data.data();
-  const auto bits = [&](std::size_t i) {
-    return a.big_endian ? load_be(base + i * static_cast<std::size_t>(n), n)
-                        : load_le(base + i * static_cast<std::size_t>(n), n);
-  };
-
-  if (a.kind == NpyKind::kFloat && n == 4 && !a.fortran_order &&
-      a.big_endian == (std::endian::native == std::endian::big)) {
+  if (native_float32(a) && !a.fortran_order) {
     std::memcpy(g.z.data(), base, g.z.size() * sizeof(float));  // the common case
-    for (std::size_t i = 0; i < g.z.size(); ++i) {
-      if (!std::isfinite(g.z[i])) {
-        bad_sample(what, i / cols, i % cols, std::isnan(g.z[i]) ? "NaN" : "an infinite value");
-      }
-    }
+    check_finite(g.z, 0, 0, cols, what);
     return g;
   }
+  const auto n = static_cast<std::size_t>(a.item_size);
   for (std::size_t r = 0; r < rows; ++r) {
     for (std::size_t c = 0; c < cols; ++c) {
-      const std::size_t i = storage_index(r, c);
-      float& out = g.z[r * cols + c];
-      switch (a.kind) {
-        case NpyKind::kFloat: {
-          double v;
-          if (n == 4) {
-            v = std::bit_cast<float>(static_cast<std::uint32_t>(bits(i)));
-          } else {
-            v = std::bit_cast<double>(bits(i));
-          }
-          if (std::isnan(v)) bad_sample(what, r, c, "NaN");
-          if (std::isinf(v)) bad_sample(what, r, c, "an infinite value");
-          if (std::fabs(v) > double(std::numeric_limits<float>::max())) {
-            bad_sample(what, r, c, "a value outside the float32 range");
-          }
-          out = static_cast<float>(v);
-          break;
-        }
-        case NpyKind::kBool:
-          out = bits(i) != 0 ? 1.0f : 0.0f;
-          break;
-        case NpyKind::kUInt: {
-          const std::uint64_t v = bits(i);
-          if (!integer_fits_float(v)) {
-            bad_sample(what, r, c, "the integer " + std::to_string(v) + ", not exactly a float32");
-          }
-          out = static_cast<float>(v);
-          break;
-        }
-        case NpyKind::kInt: {
-          const std::uint64_t u = bits(i);
-          const int shift = 64 - 8 * n;
-          const std::int64_t v = static_cast<std::int64_t>(u << shift) >> shift;  // sign-extend
-          const std::uint64_t magnitude =
-              v < 0 ? static_cast<std::uint64_t>(-(v + 1)) + 1 : static_cast<std::uint64_t>(v);
-          if (!integer_fits_float(magnitude)) {
-            bad_sample(what, r, c, "the integer " + std::to_string(v) + ", not exactly a float32");
-          }
-          out = static_cast<float>(v);
-          break;
-        }
-      }
+      const std::size_t i = a.fortran_order ? c * rows + r : r * cols + c;
+      g.z[r * cols + c] = element(a, base + i * n, what, r, c);
     }
   }
   return g;
@@ -590,7 +603,12 @@ double NpyArray::value(std::size_t i) const {
 // ---------------------------------------------------------------------------------------------
 // parse_npy
 
-NpyArray parse_npy(std::span<const std::uint8_t> bytes, const std::string& what) {
+namespace {
+
+// The array a .npy describes (its `data` left empty) and the offset of its data, from the first
+// bytes of the file: `bytes` must hold at least the preamble and the header.
+std::pair<NpyArray, std::size_t> parse_npy_header(std::span<const std::uint8_t> bytes,
+                                                  const std::string& what) {
   static constexpr std::uint8_t kMagic[6] = {0x93, 'N', 'U', 'M', 'P', 'Y'};
   if (bytes.size() < 10) {
     throw_input("'" + what + "' is not a .npy array: " + std::to_string(bytes.size()) +
@@ -630,15 +648,30 @@ NpyArray parse_npy(std::span<const std::uint8_t> bytes, const std::string& what)
     }
     count *= d;
   }
-  const std::size_t data_start = header_start + header_len;
-  const std::size_t expected = count * static_cast<std::size_t>(a.item_size);
-  const std::size_t have = bytes.size() - data_start;
+  return {a, header_start + header_len};
+}
+
+// The byte size of the array's data (checked against overflow by parse_npy_header).
+std::size_t data_bytes(const NpyArray& a) {
+  return a.count() * static_cast<std::size_t>(a.item_size);
+}
+
+// Checks that the `have` bytes after a .npy's header are exactly the array's data.
+void check_data_size(const NpyArray& a, std::size_t have, const std::string& what) {
+  const std::size_t expected = data_bytes(a);
   if (have != expected) {
     throw_input("'" + what + "' has " + std::to_string(have) + " bytes of array data; expected " +
                 std::to_string(expected) + " for shape " + shape_text(a.shape) + " of " +
                 a.dtype() + (have < expected ? " (the file is truncated)" : ""));
   }
-  a.data = bytes.subspan(data_start, expected);
+}
+
+}  // namespace
+
+NpyArray parse_npy(std::span<const std::uint8_t> bytes, const std::string& what) {
+  auto [a, data_start] = parse_npy_header(bytes, what);
+  check_data_size(a, bytes.size() - data_start, what);
+  a.data = bytes.subspan(data_start, data_bytes(a));
   return a;
 }
 
@@ -884,6 +917,132 @@ Heightfield heightfield_from_npz(std::span<const std::uint8_t> bytes, const std:
 Heightfield read_npy(const std::string& path) {
   const std::vector<std::uint8_t> bytes = read_file_bytes(path);
   return heightfield_from_npy(bytes, path);
+}
+
+namespace {
+
+// A plain .npy read by windows: each window's rows (or, in Fortran order, columns) are read with
+// pread, converted and checked like read_npy's whole array, so no more than a window of the file
+// is ever in memory. pread keeps reads from several threads independent.
+class NpyWindows final : public RasterWindows {
+ public:
+  explicit NpyWindows(const std::string& path) : path_(path) {
+    std::error_code ec;
+    const auto status = std::filesystem::status(path, ec);
+    if (!std::filesystem::exists(status)) throw_io("cannot open '" + path + "': no such file");
+    if (std::filesystem::is_directory(status)) {
+      throw_input("cannot read '" + path + "': it is a directory, expected a file");
+    }
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) throw_io("cannot open '" + path + "': " + std::strerror(errno));
+    try {
+      open_header();
+    } catch (...) {
+      ::close(fd_);
+      throw;
+    }
+  }
+  ~NpyWindows() override { ::close(fd_); }
+  NpyWindows(const NpyWindows&) = delete;
+  NpyWindows& operator=(const NpyWindows&) = delete;
+
+  int width() const override { return static_cast<int>(cols_); }
+  int height() const override { return static_cast<int>(rows_); }
+  const Georef& georef() const override { return georef_; }  // a plain .npy has none
+  const std::string& source() const override { return path_; }
+
+  Heightfield read(int col0, int row0, int w, int h) const override {
+    if (col0 < 0 || row0 < 0 || w <= 0 || h <= 0 || col0 > width() - w || row0 > height() - h) {
+      throw_input("window " + std::to_string(w) + " x " + std::to_string(h) + " at (" +
+                  std::to_string(col0) + ", " + std::to_string(row0) + ") is outside '" + path_ +
+                  "' (" + std::to_string(cols_) + " x " + std::to_string(rows_) + ")");
+    }
+    Heightfield out = window_header(georef_, path_, col0, row0, w, h);
+    const auto c0 = static_cast<std::size_t>(col0), r0 = static_cast<std::size_t>(row0);
+    const auto ww = static_cast<std::size_t>(w), hh = static_cast<std::size_t>(h);
+    out.z.resize(ww * hh);
+    const auto n = static_cast<std::size_t>(array_.item_size);
+    if (!array_.fortran_order) {  // row by row
+      std::vector<std::uint8_t> row(native_float32(array_) ? 0 : ww * n);
+      for (std::size_t r = 0; r < hh; ++r) {
+        const std::size_t at = ((r0 + r) * cols_ + c0) * n;
+        float* z = out.z.data() + r * ww;
+        if (row.empty()) {
+          read_exactly(reinterpret_cast<std::uint8_t*>(z), ww * n, at);
+          check_finite({z, ww}, r0 + r, c0, ww, path_);
+          continue;
+        }
+        read_exactly(row.data(), row.size(), at);
+        for (std::size_t c = 0; c < ww; ++c) {
+          z[c] = element(array_, row.data() + c * n, path_, r0 + r, c0 + c);
+        }
+      }
+    } else {  // column by column
+      std::vector<std::uint8_t> column(hh * n);
+      for (std::size_t c = 0; c < ww; ++c) {
+        read_exactly(column.data(), column.size(), ((c0 + c) * rows_ + r0) * n);
+        for (std::size_t r = 0; r < hh; ++r) {
+          out.z[r * ww + c] = element(array_, column.data() + r * n, path_, r0 + r, c0 + c);
+        }
+      }
+    }
+    return out;
+  }
+
+ private:
+  void open_header() {
+    struct stat st {};
+    if (::fstat(fd_, &st) != 0) throw_io("cannot stat '" + path_ + "': " + std::strerror(errno));
+    file_size_ = static_cast<std::uint64_t>(st.st_size);
+    // The preamble, then the header whose length it gives (parse_npy_header reports a header
+    // longer than the file).
+    std::vector<std::uint8_t> head(std::min<std::uint64_t>(12, file_size_));
+    read_at(head.data(), head.size(), 0);
+    std::size_t need = head.size();
+    if (head.size() >= 10 && head[6] == 1) {
+      need = 10 + static_cast<std::size_t>(load_le(&head[8], 2));
+    } else if (head.size() >= 12 && (head[6] == 2 || head[6] == 3)) {
+      need = 12 + static_cast<std::size_t>(load_le(&head[8], 4));
+    }
+    head.resize(std::min<std::uint64_t>(need, file_size_));
+    read_at(head.data(), head.size(), 0);
+    auto [a, data_start] = parse_npy_header(head, path_);
+    array_ = std::move(a);
+    std::tie(rows_, cols_) = grid_shape(array_, path_);
+    check_data_size(array_, file_size_ - data_start, path_);
+    data_start_ = data_start;
+  }
+
+  // Reads n bytes at byte `at` of the file; the file ending first is an error.
+  void read_at(std::uint8_t* out, std::size_t n, std::uint64_t at) const {
+    for (std::size_t done = 0; done < n;) {
+      const ssize_t got = ::pread(fd_, out + done, n - done, static_cast<off_t>(at + done));
+      if (got < 0 && errno == EINTR) continue;
+      if (got < 0) throw_io("cannot read '" + path_ + "': " + std::strerror(errno));
+      if (got == 0) {
+        throw_io("'" + path_ + "' ended at byte " + std::to_string(at + done) +
+                 " while it was read (was it truncated meanwhile?)");
+      }
+      done += static_cast<std::size_t>(got);
+    }
+  }
+
+  void read_exactly(std::uint8_t* out, std::size_t n, std::uint64_t data_offset) const {
+    read_at(out, n, data_start_ + data_offset);
+  }
+
+  std::string path_;
+  int fd_ = -1;
+  std::uint64_t file_size_ = 0;
+  NpyArray array_;
+  std::size_t rows_ = 0, cols_ = 0, data_start_ = 0;
+  Georef georef_;
+};
+
+}  // namespace
+
+std::unique_ptr<RasterWindows> open_npy(const std::string& path) {
+  return std::make_unique<NpyWindows>(path);
 }
 
 Heightfield read_npz(const std::string& path) {

@@ -718,6 +718,20 @@ TEST_F(DbCli, MemoryBudgetChoosesTheBlockBuilderAndIsReported) {
   EXPECT_GT(j.at("blocks").at("temp_bytes").get<std::uint64_t>(), 0u);
   EXPECT_GE(j.at("database").at("dag_depth").get<std::uint64_t>(), 3u);
   EXPECT_TRUE(smr::verify_database(db, nullptr).ok());
+  // The same DEM as .npy is read by the same windows (the whole raster only where the block
+  // builder's top levels ask for it) and gives the same CRMR.
+  const std::string npy = path("dem.npy");
+  smr::write_npy(npy, h);
+  const CliRun n = smrdb("ingest " + npy + " --memory 64M --block-cells 16 --max-error 0.5 -q " +
+                         "--json -o " + path("n.smrdb"));
+  ASSERT_EQ(n.code, 0) << n.out;
+  const nlohmann::json jn = nlohmann::json::parse(n.out.substr(n.out.find('{')));
+  EXPECT_EQ(jn.at("input").at("largest_window_samples"),
+            j.at("input").at("largest_window_samples"));
+  for (const char* key :
+       {"ops", "vertices", "finest_triangles", "fragment_triangles", "err_final"}) {
+    EXPECT_EQ(jn.at("crmr").at(key), j.at("crmr").at(key)) << key;
+  }
   // 1.5G reads as a fraction of a gibibyte and is recorded as bytes.
   ASSERT_EQ(
       smrdb("ingest " + tif + " --memory 1.5G --block-cells 16 -q -o " + path("g.smrdb")).code, 0);

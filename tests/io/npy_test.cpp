@@ -6,10 +6,12 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <memory>
 
 #include <gtest/gtest.h>
 
@@ -505,6 +507,124 @@ TEST(Npy, MutatedBytesNeverCrash) {
       (void)heightfield_from_npy(b, "mutated.npy");
     } catch (const Error&) {
     }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// .npy by windows (open_npy, used by the out-of-core builder)
+
+/// Every window in `windows` read through open_npy(path) equals the same window of the whole
+/// array read by read_npy.
+void expect_windows_match(const std::string& path, const std::vector<std::array<int, 4>>& windows) {
+  const Heightfield whole = read_npy(path);
+  const HeightfieldWindows reference(whole);
+  const std::unique_ptr<RasterWindows> w = open_npy(path);
+  ASSERT_EQ(w->width(), whole.width);
+  ASSERT_EQ(w->height(), whole.height);
+  EXPECT_EQ(w->georef(), whole.georef);
+  EXPECT_EQ(w->source(), path);
+  for (const auto& [c0, r0, ww, hh] : windows) {
+    SCOPED_TRACE(std::to_string(ww) + "x" + std::to_string(hh) + " at " + std::to_string(c0) + "," +
+                 std::to_string(r0));
+    const Heightfield got = w->read(c0, r0, ww, hh), want = reference.read(c0, r0, ww, hh);
+    EXPECT_EQ(got.z, want.z);
+    EXPECT_TRUE(got.valid.empty());
+    EXPECT_EQ(got.georef, want.georef);
+    EXPECT_EQ(got.width, ww);
+    EXPECT_EQ(got.height, hh);
+  }
+}
+
+TEST(NpyWindows, EveryDtypeOrderAndVersionReadsTheSameSamplesAsTheWholeArray) {
+  TempDir dir;
+  const std::size_t rows = 23, cols = 37;
+  std::vector<double> values(rows * cols);
+  for (std::size_t i = 0; i < values.size(); ++i) values[i] = double((i * 7919) % 251) - 100.0;
+  // Windows: whole, one sample, a row, a column, corners and interior pieces.
+  std::vector<std::array<int, 4>> windows = {{0, 0, 37, 23}, {5, 7, 1, 1},   {0, 22, 37, 1},
+                                             {36, 0, 1, 23}, {30, 15, 7, 8}, {0, 0, 16, 16}};
+  for (int c0 = 0; c0 < 37; c0 += 9) {
+    for (int r0 = 0; r0 < 23; r0 += 6)
+      windows.push_back({c0, r0, std::min(10, 37 - c0), std::min(5, 23 - r0)});
+  }
+  int k = 0;
+  for (const std::string descr : {"<f4", ">f4", "<f8", ">i2", "<u2", "|i1", "<i8"}) {
+    for (const bool fortran : {false, true}) {
+      SCOPED_TRACE(descr + (fortran ? " Fortran order" : " C order"));
+      std::vector<double> stored = values;
+      if (fortran) {
+        for (std::size_t r = 0; r < rows; ++r)
+          for (std::size_t c = 0; c < cols; ++c) stored[c * rows + r] = values[r * cols + c];
+      }
+      if (descr[1] == 'u') {
+        for (double& v : stored) v += 100.0;
+      }
+      const std::string path = dir.file(descr.substr(1) + "_" + std::to_string(k++) + ".npy");
+      test::write_bytes(path,
+                        make_npy(descr, fortran, "(23, 37)", encode(stored, descr), 1 + k % 3));
+      expect_windows_match(path, windows);
+    }
+  }
+}
+
+TEST(NpyWindows, ErrorsNameTheFileAndOnlyTheWindowWithABadSampleFails) {
+  TempDir dir;
+  const std::string missing = dir.file("missing.npy");
+  expect_error([&] { (void)open_npy(missing); }, ErrorKind::kIo, {missing, "no such file"});
+  expect_error([&] { (void)open_dem(missing); }, ErrorKind::kIo, {missing});
+  expect_error([&] { (void)open_npy(dir.path().string()); }, ErrorKind::kInvalidInput,
+               {"directory"});
+  const std::string text = dir.file("text.npy");
+  test::write_text(text, "this is not an array\n");
+  expect_error([&] { (void)open_npy(text); }, ErrorKind::kInvalidInput, {text, "not a .npy"});
+  const std::string cube = dir.file("cube.npy");
+  test::write_bytes(cube,
+                    make_npy("<f4", false, "(2, 2, 2)", encode(std::vector<double>(8, 1), "<f4")));
+  expect_error([&] { (void)open_npy(cube); }, ErrorKind::kInvalidInput, {cube, "2-D"});
+  const std::string truncated = dir.file("truncated.npy");
+  Bytes t = small_elevation_npy();
+  t.resize(t.size() - 3);
+  test::write_bytes(truncated, t);
+  expect_error([&] { (void)open_dem(truncated); }, ErrorKind::kInvalidInput,
+               {truncated, "truncated"});
+
+  // A NaN at [2, 3] of a 4 x 5 array: windows without it read; the window with it names it.
+  std::vector<double> v(20, 1.0);
+  v[2 * 5 + 3] = std::numeric_limits<double>::quiet_NaN();
+  for (const char* descr : {"<f4", ">f8"}) {
+    const std::string path = dir.file(std::string("nan") + (descr[0] == '<' ? "4" : "8") + ".npy");
+    test::write_bytes(path, make_npy(descr, false, "(4, 5)", encode(v, descr)));
+    const std::unique_ptr<RasterWindows> w = open_npy(path);
+    EXPECT_NO_THROW((void)w->read(0, 0, 5, 2));
+    EXPECT_NO_THROW((void)w->read(0, 0, 3, 4));
+    expect_error([&] { (void)w->read(1, 1, 4, 3); }, ErrorKind::kInvalidInput,
+                 {path, "NaN", "[2, 3]"});
+    expect_error([&] { (void)w->read(2, 0, 4, 1); }, ErrorKind::kInvalidInput, {path, "outside"});
+  }
+
+  // The file cut short after it was opened: the read that reaches the missing bytes says so.
+  const std::string cut = dir.file("cut.npy");
+  const Bytes full =
+      make_npy("<f4", false, "(64, 64)", encode(std::vector<double>(4096, 2), "<f4"));
+  test::write_bytes(cut, full);
+  const std::unique_ptr<RasterWindows> w = open_npy(cut);
+  test::write_bytes(cut, Bytes(full.begin(), full.begin() + 2048));
+  expect_error([&] { (void)w->read(0, 32, 64, 32); }, ErrorKind::kIo, {cut, "ended"});
+}
+
+TEST(NpyWindows, EveryTruncatedPrefixIsAnError) {
+  TempDir dir;
+  const std::string path = dir.file("prefix.npy");
+  const Bytes full = make_npy(">i2", true, "(3, 2)", encode({1, 2, 3, 4, 5, 6}, ">i2"), 2);
+  for (std::size_t n = 0; n < full.size(); ++n) {
+    test::write_bytes(path, Bytes(full.begin(), full.begin() + static_cast<long>(n)));
+    EXPECT_THROW(
+        {
+          const std::unique_ptr<RasterWindows> w = open_npy(path);
+          (void)w->read(0, 0, w->width(), w->height());
+        },
+        Error)
+        << "prefix " << n;
   }
 }
 
