@@ -158,9 +158,13 @@ std::vector<int> simplify_line(const std::vector<float>& z, const std::vector<st
 /// source again. Tile (tx, ty) holds the leaf block (tx, ty)'s whole window: columns
 /// [tx * B, min(tx * B + B, W - 1)], rows likewise, so its closing column and row (shared with
 /// the next tiles) are there too and a window inside the blocks stored so far reads no other.
+/// A source that reads in place from several threads at once (RasterWindows::random_access: a
+/// .npy, memory) is not copied: `put` only records that the tile is stored, and the tiles are
+/// read from the source itself, with the same samples and the same "not stored yet" rule.
 class SampleSpill {
  public:
-  SampleSpill(const std::string& dir, int width, int height, int b, int nx, int ny)
+  SampleSpill(const std::string& dir, int width, int height, int b, int nx, int ny,
+              const RasterWindows* direct)
       : W_(width),
         H_(height),
         B_(b),
@@ -168,10 +172,17 @@ class SampleSpill {
         ny_(ny),
         stride_(std::uint64_t(b + 1) * std::uint64_t(b + 1)),
         stored_(std::size_t(nx) * std::size_t(ny), 0),
-        file_(dir, std::uint64_t(nx) * std::uint64_t(ny) * stride_ * 5) {}
+        direct_(direct),
+        file_(direct != nullptr ? nullptr
+                                : std::make_unique<storage::TempFile>(
+                                      dir, std::uint64_t(nx) * std::uint64_t(ny) * stride_ * 5)) {}
 
   /// Stores tile (tx, ty) from window w, whose sample (0, 0) is grid (c0, r0).
   void put(int tx, int ty, const Heightfield& w, int c0, int r0) {
+    if (direct_ != nullptr) {
+      stored_[std::size_t(ty) * std::size_t(nx_) + std::size_t(tx)] = 1;
+      return;
+    }
     const auto [cw, rh] = extent(tx, ty);
     // Buffers kept across tiles (one caller, the reading thread): no fresh pages per tile.
     std::vector<float>& z = put_z_;
@@ -185,8 +196,8 @@ class SampleSpill {
       if (!w.valid.empty()) std::memcpy(v.data() + to, w.valid.data() + from, std::size_t(cw));
     }
     const std::uint64_t at = offset(tx, ty);
-    file_.write(at, z.data(), z.size() * sizeof(float));
-    file_.write(at + stride_ * sizeof(float), v.data(), v.size());
+    file_->write(at, z.data(), z.size() * sizeof(float));
+    file_->write(at + stride_ * sizeof(float), v.data(), v.size());
     stored_[std::size_t(ty) * std::size_t(nx_) + std::size_t(tx)] = 1;
   }
 
@@ -267,23 +278,14 @@ class SampleSpill {
             std::memcpy(out.valid.data() + o, tile.v.data() + first + r * pitch, n);
           }
         } else {
-          // Whole rows in one read when the window spans the tile's width, else row by row,
-          // through buffers each thread keeps (no fresh pages to fault in per window).
+          // Through buffers each thread keeps (no fresh pages to fault in per window).
           thread_local std::vector<float> z;
           thread_local std::vector<std::uint8_t> v;
-          const bool whole_rows = c_lo == tx * B_ && c_hi == tx * B_ + cw;
           if (z.size() < n * rows) {
             z.resize(n * rows);
             v.resize(n * rows);
           }
-          const std::uint64_t at = offset(tx, ty);
-          for (std::size_t r = 0; r < rows; r += whole_rows ? rows : 1) {
-            const std::uint64_t first = std::uint64_t(r_lo - ty * B_ + int(r)) * std::uint64_t(cw) +
-                                        std::uint64_t(c_lo - tx * B_);
-            const std::size_t count = whole_rows ? n * rows : n;
-            file_.read(at + first * sizeof(float), z.data() + r * n, count * sizeof(float));
-            file_.read(at + stride_ * sizeof(float) + first, v.data() + r * n, count);
-          }
+          load(tx, ty, c_lo, r_lo, n, rows, z.data(), v.data());
           for (std::size_t r = 0; r < rows; ++r) {
             const std::size_t o = out.index(c_lo - col0, r_lo - row0 + int(r));
             std::memcpy(out.z.data() + o, z.data() + r * n, n * sizeof(float));
@@ -296,7 +298,7 @@ class SampleSpill {
         std::find(out.valid.begin(), out.valid.end(), std::uint8_t{0}) != out.valid.end();
     if (!any_invalid) out.valid.clear();
   }
-  std::uint64_t bytes() const { return file_.bytes_written(); }
+  std::uint64_t bytes() const { return file_ ? file_->bytes_written() : 0; }
 
  private:
   bool stored(int tx, int ty) const {
@@ -313,9 +315,35 @@ class SampleSpill {
       v = tile.v[i];
       return;
     }
+    load(tx, ty, c, r, 1, 1, &z, &v);
+  }
+
+  /// Samples [c0, c0 + n) x [r0, r0 + rows) of stored tile (tx, ty), which holds them, into z and
+  /// v (n to a row).
+  void load(int tx, int ty, int c0, int r0, std::size_t n, std::size_t rows, float* z,
+            std::uint8_t* v) const {
+    if (direct_ != nullptr) {
+      thread_local Heightfield window;  // its pages stay with the thread
+      direct_->read_into(window, c0, r0, int(n), int(rows));
+      std::memcpy(z, window.z.data(), n * rows * sizeof(float));
+      if (window.valid.empty()) {
+        std::fill_n(v, n * rows, std::uint8_t{1});
+      } else {
+        std::memcpy(v, window.valid.data(), n * rows);
+      }
+      return;
+    }
+    const int cw = extent(tx, ty).first;
+    // Whole rows in one read when the piece spans the tile's width, else row by row.
+    const bool whole_rows = c0 == tx * B_ && n == std::size_t(cw);
     const std::uint64_t at = offset(tx, ty);
-    file_.read(at + i * sizeof(float), &z, sizeof z);
-    file_.read(at + stride_ * sizeof(float) + i, &v, 1);
+    for (std::size_t r = 0; r < rows; r += whole_rows ? rows : 1) {
+      const std::uint64_t first =
+          std::uint64_t(r0 - ty * B_ + int(r)) * std::uint64_t(cw) + std::uint64_t(c0 - tx * B_);
+      const std::size_t count = whole_rows ? n * rows : n;
+      file_->read(at + first * sizeof(float), z + r * n, count * sizeof(float));
+      file_->read(at + stride_ * sizeof(float) + first, v + r * n, count);
+    }
   }
 
   const Cache::Tile& cached(Cache& cache, int tx, int ty) const {
@@ -333,9 +361,7 @@ class SampleSpill {
     const auto [cw, rh] = extent(tx, ty);
     t.z.resize(std::size_t(cw) * std::size_t(rh));
     t.v.resize(t.z.size());
-    const std::uint64_t at = offset(tx, ty);
-    file_.read(at, t.z.data(), t.z.size() * sizeof(float));
-    file_.read(at + stride_ * sizeof(float), t.v.data(), t.v.size());
+    load(tx, ty, tx * B_, ty * B_, std::size_t(cw), std::size_t(rh), t.z.data(), t.v.data());
     return t;
   }
   /// Columns and rows of tile (tx, ty): its leaf block's window.
@@ -352,7 +378,8 @@ class SampleSpill {
   std::vector<std::uint8_t> stored_;  // tile -> put yet
   std::vector<float> put_z_;          // put's buffers
   std::vector<std::uint8_t> put_v_;
-  storage::TempFile file_;
+  const RasterWindows* direct_;  // the source, read in place; or
+  std::unique_ptr<storage::TempFile> file_;
 };
 
 class Builder {
@@ -403,7 +430,8 @@ class Builder {
     // the exact upper levels.
     {
       const std::string dir = storage::scratch_dir(opt_.tmp_dir);
-      spill_ = std::make_unique<SampleSpill>(dir, W_, H_, B_, bw_, bh_);
+      spill_ = std::make_unique<SampleSpill>(dir, W_, H_, B_, bw_, bh_,
+                                             dem_.random_access() ? &dem_ : nullptr);
     }
     if (opt_.max_error == 0.0) {
       survey();

@@ -85,12 +85,21 @@ class RasterWindows {
   /// has read what it needs hands the memory back). Returns the previous cap; readers without
   /// such a cache ignore it and return 0.
   virtual std::uint64_t set_cache_bytes(std::uint64_t /*bytes*/) const { return 0; }
+  /// True when `read` may be called from several threads at once and costs about the bytes it
+  /// returns (memory, or a file read in place): a builder may then read samples again from the
+  /// source instead of keeping a copy of its own (smr/build/block_tin.cpp).
+  virtual bool random_access() const { return false; }
+  /// `read` into `out`, reusing its buffers where the reader can.
+  virtual void read_into(Heightfield& out, int col0, int row0, int w, int h) const {
+    out = read(col0, row0, w, h);
+  }
 };
 
 /// Windows of a Heightfield already in memory (tests, small inputs).
 class HeightfieldWindows final : public RasterWindows {
  public:
   explicit HeightfieldWindows(const Heightfield& h) : h_(h) {}
+  bool random_access() const override { return true; }
   int width() const override { return h_.width; }
   int height() const override { return h_.height; }
   const Georef& georef() const override { return h_.georef; }

@@ -29,6 +29,7 @@ class OwnedWindows final : public RasterWindows {
   Heightfield read(int col0, int row0, int w, int h) const override {
     return windows_.read(col0, row0, w, h);
   }
+  bool random_access() const override { return true; }
 
  private:
   Heightfield h_;

@@ -951,13 +951,23 @@ class NpyWindows final : public RasterWindows {
   const Georef& georef() const override { return georef_; }  // a plain .npy has none
   const std::string& source() const override { return path_; }
 
+  bool random_access() const override { return true; }
+
   Heightfield read(int col0, int row0, int w, int h) const override {
+    Heightfield out;
+    read_into(out, col0, row0, w, h);
+    return out;
+  }
+
+  void read_into(Heightfield& out, int col0, int row0, int w, int h) const override {
     if (col0 < 0 || row0 < 0 || w <= 0 || h <= 0 || col0 > width() - w || row0 > height() - h) {
       throw_input("window " + std::to_string(w) + " x " + std::to_string(h) + " at (" +
                   std::to_string(col0) + ", " + std::to_string(row0) + ") is outside '" + path_ +
                   "' (" + std::to_string(cols_) + " x " + std::to_string(rows_) + ")");
     }
-    Heightfield out = window_header(georef_, path_, col0, row0, w, h);
+    std::vector<float> buffer = std::move(out.z);  // its pages, already faulted in
+    out = window_header(georef_, path_, col0, row0, w, h);
+    out.z = std::move(buffer);
     const auto c0 = static_cast<std::size_t>(col0), r0 = static_cast<std::size_t>(row0);
     const auto ww = static_cast<std::size_t>(w), hh = static_cast<std::size_t>(h);
     out.z.resize(ww * hh);
@@ -986,7 +996,6 @@ class NpyWindows final : public RasterWindows {
         }
       }
     }
-    return out;
   }
 
  private:

@@ -307,6 +307,34 @@ TEST(BlockTin, HolesThatCrossBlockBordersStayExact) {
   const InvariantReport inv = check_crmr(m);
   EXPECT_TRUE(inv.ok()) << inv.summary();
   EXPECT_EQ(valid_samples_under_void(m, h), 0u);
+  {
+    // The same source through the builder's scratch copy of the samples (a reader that cannot
+    // be read in place, like a GDAL raster) instead of read in place: the same CRMR.
+    class Copied final : public RasterWindows {
+     public:
+      explicit Copied(const Heightfield& f) : in_(f) {}
+      int width() const override { return in_.width(); }
+      int height() const override { return in_.height(); }
+      const Georef& georef() const override { return in_.georef(); }
+      const std::string& source() const override { return in_.source(); }
+      Heightfield read(int c0, int r0, int w, int hh) const override {
+        return in_.read(c0, r0, w, hh);
+      }
+
+     private:
+      HeightfieldWindows in_;
+    };
+    ASSERT_TRUE(HeightfieldWindows(h).random_access());
+    ASSERT_FALSE(Copied(h).random_access());
+    BlockTinStats copied_stats;
+    const Crmr copied = build_block_tin(Copied(h), opt, &copied_stats);
+    EXPECT_GT(copied_stats.temp_bytes, st.temp_bytes);
+    ASSERT_EQ(copied.ops.size(), m.ops.size());
+    EXPECT_TRUE(copied.header == m.header);
+    for (std::size_t i = 0; i < m.ops.size(); ++i) {
+      ASSERT_TRUE(copied.ops[i] == m.ops[i]) << "op " << i << " differs";
+    }
+  }
   Crmr swallowed = m;  // the oracle sees a hole that swallows data
   for (Op& op : swallowed.ops) {
     for (FragmentTriangle& t : op.fragment) t.flags |= FragmentTriangle::kVoid;
