@@ -98,7 +98,8 @@ std::string shape_text(const std::vector<std::size_t>& shape) {
   return s + ")";
 }
 
-std::vector<std::uint8_t> read_file_bytes(const std::string& path) {
+// A missing path is kIo, a directory kInvalidInput, both naming the path.
+void check_is_file(const std::string& path) {
   std::error_code ec;
   const auto status = std::filesystem::status(path, ec);
   if (!std::filesystem::exists(status)) {
@@ -107,6 +108,10 @@ std::vector<std::uint8_t> read_file_bytes(const std::string& path) {
   if (std::filesystem::is_directory(status)) {
     throw_input("cannot read '" + path + "': it is a directory, expected a file");
   }
+}
+
+std::vector<std::uint8_t> read_file_bytes(const std::string& path) {
+  check_is_file(path);
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (f == nullptr) throw_io("cannot open '" + path + "': " + std::strerror(errno));
   std::vector<std::uint8_t> bytes;
@@ -334,8 +339,7 @@ bool native_float32(const NpyArray& a) {
          a.big_endian == (std::endian::native == std::endian::big);
 }
 
-// Checks that float32 samples copied as they are, elevation [r][c] at z[(r - r0) * w + c - c0]
-// for the rectangle [r0, r0 + h) x [c0, c0 + w), are finite.
+// Checks that float32 samples are finite: z[i] is elevation [r0 + i / w, c0 + i % w].
 void check_finite(std::span<const float> z, std::size_t r0, std::size_t c0, std::size_t w,
                   const std::string& what) {
   for (std::size_t i = 0; i < z.size(); ++i) {
@@ -927,12 +931,7 @@ namespace {
 class NpyWindows final : public RasterWindows {
  public:
   explicit NpyWindows(const std::string& path) : path_(path) {
-    std::error_code ec;
-    const auto status = std::filesystem::status(path, ec);
-    if (!std::filesystem::exists(status)) throw_io("cannot open '" + path + "': no such file");
-    if (std::filesystem::is_directory(status)) {
-      throw_input("cannot read '" + path + "': it is a directory, expected a file");
-    }
+    check_is_file(path);
     fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd_ < 0) throw_io("cannot open '" + path + "': " + std::strerror(errno));
     try {
