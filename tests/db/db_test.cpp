@@ -274,7 +274,7 @@ TEST(DatabaseStreamWriter, SpillingSortsGiveTheSameBytes) {
 // The block builder streams straight into the writer (the way `smrdb ingest --builder blocks`
 // runs): the same file as collecting its CRMR and writing it whole, and the DAG depth both report.
 TEST(DatabaseStreamWriter, TheBlockBuilderStreamsIntoIt) {
-  const test::Dataset& d = test::dataset("fbm257");
+  const test::Dataset& d = test::dataset(test::kSanitized ? "fbm129" : "fbm257");
   TempDir dir;
   BlockTinOptions bo;
   bo.block_cells = 32;
