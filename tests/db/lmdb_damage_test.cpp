@@ -53,7 +53,7 @@ namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
 constexpr std::size_t kPage = 4096;          // LMDB's page size on the platforms the suite runs on
-constexpr int kChildSeconds = 120;           // a child still running after this is a hang
+constexpr int kCaseSeconds = 120;            // a case still running after this is a hang
 constexpr std::size_t kSanitizedStride = 5;  // the sweeps' sample under the sanitizers
 
 using test::read_file;
@@ -310,7 +310,7 @@ struct Worker {
     if (::read(in, &i, sizeof i) != static_cast<ssize_t>(sizeof i) || i >= cases.size()) {
       ::_exit(0);  // no atexit handlers or static destructors: those belong to the parent
     }
-    ::alarm(kChildSeconds);
+    ::alarm(kCaseSeconds);
     std::string answer;
     try {
       write_file(path, damaged(clean.bytes, cases[i]));
@@ -382,7 +382,7 @@ Outcome death(Worker& w) {
   Outcome o;
   if (WIFSIGNALED(status)) {
     const int sig = WTERMSIG(status);
-    o.death = sig == SIGALRM ? "hung (no result after " + std::to_string(kChildSeconds) + " s)"
+    o.death = sig == SIGALRM ? "hung (no result after " + std::to_string(kCaseSeconds) + " s)"
                              : "killed by signal " + std::to_string(sig) + " (" +
                                    std::string(strsignal(sig)) + ")";
   } else {
