@@ -229,6 +229,12 @@ class SampleSpill {
   /// fresh pages; every sample is written).
   void read_into(Heightfield& out, int col0, int row0, int w, int h, const RasterWindows& source,
                  Cache* cache = nullptr) const {
+    const int tx0 = tile_of(col0, nx_), tx1 = tile_of(std::max(col0, col0 + w - 2), nx_);
+    const int ty0 = tile_of(row0, ny_), ty1 = tile_of(std::max(row0, row0 + h - 2), ny_);
+    if (direct_ != nullptr && all_stored(tx0, tx1, ty0, ty1)) {
+      direct_->read_into(out, col0, row0, w, h);  // the whole window in one read, no copies
+      return;
+    }
     std::vector<float> zbuf = std::move(out.z);
     std::vector<std::uint8_t> vbuf = std::move(out.valid);
     out = window_header(source.georef(), source.source(), col0, row0, w, h);
@@ -236,8 +242,6 @@ class SampleSpill {
     out.valid = std::move(vbuf);
     out.z.resize(std::size_t(w) * std::size_t(h));
     out.valid.resize(out.z.size());
-    const int tx0 = tile_of(col0, nx_), tx1 = tile_of(std::max(col0, col0 + w - 2), nx_);
-    const int ty0 = tile_of(row0, ny_), ty1 = tile_of(std::max(row0, row0 + h - 2), ny_);
     for (int ty = ty0; ty <= ty1; ++ty) {
       for (int tx = tx0; tx <= tx1; ++tx) {
         const auto [cw, rh] = extent(tx, ty);
@@ -303,6 +307,14 @@ class SampleSpill {
  private:
   bool stored(int tx, int ty) const {
     return stored_[std::size_t(ty) * std::size_t(nx_) + std::size_t(tx)] != 0;
+  }
+  bool all_stored(int tx0, int tx1, int ty0, int ty1) const {
+    for (int ty = ty0; ty <= ty1; ++ty) {
+      for (int tx = tx0; tx <= tx1; ++tx) {
+        if (!stored(tx, ty)) return false;
+      }
+    }
+    return true;
   }
 
   /// Sample (c, r) of stored tile (tx, ty), which holds it.
