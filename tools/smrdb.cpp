@@ -668,6 +668,7 @@ nlohmann::json ingest_mesh_blocks(const IngestArgs& a, const std::string& db_pat
       {"base_vertices", st.base_vertices},
       {"base_triangles", st.base_triangles},
       {"max_block_triangles", st.max_block_triangles},
+      {"max_handed_triangles", st.max_handed_triangles},
       {"triangles_per_second", double(st.triangles) / std::max(1e-9, build_seconds)},
       {"temp_bytes", st.temp_bytes + w.spool_bytes + w.scratch_bytes},
       {"seconds",

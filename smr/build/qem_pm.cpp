@@ -586,6 +586,10 @@ class Builder {
     }
   }
 
+  std::uint64_t alive_triangles() const {
+    return static_cast<std::uint64_t>(std::count_if(
+        tris_.begin(), tris_.end(), [](const Tri& t) { return t.destroyer == kNone; }));
+  }
   std::uint64_t alive_vertices() const {
     return std::accumulate(comp_vertices_.begin(), comp_vertices_.end(), std::uint64_t{0});
   }
@@ -1700,7 +1704,12 @@ class BlockPmBuilder {
   // Simplifies one block and hands its collapses to the assembler.
   BlockState simplify(int level, BlockState in) {
     Simplified done = compute(level, in);
-    return commit(std::move(in), std::move(done));
+    BlockState out = commit(std::move(in), std::move(done));
+    if (level < levels_) {
+      stats_.max_handed_triangles =
+          std::max<std::uint64_t>(stats_.max_handed_triangles, out.tris.size());
+    }
+    return out;
   }
 
   // A block simplified, not yet handed over: reads only what stays fixed while blocks are made
@@ -1750,6 +1759,14 @@ class BlockPmBuilder {
     const double last = level == levels_ ? side_ : top;
     for (double t = top / 8.0; t <= last; t *= 2.0) out.rounds += out.b->simplify_rounds(t);
     if (level == levels_) out.rounds += out.b->simplify_rounds(kInfinity);
+    // A block hands its parent at most leaf_triangles triangles (so that a block holds at most 8
+    // times that): past `top`, the tolerance goes on doubling until it does.
+    for (double t = 2.0 * top; level < levels_ && out.b->alive_triangles() > opt_.leaf_triangles;
+         t *= 2.0) {
+      const std::uint64_t rounds = out.b->simplify_rounds(t);
+      out.rounds += rounds;
+      if (rounds == 0 && t > side_) break;  // the rules allow no more
+    }
     out.gid = std::move(gid);
     return out;
   }

@@ -81,7 +81,9 @@ struct QemPmStats {
 // on its own. A block is simplified by the collapses above with its locked vertices -- those with
 // triangles in another block of its level -- kept, up to a bound of tolerance_fraction of the
 // block's side (doubling per level as blocks do; within a block it rises in steps of 2 from an
-// 8th of it, and the root's on to the model's size), cheapest quadric cost first, in
+// 8th of it, and the root's on to the model's size; past it while the block still has more than
+// leaf_triangles triangles, so that a block holds at most 8 times that), cheapest quadric cost
+// first, in
 // independent-set rounds (no two collapses of a round touch, so the DAG height is at most the
 // number of rounds). Then 2x2x2 blocks merge, the borders between them unlock and simplification
 // goes on, up to the root, which simplifies as far as the rules allow. Every collapse goes to the
@@ -95,8 +97,13 @@ struct QemPmStats {
 struct BlockPmOptions {
   /// Leaf octree cells are made small enough to hold about this many triangles on average.
   std::uint64_t leaf_triangles = 1 << 16;
-  /// A level's largest tolerance, as a fraction of its blocks' side.
-  double tolerance_fraction = 1.0 / 64.0;
+  /// A level's largest tolerance, as a fraction of its blocks' side. Small, so that a block
+  /// stops simplifying near the errors of the collapses its locked border will make one level
+  /// up: a border collapse comes after the ones beside it, so in refinement it must be split
+  /// before them, and a coarse block interior would keep its border at full resolution in
+  /// every cut finer than the interior (a 1 px cut of the armadillo subdivided 3 times had 2x
+  /// the triangles of the in-core build at 1/64; at 1/1024 it has fewer, benchmarks/README.md).
+  double tolerance_fraction = 1.0 / 1024.0;
   double max_normal_turn_degrees = 75.0;
   double boundary_weight = 100.0;
   /// Budget of the external sorts (triangle order, assembly); 0 = 256 MiB.
@@ -114,7 +121,8 @@ struct BlockPmStats {
   std::uint64_t leaf_blocks = 0, vertices = 0, triangles = 0;
   std::uint64_t collapses = 0, rounds = 0, dag_height = 0;
   std::uint64_t base_vertices = 0, base_triangles = 0;
-  std::uint64_t max_block_triangles = 0;  // largest block simplified
+  std::uint64_t max_block_triangles = 0;   // largest block simplified
+  std::uint64_t max_handed_triangles = 0;  // most triangles a block handed its parent
   std::uint64_t temp_bytes = 0;
   double seconds_sort = 0, seconds_blocks = 0, seconds_assemble = 0;
 };
