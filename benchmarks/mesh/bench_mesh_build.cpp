@@ -113,36 +113,6 @@ std::string ratio_key(double ratio) {
   return ratio == 0.1 ? "10pct" : ratio == 0.01 ? "1pct" : std::to_string(ratio);
 }
 
-// ---- midpoint subdivision -------------------------------------------------------------------
-
-// One level of 1-to-4 midpoint subdivision: every edge gets its midpoint (shared by both faces;
-// numbered in order of first appearance in face order, so the output is deterministic), and each
-// triangle (a, b, c) becomes (a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca): same surface,
-// same orientation.
-smr::TriangleMesh subdivide(const smr::TriangleMesh& in) {
-  smr::TriangleMesh out;
-  out.positions = in.positions;
-  out.positions.reserve(in.positions.size() + in.triangles.size() * 3 / 2 + 16);
-  out.triangles.reserve(in.triangles.size() * 4);
-  std::unordered_map<std::uint64_t, std::uint32_t> mid;
-  mid.reserve(in.triangles.size() * 2);
-  auto midpoint = [&](std::uint32_t a, std::uint32_t b) {
-    const std::uint64_t key = (std::uint64_t(std::min(a, b)) << 32) | std::uint64_t(std::max(a, b));
-    auto [it, inserted] = mid.try_emplace(key, std::uint32_t(out.positions.size()));
-    if (inserted) out.positions.push_back(0.5 * (in.positions[a] + in.positions[b]));
-    return it->second;
-  };
-  for (const auto& t : in.triangles) {
-    const std::uint32_t ab = midpoint(t[0], t[1]), bc = midpoint(t[1], t[2]),
-                        ca = midpoint(t[2], t[0]);
-    out.triangles.push_back({t[0], ab, ca});
-    out.triangles.push_back({ab, t[1], bc});
-    out.triangles.push_back({ca, bc, t[2]});
-    out.triangles.push_back({ab, bc, ca});
-  }
-  return out;
-}
-
 // ---- ours -----------------------------------------------------------------------------------
 
 // Longest chain of parents from any op down to R^0 (parents have smaller ids than their
@@ -371,7 +341,7 @@ int main(int argc, char** argv) {
     if (subdivide_levels > 0 || !output.empty()) {  // -o alone: the mesh as read (0 levels)
       if (output.empty()) throw std::runtime_error("--subdivide needs -o OUT");
       t0 = now_ns();
-      for (int i = 0; i < subdivide_levels; ++i) mesh = subdivide(mesh);
+      for (int i = 0; i < subdivide_levels; ++i) mesh = smr::midpoint_subdivided(mesh);
       const double sub_seconds = seconds_since(t0);
       smr::write_mesh(output, mesh);
       report["benchmark"] = "mesh_subdivide";

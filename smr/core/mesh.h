@@ -20,6 +20,13 @@ struct TriangleMesh {
   std::vector<float> triangle_values;
 };
 
+/// One level of 1-to-4 midpoint subdivision: every edge gets its midpoint (shared by both faces;
+/// numbered in order of first appearance in face order, so the output is deterministic), and each
+/// triangle (a, b, c) becomes (a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca): the same
+/// surface and orientation with 4 times the triangles (the benchmarks' and tests' large meshes).
+/// triangle_values are not carried over.
+TriangleMesh midpoint_subdivided(const TriangleMesh& in);
+
 /// A triangle mesh read in passes, never held whole: the out-of-core builder's input
 /// (smr::build_block_pm). Indices are into the vertex order; the mesh must be manifold and
 /// consistently oriented (what read_mesh validates in memory). A file stream may know its counts

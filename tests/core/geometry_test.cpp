@@ -4,11 +4,14 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <set>
+#include <utility>
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
 
 #include "smr/core/geometry.h"
+#include "smr/core/mesh.h"
 
 namespace smr {
 namespace {
@@ -105,6 +108,43 @@ TEST(Geometry, ConeUnionAndCanonicalFormHoldTheirCones) {
   // Cones of pi/2 or more never cull: stored as the full cone.
   EXPECT_EQ(canonical_cone(NormalCone{Vec3{0, 0, 1}, M_PI / 2}).half_angle, M_PI);
   EXPECT_FALSE(cone_contains(NormalCone{Vec3{0, 0, 1}, 0.5}, NormalCone{Vec3{0, 0, 1}, M_PI}));
+}
+
+// Midpoint subdivision of a tetrahedron: V + E vertices, 4T triangles, the same area, every new
+// vertex the midpoint of an edge, and still a closed, consistently oriented surface (each
+// directed edge once, its reverse once).
+TEST(MidpointSubdivided, KeepsTheSurfaceAndItsOrientation) {
+  TriangleMesh tet;
+  tet.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  tet.triangles = {{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {0, 3, 2}};
+  const auto area = [](const TriangleMesh& m) {
+    double a = 0.0;
+    for (const auto& t : m.triangles) {
+      a += 0.5 * glm::length(glm::cross(m.positions[t[1]] - m.positions[t[0]],
+                                        m.positions[t[2]] - m.positions[t[0]]));
+    }
+    return a;
+  };
+  const TriangleMesh twice = midpoint_subdivided(midpoint_subdivided(tet));
+  ASSERT_EQ(twice.triangles.size(), 64u);
+  EXPECT_EQ(twice.positions.size(), 34u);  // 4 + 6, then 10 + 24
+  EXPECT_NEAR(area(twice), area(tet), 1e-12);
+  std::set<std::pair<std::uint32_t, std::uint32_t>> directed;
+  for (const auto& t : twice.triangles) {
+    for (int k = 0; k < 3; ++k) EXPECT_TRUE(directed.insert({t[k], t[(k + 1) % 3]}).second);
+  }
+  for (const auto& [a, b] : directed) EXPECT_EQ(directed.count({b, a}), 1u);
+  const TriangleMesh once = midpoint_subdivided(tet);
+  for (std::uint32_t v = 4; v < once.positions.size(); ++v) {
+    bool is_midpoint = false;
+    for (std::uint32_t a = 0; a < 4; ++a) {
+      for (std::uint32_t b = a + 1; b < 4; ++b) {
+        is_midpoint =
+            is_midpoint || once.positions[v] == 0.5 * (tet.positions[a] + tet.positions[b]);
+      }
+    }
+    EXPECT_TRUE(is_midpoint) << v;
+  }
 }
 
 }  // namespace
