@@ -1759,8 +1759,9 @@ class BlockPmBuilder {
     const double last = level == levels_ ? side_ : top;
     for (double t = top / 8.0; t <= last; t *= 2.0) out.rounds += out.b->simplify_rounds(t);
     if (level == levels_) out.rounds += out.b->simplify_rounds(kInfinity);
-    // A block hands its parent at most leaf_triangles triangles (so that a block holds at most 8
-    // times that): past `top`, the tolerance goes on doubling until it does.
+    // A block hands its parent at most leaf_triangles triangles (so that a block above the
+    // leaves holds at most 8 times that): past `top`, the tolerance goes on doubling until it
+    // does, or until the rules allow no more.
     for (double t = 2.0 * top; level < levels_ && out.b->alive_triangles() > opt_.leaf_triangles;
          t *= 2.0) {
       const std::uint64_t rounds = out.b->simplify_rounds(t);

@@ -80,20 +80,20 @@ struct QemPmStats {
 // sorted by the octree leaf cell of their centroid (an external sort), so each leaf block is read
 // on its own. A block is simplified by the collapses above with its locked vertices -- those with
 // triangles in another block of its level -- kept, up to a bound of tolerance_fraction of the
-// block's side (doubling per level as blocks do; within a block it rises in steps of 2 from an
-// 8th of it, and the root's on to the model's size; past it while the block still has more than
-// leaf_triangles triangles, so that a block holds at most 8 times that), cheapest quadric cost
-// first, in
-// independent-set rounds (no two collapses of a round touch, so the DAG height is at most the
-// number of rounds). Then 2x2x2 blocks merge, the borders between them unlock and simplification
-// goes on, up to the root, which simplifies as far as the rules allow. Every collapse goes to the
-// out-of-core assembler (op_assembly.h) as it is made, so ops are ordered and linked on disk.
-// Components are not spawned (R^0 keeps each at its smallest) and splits are not coalesced.
+// block's side (doubling per level as blocks do; within a block it rises in steps of 2 from an 8th
+// of it, and the root's on to the model's size; past it while the block still has more than
+// leaf_triangles triangles, so that a block above the leaves holds at most 8 times that), cheapest
+// quadric cost first, in independent-set rounds (no two collapses of a round touch, so the DAG
+// height is at most the number of rounds). Then 2x2x2 blocks merge, the borders between them unlock
+// and simplification goes on, up to the root, which simplifies as far as the rules allow. Every
+// collapse goes to the out-of-core assembler (op_assembly.h) as it is made, so ops are ordered and
+// linked on disk. Components are not spawned (R^0 keeps each at its smallest) and splits are not
+// coalesced.
 // Quadrics: each block adds its triangles' planes to their corners and sums what its children
-// carried; boundary constraint planes are added when an edge's boundary status is first known
-// (one end unlocked), from the triangle then on it.
-// Memory: 24 bytes a vertex (positions) and 8 (their octree span), 16 a collapse (the
-// assembler), the largest block being simplified and the blocks waiting for their siblings.
+// carried; boundary constraint planes are added when an edge's boundary status is first known (one
+// end unlocked), from the triangle then on it.
+// Memory: 24 bytes a vertex (positions) and 8 (their octree span), 16 a collapse (the assembler),
+// the largest block being simplified and the blocks waiting for their siblings.
 struct BlockPmOptions {
   /// Leaf octree cells are made small enough to hold about this many triangles on average.
   std::uint64_t leaf_triangles = 1 << 16;
