@@ -16,3 +16,9 @@ require_tools() {
   command -v jq >/dev/null || { echo "jq is required to assemble the results" >&2; exit 1; }
   [[ -x /usr/bin/time ]] || { echo "/usr/bin/time (Debian package time) is required" >&2; exit 1; }
 }
+
+# A jq definition to put before a program: peak_rss_mb(time_kb; report) is a run's peak RSS in MiB
+# from /usr/bin/time's %M (KiB) and smrdb's --json report. %M alone is not the peak: smrdb resets
+# the kernel's high-water mark before writing the database (clear_refs 5, to report that phase's
+# own peak), and the exit rusage reads the mark as reset; the report keeps the earlier peak.
+PEAK_RSS_JQ='def peak_rss_mb(time_kb; report): [time_kb / 1024, (report.peak_rss_mb // 0)] | max;'

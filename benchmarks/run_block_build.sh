@@ -49,7 +49,8 @@ if [[ ! -d "$here/peers/node_modules/delatin" ]]; then
   (cd "$here/peers" && npm ci --no-audit --no-fund)
 fi
 mkdir -p "$WORK_DIR" "$(dirname "$OUT")"
-log() { echo "[$(date +%H:%M:%S)] $*" >&2; }
+# shellcheck source=lib.sh
+source "$here/lib.sh"
 
 max_error="$(awk -v r="$RANGE" -v f="$MAX_ERROR_FRACTION" 'BEGIN { printf "%.12g", r * f }')"
 tif="$WORK_DIR/fbm${SIZE}_seed${SEED}.tif"
@@ -99,14 +100,11 @@ set +e
 "$bench_check" "$npy" --mesh "$WORK_DIR/delatin.bin" --max-error "$max_error" >"$WORK_DIR/delatin_check.json"
 set -e
 
-# /usr/bin/time's %M alone is not the peak: smrdb resets the kernel's high-water mark before
-# writing the database (to report that phase's own peak, clear_refs 5), and the exit rusage reads
-# the mark as reset. smrdb's own --json peak_rss_mb keeps the earlier peak; the larger is taken.
 for ((i = 1; i <= REPEAT; i++)); do
-  jq --slurpfile j "$WORK_DIR/blocks_$i.json" -R 'split(" ") | {rss_mb: ([(.[0] | tonumber) / 1024, $j[0].peak_rss_mb] | max), wall_seconds: (.[1] | tonumber), report: $j[0]}' \
+  jq --slurpfile j "$WORK_DIR/blocks_$i.json" -R "$PEAK_RSS_JQ"' split(" ") | {rss_mb: peak_rss_mb(.[0] | tonumber; $j[0]), wall_seconds: (.[1] | tonumber), report: $j[0]}' \
     "$WORK_DIR/blocks_$i.time" >"$WORK_DIR/blocks_run_$i.json"
   if [[ "$GREEDY" == 1 ]]; then
-    jq --slurpfile j "$WORK_DIR/greedy_$i.json" -R 'split(" ") | {rss_mb: ([(.[0] | tonumber) / 1024, $j[0].peak_rss_mb] | max), wall_seconds: (.[1] | tonumber), report: $j[0]}' \
+    jq --slurpfile j "$WORK_DIR/greedy_$i.json" -R "$PEAK_RSS_JQ"' split(" ") | {rss_mb: peak_rss_mb(.[0] | tonumber; $j[0]), wall_seconds: (.[1] | tonumber), report: $j[0]}' \
       "$WORK_DIR/greedy_$i.time" >"$WORK_DIR/greedy_run_$i.json"
   else
     echo null >"$WORK_DIR/greedy_run_$i.json"

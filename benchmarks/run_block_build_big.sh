@@ -36,7 +36,8 @@ done
 command -v jq >/dev/null || { echo "jq is required to assemble the results" >&2; exit 1; }
 [[ -x /usr/bin/time ]] || { echo "/usr/bin/time (Debian package time) is required" >&2; exit 1; }
 mkdir -p "$WORK_DIR" "$(dirname "$OUT")"
-log() { echo "[$(date +%H:%M:%S)] $*" >&2; }
+# shellcheck source=lib.sh
+source "$here/lib.sh"
 
 tif="$WORK_DIR/fbm${SIZE}_seed${SEED}.tif"
 db="$WORK_DIR/fbm${SIZE}.smrdb"
@@ -74,22 +75,19 @@ else
   echo null >"$WORK_DIR/small_extract.json"
 fi
 
-# /usr/bin/time's %M alone is not the peak: smrdb resets the kernel's high-water mark before
-# writing the database (to report that phase's own peak, clear_refs 5), and the exit rusage reads
-# the mark as reset. smrdb's own --json peak_rss_mb keeps the earlier peak; the larger is taken.
 jq -n --slurpfile ingest "$WORK_DIR/big_ingest.json" --slurpfile check "$WORK_DIR/big_check.json" \
   --slurpfile big "$WORK_DIR/big_extract.json" --slurpfile small "$WORK_DIR/small_extract.json" \
   --arg time "$(cat "$WORK_DIR/big.time")" --arg memory "$MEMORY" --argjson size "$SIZE" \
   --arg date "$(date -u +%Y-%m-%dT%H:%M:%SZ)" \
   --arg commit "$(git -C "$root" rev-parse --short HEAD 2>/dev/null || echo unknown)" \
-  --arg nproc "$(nproc)" '
+  --arg nproc "$(nproc)" "$PEAK_RSS_JQ"'
   ($time | split(" ")) as $t | ($ingest[0]) as $i |
   {
     benchmark: "block_build_big", date: $date, commit: $commit, nproc: ($nproc | tonumber),
     dem: {generator: "smrdb synth --size \($size) --seed 1 --range 1600", samples: ($size * $size),
           file: "tiled GeoTIFF (256 x 256, DEFLATE)"},
     memory: $memory,
-    peak_rss_mb: ([($t[0] | tonumber) / 1024, $i.peak_rss_mb] | max), wall_seconds: ($t[1] | tonumber),
+    peak_rss_mb: peak_rss_mb($t[0] | tonumber; $i), wall_seconds: ($t[1] | tonumber),
     samples_per_second: (($size * $size) / ($t[1] | tonumber)),
     ingest: $i,
     error_check: $check[0].error_check,

@@ -51,21 +51,18 @@ for view in oblique overview; do
   views="$(jq --argjson r "$r" '. + [$r]' <<<"$views")"
 done
 
-# /usr/bin/time's %M alone is not the peak: smrdb resets the kernel's high-water mark before
-# writing the database (to report that phase's own peak, clear_refs 5), and the exit rusage reads
-# the mark as reset. smrdb's own --json peak_rss_mb keeps the earlier peak; the larger is taken.
 jq -n --slurpfile ingest "$WORK_DIR/ingest.json" --argjson views "$views" \
   --arg time "$(cat "$WORK_DIR/ingest.time")" --arg memory "$MEMORY" \
   --argjson levels "$SUBDIVIDE" --arg date "$(date -u +%Y-%m-%dT%H:%M:%SZ)" \
   --arg commit "$(git -C "$root" rev-parse --short HEAD 2>/dev/null || echo unknown)" \
-  --arg nproc "$(nproc)" '
+  --arg nproc "$(nproc)" "$PEAK_RSS_JQ"'
   ($time | split(" ")) as $t | ($ingest[0]) as $i |
   {
     benchmark: "block_mesh", date: $date, commit: $commit, nproc: ($nproc | tonumber),
     mesh: {source: "armadillo.off (CGAL demo data)", subdivision_levels: $levels,
            vertices: $i.input.vertices, triangles: $i.input.triangles},
     memory: $memory,
-    peak_rss_mb: ([($t[0] | tonumber) / 1024, $i.peak_rss_mb] | max), wall_seconds: ($t[1] | tonumber),
+    peak_rss_mb: peak_rss_mb($t[0] | tonumber; $i), wall_seconds: ($t[1] | tonumber),
     triangles_per_second: ($i.input.triangles / ($t[1] | tonumber)),
     ingest: $i,
     extraction: $views
