@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <utility>
 #include <vector>
@@ -177,13 +178,41 @@ class SampleSpill {
                                 : std::make_unique<storage::TempFile>(
                                       dir, std::uint64_t(nx) * std::uint64_t(ny) * stride_ * 5)) {}
 
-  /// Stores tile (tx, ty) from window w, whose sample (0, 0) is grid (c0, r0).
-  void put(int tx, int ty, const Heightfield& w, int c0, int r0) {
+  /// Whole tiles kept by one caller (not shared between threads), the oldest dropped first: many
+  /// small windows in one area cost one read of each tile.
+  struct Cache {
+    struct Tile {
+      int tx = -1, ty = -1;
+      std::vector<float> z;
+      std::vector<std::uint8_t> v;
+    };
+    explicit Cache(std::size_t tiles_kept) : capacity(tiles_kept) {}
+    std::size_t capacity;
+    std::deque<Tile> tiles;
+  };
+
+  /// Stores tile (tx, ty) from window w, whose sample (0, 0) is grid (c0, r0); given a cache,
+  /// puts the tile in it too (its samples are at hand: no read brings them back).
+  void put(int tx, int ty, const Heightfield& w, int c0, int r0, Cache* warm = nullptr) {
+    const auto [cw, rh] = extent(tx, ty);
+    if (warm != nullptr) {
+      bool fresh = false;
+      Cache::Tile& t = entry(*warm, tx, ty, fresh);
+      for (int r = 0; r < rh; ++r) {
+        const std::size_t from = w.index(tx * B_ - c0, ty * B_ - r0 + r);
+        const std::size_t to = std::size_t(r) * std::size_t(cw);
+        std::memcpy(t.z.data() + to, w.z.data() + from, std::size_t(cw) * sizeof(float));
+        if (w.valid.empty()) {
+          std::fill_n(t.v.begin() + std::ptrdiff_t(to), cw, std::uint8_t{1});
+        } else {
+          std::memcpy(t.v.data() + to, w.valid.data() + from, std::size_t(cw));
+        }
+      }
+    }
     if (direct_ != nullptr) {
       stored_[std::size_t(ty) * std::size_t(nx_) + std::size_t(tx)] = 1;
       return;
     }
-    const auto [cw, rh] = extent(tx, ty);
     // Buffers kept across tiles (one caller, the reading thread): no fresh pages per tile.
     std::vector<float>& z = put_z_;
     std::vector<std::uint8_t>& v = put_v_;
@@ -200,19 +229,6 @@ class SampleSpill {
     file_->write(at + stride_ * sizeof(float), v.data(), v.size());
     stored_[std::size_t(ty) * std::size_t(nx_) + std::size_t(tx)] = 1;
   }
-
-  /// Whole tiles kept by one caller (not shared between threads), the oldest dropped first: many
-  /// small windows in one area cost one read of each tile.
-  struct Cache {
-    struct Tile {
-      int tx = -1, ty = -1;
-      std::vector<float> z;
-      std::vector<std::uint8_t> v;
-    };
-    explicit Cache(std::size_t tiles_kept) : capacity(tiles_kept) {}
-    std::size_t capacity;
-    std::deque<Tile> tiles;
-  };
 
   /// Samples [col0, col0 + w) x [row0, row0 + h), as RasterWindows::read, from the tiles that
   /// hold them (a window's last column and row come from the tile before, where it has one); a
@@ -231,7 +247,7 @@ class SampleSpill {
                  Cache* cache = nullptr) const {
     const int tx0 = tile_of(col0, nx_), tx1 = tile_of(std::max(col0, col0 + w - 2), nx_);
     const int ty0 = tile_of(row0, ny_), ty1 = tile_of(std::max(row0, row0 + h - 2), ny_);
-    if (direct_ != nullptr && all_stored(tx0, tx1, ty0, ty1)) {
+    if (direct_ != nullptr && cache == nullptr && all_stored(tx0, tx1, ty0, ty1)) {
       direct_->read_into(out, col0, row0, w, h);  // the whole window in one read, no copies
       return;
     }
@@ -359,9 +375,22 @@ class SampleSpill {
   }
 
   const Cache::Tile& cached(Cache& cache, int tx, int ty) const {
-    for (const auto& t : cache.tiles) {
+    bool fresh = false;
+    Cache::Tile& t = entry(cache, tx, ty, fresh);
+    if (fresh) {
+      const auto [cw, rh] = extent(tx, ty);
+      load(tx, ty, tx * B_, ty * B_, std::size_t(cw), std::size_t(rh), t.z.data(), t.v.data());
+    }
+    return t;
+  }
+  /// Tile (tx, ty) of `cache`; if it is not there, a new one sized for it (`fresh`, its samples
+  /// to be filled) in the oldest one's place when the cache is full.
+  Cache::Tile& entry(Cache& cache, int tx, int ty, bool& fresh) const {
+    fresh = false;
+    for (auto& t : cache.tiles) {
       if (t.tx == tx && t.ty == ty) return t;
     }
+    fresh = true;
     Cache::Tile reused;  // the oldest tile's buffers: no new pages to fault in and clear
     if (cache.tiles.size() >= cache.capacity) {
       reused = std::move(cache.tiles.front());
@@ -373,9 +402,34 @@ class SampleSpill {
     const auto [cw, rh] = extent(tx, ty);
     t.z.resize(std::size_t(cw) * std::size_t(rh));
     t.v.resize(t.z.size());
-    load(tx, ty, tx * B_, ty * B_, std::size_t(cw), std::size_t(rh), t.z.data(), t.v.data());
     return t;
   }
+
+ public:
+  /// Tile (tx, ty)'s window (its leaf block's) into `out`, reusing its buffers, if `cache`
+  /// holds it; false if not.
+  bool read_cached(const Cache& cache, int tx, int ty, const RasterWindows& source,
+                   Heightfield& out) const {
+    for (const auto& t : cache.tiles) {
+      if (t.tx != tx || t.ty != ty) continue;
+      const auto [cw, rh] = extent(tx, ty);
+      std::vector<float> z = std::move(out.z);
+      std::vector<std::uint8_t> v = std::move(out.valid);
+      out = window_header(source.georef(), source.source(), tx * B_, ty * B_, cw, rh);
+      out.z = std::move(z);
+      out.valid = std::move(v);
+      out.z.assign(t.z.begin(), t.z.end());
+      if (std::find(t.v.begin(), t.v.end(), std::uint8_t{0}) != t.v.end()) {
+        out.valid.assign(t.v.begin(), t.v.end());
+      } else {
+        out.valid.clear();
+      }
+      return true;
+    }
+    return false;
+  }
+
+ private:
   /// Columns and rows of tile (tx, ty): its leaf block's window.
   std::pair<int, int> extent(int tx, int ty) const {
     return {std::min(tx * B_ + B_, W_ - 1) - tx * B_ + 1,
@@ -524,10 +578,6 @@ class Builder {
     return w;
   }
 
-  static Heightfield crop(const Heightfield& h, int col0, int row0, int w, int hh) {
-    return HeightfieldWindows(h).read(col0, row0, w, hh);
-  }
-
   // ---- phase 1: a leaf block's greedy TIN, then its level-0 decimation with exact errors ----
   using Clock = std::chrono::steady_clock;
   static double since(Clock::time_point& t) {
@@ -549,6 +599,8 @@ class Builder {
   LeafInput read_leaf(int bx, int by) {
     const Clock::time_point t0 = Clock::now();
     LeafInput in;
+    in.halo = spare_window();
+    in.w = spare_window();
     in.bx = bx;
     in.by = by;
     // The block's window and a halo of one sample around it, which the border rule below reads:
@@ -557,11 +609,12 @@ class Builder {
     const int hc0 = std::max(0, c0 - 1), hr0 = std::max(0, r0 - 1);
     const int hc1 = std::min(W_ - 1, block_col1(bx) + 1),
               hr1 = std::min(H_ - 1, block_row1(by) + 1);
-    in.halo = dem_.read(hc0, hr0, hc1 - hc0 + 1, hr1 - hr0 + 1);
-    in.w = crop(in.halo, c0 - hc0, r0 - hr0, block_col1(bx) - c0 + 1, block_row1(by) - r0 + 1);
+    dem_.read_into(in.halo, hc0, hr0, hc1 - hc0 + 1, hr1 - hr0 + 1);
+    HeightfieldWindows(in.halo).read_into(in.w, c0 - hc0, r0 - hr0, block_col1(bx) - c0 + 1,
+                                          block_row1(by) - r0 + 1);
     const Heightfield& w = in.w;
     stats_.max_block_samples = std::max<std::uint64_t>(stats_.max_block_samples, in.halo.z.size());
-    if (spill_) spill_->put(bx, by, w, c0, r0);
+    if (spill_) spill_->put(bx, by, w, c0, r0, &repair_tiles_);
     for (std::size_t i = 0; i < w.z.size(); ++i) {
       if (!w.valid.empty() && w.valid[i] == 0) continue;
       ++valid_samples_;
@@ -574,6 +627,21 @@ class Builder {
     stats_.samples += w.z.size();
     stats_.seconds_read += std::chrono::duration<double>(Clock::now() - t0).count();
     return in;
+  }
+
+  /// A window whose buffers a worker handed back (or a new one): the leaf pass's windows reuse
+  /// pages already faulted in instead of fresh ones. They are taken on the calling thread and
+  /// handed back by the workers, so at most the pipeline's items' windows are ever out.
+  Heightfield spare_window() {
+    std::lock_guard lock(spare_mu_);
+    if (spare_windows_.empty()) return {};
+    Heightfield w = std::move(spare_windows_.back());
+    spare_windows_.pop_back();
+    return w;
+  }
+  void give_back(Heightfield&& w) {
+    std::lock_guard lock(spare_mu_);
+    spare_windows_.push_back(std::move(w));
   }
 
   /// Builds a read leaf block into this (empty) builder's records: its greedy TIN from the shared
@@ -793,7 +861,8 @@ class Builder {
         [this](Item& item) {
           if (item.builder) {
             item.builder->build_leaf(item.in);
-            item.in = LeafInput{};  // the samples are done with
+            give_back(std::move(item.in.halo));  // the samples are done with: their buffers
+            give_back(std::move(item.in.w));     // serve the next leaves
           }
           if (item.block) decimate_block(*item.block);
         },
@@ -812,6 +881,7 @@ class Builder {
           report(0.7 * double(std::min(k + 1, n)) / double(n));
         });
     leaf_vertices_ = {};
+    spare_windows_ = {};
     window_buffer() = Heightfield{};
     level0_done_ = interleave;
     stats_.level0_interleaved = interleave;
@@ -851,6 +921,13 @@ class Builder {
     // leaves the reader is ahead by): it covers this block's samples, and does not depend on
     // the thread count.
     block->builder->tol_ = leaf_tol_[std::min(j + std::size_t(bw_) + 1, leaf_tol_.size() - 1)];
+    // Its window is leaf j's, most likely still among the repair's tiles: a copy, not a read.
+    Heightfield w = spare_window();
+    if (spill_ && spill_->read_cached(repair_tiles_, bx, by, dem_, w)) {
+      block->samples = std::move(w);
+    } else {
+      give_back(std::move(w));
+    }
     return block;
   }
 
@@ -1581,7 +1658,12 @@ class Builder {
   }
 
   /// A copied block's decimation (a worker thread), exact bounds from its window.
-  void decimate_block(UpperBlock& block) const {
+  void decimate_block(UpperBlock& block) {
+    if (block.samples.width != 0) {
+      block.builder->decimate_level(block.level, &block.samples, block.c0, block.r0, &block.cand);
+      give_back(std::move(block.samples));
+      return;
+    }
     Heightfield& w = window_buffer();
     spill_->read_into(w, block.c0, block.r0, block.w, block.h, dem_);
     block.builder->decimate_level(block.level, &w, block.c0, block.r0, &block.cand);
@@ -1605,6 +1687,7 @@ class Builder {
     std::vector<std::uint32_t> first_tri;      // each local vertex's `tri` as copied
     std::vector<std::uint32_t> cand;           // local ids of the removal candidates
     IdMap<std::uint32_t> border_owner;  // edge on the block's border -> its whole-mesh triangle
+    Heightfield samples;  // the block's window when it was at hand as the block was copied
   };
 
   std::unique_ptr<UpperBlock> copy_block(int level, std::vector<std::uint32_t>&& tris,
@@ -1969,6 +2052,8 @@ class Builder {
   IdMap<std::uint32_t> shared_;      // grid index -> border vertex + 1
   IdMap<std::uint32_t> open_edges_;  // edge -> (tri << 2 | edge)
   std::vector<std::pair<std::uint64_t, std::uint32_t>> scratch_outer_;
+  std::mutex spare_mu_;                     // guards spare_windows_
+  std::vector<Heightfield> spare_windows_;  // windows whose buffers are free (spare_window)
   mutable std::uint64_t scanned_ = 0, plans_ = 0;
   mutable std::vector<std::array<double, 2>> clip_a_, clip_b_;  // overlay_bound's scratch
   std::vector<double> cost_;

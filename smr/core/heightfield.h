@@ -9,6 +9,7 @@
 //  - `valid` is empty when every sample holds data, else one byte per sample (0 = no data).
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -105,22 +106,29 @@ class HeightfieldWindows final : public RasterWindows {
   const Georef& georef() const override { return h_.georef; }
   const std::string& source() const override { return h_.source; }
   Heightfield read(int col0, int row0, int w, int h) const override {
-    Heightfield out = window_header(h_.georef, h_.source, col0, row0, w, h);
+    Heightfield out;
+    read_into(out, col0, row0, w, h);
+    return out;
+  }
+  void read_into(Heightfield& out, int col0, int row0, int w, int h) const override {
+    std::vector<float> z = std::move(out.z);  // keep the buffers' pages
+    std::vector<std::uint8_t> valid = std::move(out.valid);
+    out = window_header(h_.georef, h_.source, col0, row0, w, h);
+    out.z = std::move(z);
+    out.valid = std::move(valid);
     out.z.resize(static_cast<std::size_t>(w) * static_cast<std::size_t>(h));
+    out.valid.resize(h_.has_nodata() ? out.z.size() : 0);
     bool any_invalid = false;
-    if (h_.has_nodata()) out.valid.resize(out.z.size());
     for (int r = 0; r < h; ++r) {
+      const std::size_t i = out.index(0, r), j = h_.index(col0, row0 + r);
+      std::copy_n(h_.z.begin() + std::ptrdiff_t(j), w, out.z.begin() + std::ptrdiff_t(i));
+      if (!h_.has_nodata()) continue;
       for (int c = 0; c < w; ++c) {
-        const std::size_t i = out.index(c, r), j = h_.index(col0 + c, row0 + r);
-        out.z[i] = h_.z[j];
-        if (h_.has_nodata()) {
-          out.valid[i] = h_.valid[j];
-          any_invalid |= h_.valid[j] == 0;
-        }
+        out.valid[i + std::size_t(c)] = h_.valid[j + std::size_t(c)];
+        any_invalid |= h_.valid[j + std::size_t(c)] == 0;
       }
     }
     if (!any_invalid) out.valid.clear();
-    return out;
   }
 
  private:

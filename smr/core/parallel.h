@@ -1,18 +1,22 @@
 // Parallel helpers for work whose results are combined in order, so that output never depends
-// on the thread count: parallel_for (independent items, results by index) and ordered_pipeline
-// (items made and merged in order on the calling thread, worked on by a pool).
+// on the thread count: parallel_for (independent items, results by index; WorkerPool runs many
+// such batches on the same threads) and ordered_pipeline (items made and merged in order on the
+// calling thread, worked on by a pool).
 #pragma once
 
 #include <algorithm>
 #include <atomic>
 #include <condition_variable>
 #include <cstddef>
+#include <cstdint>
 #include <deque>
 #include <exception>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <thread>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace smr {
@@ -21,35 +25,106 @@ inline unsigned thread_count(unsigned requested) {
   return requested != 0 ? requested : std::max(1u, std::thread::hardware_concurrency());
 }
 
+/// A fixed set of threads that runs batches of independent items one batch after another: a
+/// caller with many small batches starts its threads (and whatever they keep thread_local, such
+/// as codec contexts) once, not once a batch. The calling thread works on each batch too.
+class WorkerPool {
+ public:
+  /// `threads` in all, the caller's included (0 = one per core).
+  explicit WorkerPool(unsigned threads) {
+    const unsigned n = thread_count(threads);
+    for (unsigned t = 1; t < n; ++t) helpers_.emplace_back([this] { serve(); });
+  }
+  ~WorkerPool() {
+    {
+      std::lock_guard lock(mu_);
+      quit_ = true;
+    }
+    start_cv_.notify_all();
+    for (std::thread& t : helpers_) t.join();
+  }
+  WorkerPool(const WorkerPool&) = delete;
+  WorkerPool& operator=(const WorkerPool&) = delete;
+
+  /// f(i) for i in [0, n), the items pulled from a shared counter. The first exception thrown by
+  /// any f is rethrown once every thread has left the batch.
+  template <class F>
+  void for_each(std::size_t n, F&& f) {
+    if (helpers_.empty() || n <= 1) {
+      for (std::size_t i = 0; i < n; ++i) f(i);
+      return;
+    }
+    {
+      std::unique_lock lock(mu_);
+      // A helper that woke late for the last batch may still be looking at it.
+      idle_cv_.wait(lock, [&] { return busy_ == 0; });
+      job_ = [&f](std::size_t i) { f(i); };
+      n_ = n;
+      next_ = 0;
+      failed_ = false;
+      error_ = nullptr;
+      ++generation_;
+    }
+    start_cv_.notify_all();
+    drain();
+    std::unique_lock lock(mu_);
+    idle_cv_.wait(lock, [&] { return busy_ == 0; });
+    job_ = nullptr;
+    if (error_) std::rethrow_exception(std::exchange(error_, nullptr));
+  }
+
+ private:
+  void serve() {
+    std::uint64_t seen = 0;
+    for (;;) {
+      {
+        std::unique_lock lock(mu_);
+        start_cv_.wait(lock, [&] { return quit_ || generation_ != seen; });
+        if (quit_) return;
+        seen = generation_;
+        ++busy_;
+      }
+      drain();
+      {
+        std::lock_guard lock(mu_);
+        --busy_;
+      }
+      idle_cv_.notify_all();
+    }
+  }
+  // job_ and n_ change only while no helper is busy, so reading them here needs no lock.
+  void drain() {
+    for (std::size_t i; !failed_.load() && (i = next_.fetch_add(1)) < n_;) {
+      try {
+        job_(i);
+      } catch (...) {
+        std::lock_guard lock(mu_);
+        if (!error_) error_ = std::current_exception();
+        failed_ = true;
+      }
+    }
+  }
+
+  std::vector<std::thread> helpers_;
+  std::mutex mu_;
+  std::condition_variable start_cv_, idle_cv_;
+  bool quit_ = false;
+  std::uint64_t generation_ = 0;  // batches started
+  unsigned busy_ = 0;             // helpers inside a batch
+  std::function<void(std::size_t)> job_;
+  std::size_t n_ = 0;
+  std::atomic<std::size_t> next_{0};
+  std::atomic<bool> failed_{false};
+  std::exception_ptr error_;
+};
+
 /// f(i) for i in [0, n) on up to `threads` threads (0 = one per core) pulling indices from a
 /// shared counter. The first exception thrown by any f is rethrown once every thread has stopped.
 template <class F>
 void parallel_for(std::size_t n, unsigned threads, F&& f) {
-  threads = static_cast<unsigned>(std::min<std::size_t>(thread_count(threads), n));
-  if (threads <= 1) {
-    for (std::size_t i = 0; i < n; ++i) f(i);
-    return;
-  }
-  std::atomic<std::size_t> next{0};
-  std::atomic<bool> failed{false};
-  std::exception_ptr error;
-  std::mutex mu;
-  auto run = [&] {
-    for (std::size_t i; !failed.load() && (i = next.fetch_add(1)) < n;) {
-      try {
-        f(i);
-      } catch (...) {
-        std::lock_guard lock(mu);
-        if (!error) error = std::current_exception();
-        failed = true;
-      }
-    }
-  };
-  std::vector<std::thread> pool;
-  for (unsigned t = 1; t < threads; ++t) pool.emplace_back(run);
-  run();
-  for (std::thread& t : pool) t.join();
-  if (error) std::rethrow_exception(error);
+  if (n == 0) return;
+  WorkerPool pool(static_cast<unsigned>(std::min<std::size_t>(thread_count(threads), n)));
+  pool.for_each(n, f);
 }
 
 /// An ordered pipeline for work whose results must be combined in order: for k = 0 .. n-1,

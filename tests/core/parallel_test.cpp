@@ -5,9 +5,13 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <chrono>
 #include <memory>
+#include <mutex>
 #include <numeric>
+#include <set>
 #include <stdexcept>
+#include <thread>
 #include <vector>
 
 namespace smr {
@@ -106,6 +110,34 @@ TEST(ParallelFor, EveryIndexOnceAndTheFirstFailureRethrown) {
   std::size_t calls = 0;
   parallel_for(0, 4, [&](std::size_t) { ++calls; });
   EXPECT_EQ(calls, 0u);
+}
+
+TEST(WorkerPool, ManyBatchesOnTheSameThreadsEachIndexOnce) {
+  WorkerPool pool(3);
+  std::mutex mu;
+  std::set<std::thread::id> seen;
+  for (std::size_t batch = 0; batch < 200; ++batch) {
+    // Small batches, one after another: a helper that wakes late for one must not run the next
+    // one's items twice or touch a finished batch's function.
+    std::vector<std::atomic<int>> hits(batch % 7 + 1);
+    pool.for_each(hits.size(), [&](std::size_t i) {
+      std::this_thread::sleep_for(std::chrono::microseconds(50));  // so the helpers get items
+      ++hits[i];
+      std::lock_guard lock(mu);
+      seen.insert(std::this_thread::get_id());
+    });
+    for (const auto& h : hits) ASSERT_EQ(h.load(), 1) << "batch " << batch;
+  }
+  EXPECT_LE(seen.size(), 3u) << "the batches started threads of their own";
+  // A failure is rethrown once, and the pool still works after it.
+  EXPECT_THROW(pool.for_each(100,
+                             [](std::size_t i) {
+                               if (i == 50) throw std::runtime_error("50");
+                             }),
+               std::runtime_error);
+  std::atomic<std::size_t> sum{0};
+  pool.for_each(100, [&](std::size_t i) { sum += i; });
+  EXPECT_EQ(sum.load(), 4950u);
 }
 
 }  // namespace
