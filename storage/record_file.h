@@ -1,5 +1,6 @@
 // Fixed-size records appended to an anonymous scratch file (storage::TempFile) through a buffer
-// of 4 MiB, and read back by position: the spools of the out-of-core builders and writers.
+// of 4 MiB, and read back by position (many scattered pieces in runs of nearby ones): the spools
+// of the out-of-core builders and writers.
 #pragma once
 
 #include <algorithm>
@@ -40,6 +41,43 @@ class RecordFile {
   }
   std::uint64_t bytes() const { return count() * sizeof(T); }
 
+  /// Records [first, first + count) of the file, to go to out[to, to + count).
+  struct Piece {
+    std::uint64_t first = 0;
+    std::size_t count = 0;
+    std::size_t to = 0;
+  };
+  /// Reads many pieces (after flush()), in place order, a run of nearby ones in one read: a
+  /// piece starting at most kGapBytes past the run's end joins it (the gap is read through, which
+  /// costs less than a system call), up to kRunBytes a run. Reorders `pieces`.
+  void read_pieces(std::vector<Piece>& pieces, T* out) const {
+    std::sort(pieces.begin(), pieces.end(),
+              [](const Piece& a, const Piece& b) { return a.first < b.first; });
+    constexpr std::uint64_t gap = kGapBytes / sizeof(T) + 1, run_max = kRunBytes / sizeof(T) + 1;
+    std::vector<T> run;
+    for (std::size_t i = 0; i < pieces.size();) {
+      const std::uint64_t begin = pieces[i].first;
+      std::uint64_t end = begin + pieces[i].count;
+      std::size_t k = i + 1;
+      for (; k < pieces.size(); ++k) {
+        const Piece& p = pieces[k];
+        if (p.first > end + gap || p.first + p.count - begin > run_max) break;
+        end = std::max<std::uint64_t>(end, p.first + p.count);
+      }
+      if (k == i + 1) {  // alone: straight to its place
+        read(begin, out + pieces[i].to, pieces[i].count);
+        i = k;
+        continue;
+      }
+      run.resize(static_cast<std::size_t>(end - begin));
+      read(begin, run);
+      for (; i < k; ++i) {
+        std::copy_n(run.begin() + static_cast<std::ptrdiff_t>(pieces[i].first - begin),
+                    pieces[i].count, out + pieces[i].to);
+      }
+    }
+  }
+
   /// Calls f(record) for every record in order, reading `chunk` records at a time (after flush()).
   template <class F>
   void for_each(F&& f, std::size_t chunk = (std::size_t{1} << 20) / sizeof(T) + 1) const {
@@ -53,6 +91,7 @@ class RecordFile {
 
  private:
   static constexpr std::size_t kFlushBytes = std::size_t{4} << 20;
+  static constexpr std::uint64_t kGapBytes = 16384, kRunBytes = std::uint64_t{1} << 20;
   TempFile file_;
   std::vector<T> buffer_;
   std::uint64_t count_ = 0;

@@ -362,8 +362,14 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
 
   Cursor<Fixup> fix(fixups);
   Cursor<Link> link(links);
+  // The records are read a chunk of ops at a time: ops follow falling error, the spool the
+  // build's order, so one by one they would be a read each; a chunk's are read in runs of nearby
+  // records (RecordFile::read_pieces), its bytes held within a share of the budget.
   std::vector<OrderEntry> chunk;
+  std::vector<std::size_t> chunk_at;  // each chunk entry's record in `bytes`
   std::vector<std::uint8_t> bytes;
+  std::vector<RecordFile<std::uint8_t>::Piece> pieces;
+  const std::uint64_t chunk_bytes = std::max<std::uint64_t>(s.budget(8), 1 << 16);
   std::vector<std::uint32_t> verts;
   std::vector<StarTriangle> star;
   std::vector<MadeTriangle> made;
@@ -372,15 +378,27 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
   for (std::uint32_t i = 1; i <= m; ++i) {
     if (i - 1 == at + chunk.size()) {
       at = i - 1;
-      chunk.resize(static_cast<std::size_t>(std::min<std::uint64_t>(4096, m - at)));
+      chunk.resize(
+          static_cast<std::size_t>(std::min<std::uint64_t>(std::uint64_t{1} << 16, m - at)));
       ops.read(at, chunk);
+      std::size_t n = 0, total = 0;  // the entries whose records fit the chunk's bytes
+      for (; n < chunk.size() && (n == 0 || total + chunk[n].bytes <= chunk_bytes); ++n)
+        total += chunk[n].bytes;
+      chunk.resize(n);
+      pieces.resize(n);
+      chunk_at.resize(n);
+      for (std::size_t j = 0, to = 0; j < n; to += chunk[j].bytes, ++j) {
+        pieces[j] = {chunk[j].offset, chunk[j].bytes, to};
+        chunk_at[j] = to;
+      }
+      bytes.resize(total);
+      s.spool.read_pieces(pieces, bytes.data());
     }
     const OrderEntry& oe = chunk[i - 1 - at];
-    bytes.resize(oe.bytes);
-    s.spool.read(oe.offset, bytes);
     SpoolHead head;
-    std::memcpy(&head, bytes.data(), sizeof head);
-    const std::uint8_t* p = bytes.data() + sizeof head;
+    const std::uint8_t* p = bytes.data() + chunk_at[i - 1 - at];
+    std::memcpy(&head, p, sizeof head);
+    p += sizeof head;
     p = get(p, verts, head.vertices);
     p = get(p, star, head.star);
     get(p, made, head.made);

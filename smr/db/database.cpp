@@ -47,10 +47,6 @@ constexpr std::size_t kCacheItemOverhead = 160;
 // order that leaves most heap pages partly used. On a whole-database output (1.2 M triangles,
 // 64 MiB cache) peak RSS is 196 MiB at 16 MiB intervals, 180 at 4, 172 at 1.
 constexpr std::uint64_t kReleaseEveryBytes = std::uint64_t{1} << 20;
-// The stream writer reads a page's spooled ops in runs: a record at most kSpoolGap bytes past
-// the run's end joins it, up to kSpoolRun bytes in all (one read instead of one a record).
-constexpr std::uint64_t kSpoolGap = 4096;
-constexpr std::uint64_t kSpoolRun = std::uint64_t{1} << 20;
 
 index::Box to_index(const Box3& b) {
   index::Box out;
@@ -634,38 +630,26 @@ WriteReport DatabaseStreamWriter::finish() {
       [&](std::span<const OpEntry> page, std::vector<Op>& held) {
         // A page's ops lie near one another in the spool (pages and the build's blocks both
         // follow space): they are read a run of nearby records at a time, not one by one.
-        std::vector<std::size_t> order(page.size());
-        for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
-        std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-          return page[a].spool_at < page[b].spool_at;
-        });
+        std::vector<RecordFile<std::uint8_t>::Piece> pieces(page.size());
+        std::size_t total = 0;
+        for (std::size_t i = 0; i < page.size(); ++i) {
+          pieces[i] = {page[i].spool_at, page[i].spool_size, total};
+          total += page[i].spool_size;
+        }
+        Bytes bytes(total);
+        s.spool.read_pieces(pieces, bytes.data());
         std::vector<const Op*> ops(page.size());
-        Bytes run;
-        for (std::size_t i = 0; i < order.size();) {
-          const std::uint64_t begin = page[order[i]].spool_at;
-          std::uint64_t end = begin + page[order[i]].spool_size;
-          std::size_t k = i + 1;
-          for (; k < order.size(); ++k) {
-            const OpEntry& e = page[order[k]];
-            if (e.spool_at > end + kSpoolGap || e.spool_at + e.spool_size - begin > kSpoolRun)
-              break;
-            end = std::max(end, e.spool_at + e.spool_size);
-          }
-          run.resize(end - begin);
-          s.spool.read(begin, run);
-          for (; i < k; ++i) {
-            const OpEntry& e = page[order[i]];
-            std::vector<Op> one =
-                decode_page(ByteView(run).subspan(e.spool_at - begin, e.spool_size), s.grid,
-                            "scratch op " + std::to_string(e.id));
-            if (one.size() != 1 || one[0].id.value != e.id)
-              throw_internal("database writer: the scratch file lost op " + std::to_string(e.id));
-            Op& op = held.emplace_back(std::move(one[0]));
-            op.roi = from_index(e.roi);
-            op.subtree_cone = e.cone;
-            op.error += s.shift;
-            ops[order[i]] = &op;
-          }
+        for (std::size_t i = 0, at = 0; i < page.size(); at += page[i].spool_size, ++i) {
+          const OpEntry& e = page[i];
+          std::vector<Op> one = decode_page(ByteView(bytes).subspan(at, e.spool_size), s.grid,
+                                            "scratch op " + std::to_string(e.id));
+          if (one.size() != 1 || one[0].id.value != e.id)
+            throw_internal("database writer: the scratch file lost op " + std::to_string(e.id));
+          Op& op = held.emplace_back(std::move(one[0]));
+          op.roi = from_index(e.roi);
+          op.subtree_cone = e.cone;
+          op.error += s.shift;
+          ops[i] = &op;
         }
         return ops;
       },
