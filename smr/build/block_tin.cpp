@@ -1935,6 +1935,7 @@ class Builder {
                                                                          std::uint64_t{16} << 20)
                                                : std::uint64_t{256} << 20;
     }
+    ao.threads = opt_.threads;
     ao.progress = [this](double f) { report(0.9 + 0.1 * f); };
     assembler_ = std::make_unique<OpAssembler>(ao);
   }

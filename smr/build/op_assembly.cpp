@@ -6,6 +6,7 @@
 #include <cstring>
 #include <vector>
 
+#include "smr/core/parallel.h"
 #include "storage/error.h"
 #include "storage/external_sort.h"
 #include "storage/record_file.h"
@@ -78,6 +79,18 @@ const std::uint8_t* get(const std::uint8_t* in, std::vector<T>& out, std::size_t
   out.resize(n);
   std::memcpy(out.data(), in, n * sizeof(T));
   return in + n * sizeof(T);
+}
+
+// Vertex v's index among an op's vertex ids `vs`: the `lead` introduced ones first, then the
+// rest sorted.
+std::uint32_t vertex_index(const std::vector<std::uint32_t>& vs, std::size_t lead,
+                           std::uint32_t v) {
+  for (std::size_t j = 0; j < lead; ++j) {
+    if (vs[j] == v) return static_cast<std::uint32_t>(j);
+  }
+  const auto it = std::lower_bound(vs.begin() + static_cast<std::ptrdiff_t>(lead), vs.end(), v);
+  if (it == vs.end() || *it != v) throw_internal("op assembly: a PreF corner is not in F");
+  return static_cast<std::uint32_t>(it - vs.begin());
 }
 
 int index_of(const std::array<std::uint32_t, 3>& v, std::uint32_t x) {
@@ -296,26 +309,16 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
   sink.begin(info, m + 1);
 
   std::vector<std::uint32_t> depth(m + 1, 0);
-  std::vector<std::uint32_t> vs;  // the op's vertex ids: `lead` introduced ones, then sorted
-  std::size_t lead = 0;
-  auto index = [&](std::uint32_t v) {
-    for (std::size_t j = 0; j < lead; ++j) {
-      if (vs[j] == v) return static_cast<std::uint32_t>(j);
-    }
-    const auto it = std::lower_bound(vs.begin() + static_cast<std::ptrdiff_t>(lead), vs.end(), v);
-    if (it == vs.end() || *it != v) throw_internal("op assembly: a PreF corner is not in F");
-    return static_cast<std::uint32_t>(it - vs.begin());
-  };
   // Fills the op's vertices (`first` introduced, then the rest of F's by id; R^0 introduces
-  // them all) and fragment.
-  auto fill = [&](Op& op, std::span<const std::uint32_t> first,
-                  std::span<const StarTriangle> frag) {
+  // them all) and fragment. `vs` is the caller's scratch: the op's vertex ids, the `first.size()`
+  // introduced ones, then the rest sorted. Runs on the workers (everything it reads is fixed).
+  auto fill = [&](Op& op, std::span<const std::uint32_t> first, std::span<const StarTriangle> frag,
+                  std::vector<std::uint32_t>& vs) {
     const bool base_op = op.id == kBaseOp;
     vs.clear();
     for (const StarTriangle& t : frag) vs.insert(vs.end(), t.v.begin(), t.v.end());
     std::sort(vs.begin(), vs.end());
     vs.erase(std::unique(vs.begin(), vs.end()), vs.end());
-    lead = first.size();
     if (!base_op) {
       for (std::uint32_t v : first) {
         const auto it = std::lower_bound(vs.begin(), vs.end(), v);
@@ -331,7 +334,7 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
     op.fragment.resize(frag.size());
     for (std::size_t i = 0; i < frag.size(); ++i) {
       FragmentTriangle& ft = op.fragment[i];
-      for (int k = 0; k < 3; ++k) ft.v[k] = index(frag[i].v[k]);
+      for (int k = 0; k < 3; ++k) ft.v[k] = vertex_index(vs, first.size(), frag[i].v[k]);
       if (frag[i].is_void) ft.flags |= FragmentTriangle::kVoid;
       if (frag[i].creator != kNone) {
         ft.killer = OpId(op_of[frag[i].creator]);
@@ -341,25 +344,51 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
     }
     derive_fragment_neighbours(op);
   };
-  auto emit = [&](Op&& op) {
-    std::uint32_t& d = depth[op.id.value];
-    for (OpId p : op.parents) d = std::max(d, depth[p.value] + 1);
-    s.stats.dag_height = std::max<std::uint64_t>(s.stats.dag_height, d);
+  // Sorted parents and children, bounds (workers); then the DAG depth and the sink, in id order
+  // (the calling thread).
+  auto finish_op = [&](Op& op) {
     for (std::vector<OpId>* ids : {&op.parents, &op.children}) {
       std::sort(ids->begin(), ids->end());
       ids->erase(std::unique(ids->begin(), ids->end()), ids->end());
     }
     compute_op_bounds(op);
+  };
+  auto emit = [&](Op&& op) {
+    std::uint32_t& d = depth[op.id.value];
+    for (OpId p : op.parents) d = std::max(d, depth[p.value] + 1);
+    s.stats.dag_height = std::max<std::uint64_t>(s.stats.dag_height, d);
     sink.add(std::move(op));
   };
   {
     Op op;
     op.id = OpId(0);
-    fill(op, {}, base);
+    std::vector<std::uint32_t> vs;
+    fill(op, {}, base, vs);
     op.error = err0;
+    finish_op(op);
     emit(std::move(op));
   }
 
+  // The ops in batches through a pipeline: the calling thread reads each batch's records and
+  // its share of the fixups and links (sequential streams), the workers make the ops, and the
+  // calling thread hands them to the sink in id order, so the output does not depend on the
+  // thread count.
+  struct Raw {  // what op i is made from
+    std::uint32_t k = 0;
+    std::vector<std::uint32_t> verts;
+    std::vector<StarTriangle> star;
+    std::vector<MadeTriangle> made;
+    std::vector<Fixup> fixups;
+    std::vector<Link> links;
+  };
+  struct Batch {
+    std::uint32_t first = 0;  // op id of raw[0]
+    std::vector<Raw> raw;
+    std::vector<Op> ops;
+    std::uint64_t links = 0;
+  };
+  constexpr std::uint32_t kBatchOps = 256;
+  const std::uint64_t batches = (m + kBatchOps - 1) / kBatchOps;
   Cursor<Fixup> fix(fixups);
   Cursor<Link> link(links);
   // The records are read a chunk of ops at a time: ops follow falling error, the spool the
@@ -370,89 +399,113 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
   std::vector<std::uint8_t> bytes;
   std::vector<RecordFile<std::uint8_t>::Piece> pieces;
   const std::uint64_t chunk_bytes = std::max<std::uint64_t>(s.budget(8), 1 << 16);
-  std::vector<std::uint32_t> verts;
-  std::vector<StarTriangle> star;
-  std::vector<MadeTriangle> made;
-  std::vector<std::pair<std::uint32_t, std::uint32_t>> owner;  // per made triangle: op, index
   std::uint64_t at = 0;
-  for (std::uint32_t i = 1; i <= m; ++i) {
-    if (i - 1 == at + chunk.size()) {
-      at = i - 1;
-      chunk.resize(
-          static_cast<std::size_t>(std::min<std::uint64_t>(std::uint64_t{1} << 16, m - at)));
-      ops.read(at, chunk);
-      std::size_t n = 0, total = 0;  // the entries whose records fit the chunk's bytes
-      for (; n < chunk.size() && (n == 0 || total + chunk[n].bytes <= chunk_bytes); ++n)
-        total += chunk[n].bytes;
-      chunk.resize(n);
-      pieces.resize(n);
-      chunk_at.resize(n);
-      for (std::size_t j = 0, to = 0; j < n; to += chunk[j].bytes, ++j) {
-        pieces[j] = {chunk[j].offset, chunk[j].bytes, to};
-        chunk_at[j] = to;
-      }
-      bytes.resize(total);
-      s.spool.read_pieces(pieces, bytes.data());
-    }
-    const OrderEntry& oe = chunk[i - 1 - at];
-    SpoolHead head;
-    const std::uint8_t* p = bytes.data() + chunk_at[i - 1 - at];
-    std::memcpy(&head, p, sizeof head);
-    p += sizeof head;
-    p = get(p, verts, head.vertices);
-    p = get(p, star, head.star);
-    get(p, made, head.made);
-
-    Op op;
-    op.id = OpId(i);
-    fill(op, verts, star);
-    op.error = s.err[oe.k];
-    op.birth_res = birth(oe.k);
-    owner.assign(made.size(), {kNone, 0});
-    fix.take(i, [&](const Fixup& f) {
-      bool found = false;
-      for (std::size_t j = 0; j < made.size(); ++j) {
-        if (made[j].id == f.tri) owner[j] = {f.owner, f.local}, found = true;
-      }
-      if (!found)
-        throw_internal("op assembly: a star triangle names a creator that did not make it");
-    });
-    for (std::size_t j = 0; j < made.size(); ++j) {
-      if (owner[j].first == kNone)
-        throw_internal("op assembly: a made triangle is in no later star nor in R^0");
-      op.pre.push_back({OpId(owner[j].first), owner[j].second});
-      op.parents.push_back(OpId(owner[j].first));
-      PreTriangle pt;
-      for (int k = 0; k < 3; ++k) pt.v[k] = index(made[j].v[k]);
-      if (made[j].is_void) pt.flags |= FragmentTriangle::kVoid;
-      op.pre_tris.push_back(pt);
-    }
-    // Links: the newer of PreF's triangle with a->b and the live one across.
-    link.take(i, [&](const Link& l) {
-      const std::array<std::uint32_t, 3>& v = star[l.tri].v;
-      const std::uint32_t a = v[l.edge], b = v[(l.edge + 1) % 3];
-      std::size_t inside = made.size();
-      int inside_edge = -1;
-      for (std::size_t j = 0; j < made.size(); ++j) {
-        const int x = index_of(made[j].v, a);
-        if (x >= 0 && made[j].v[(x + 1) % 3] == b) {
-          inside = j;
-          inside_edge = x;
+  auto make = [&](std::size_t b) {
+    auto batch = std::make_unique<Batch>();
+    batch->first = static_cast<std::uint32_t>(b * kBatchOps + 1);
+    const std::uint32_t last =
+        static_cast<std::uint32_t>(std::min<std::uint64_t>(m, (b + 1) * kBatchOps));
+    batch->raw.resize(last - batch->first + 1);
+    for (std::uint32_t i = batch->first; i <= last; ++i) {
+      if (i - 1 == at + chunk.size()) {
+        at = i - 1;
+        chunk.resize(
+            static_cast<std::size_t>(std::min<std::uint64_t>(std::uint64_t{1} << 16, m - at)));
+        ops.read(at, chunk);
+        std::size_t n = 0, total = 0;  // the entries whose records fit the chunk's bytes
+        for (; n < chunk.size() && (n == 0 || total + chunk[n].bytes <= chunk_bytes); ++n)
+          total += chunk[n].bytes;
+        chunk.resize(n);
+        pieces.resize(n);
+        chunk_at.resize(n);
+        for (std::size_t j = 0, to = 0; j < n; to += chunk[j].bytes, ++j) {
+          pieces[j] = {chunk[j].offset, chunk[j].bytes, to};
+          chunk_at[j] = to;
         }
+        bytes.resize(total);
+        s.spool.read_pieces(pieces, bytes.data());
       }
-      if (inside == made.size())
-        throw_internal("op assembly: a fragment boundary edge has no PreF triangle");
-      EdgeRef target{TriRef{OpId(owner[inside].first), owner[inside].second},
-                     static_cast<std::uint8_t>(inside_edge)};
-      if (l.owner > owner[inside].first) {
-        target = EdgeRef{TriRef{OpId(l.owner), l.local}, static_cast<std::uint8_t>(l.coarser_edge)};
+      Raw& r = batch->raw[i - batch->first];
+      r.k = chunk[i - 1 - at].k;
+      SpoolHead head;
+      const std::uint8_t* p = bytes.data() + chunk_at[i - 1 - at];
+      std::memcpy(&head, p, sizeof head);
+      p += sizeof head;
+      p = get(p, r.verts, head.vertices);
+      p = get(p, r.star, head.star);
+      get(p, r.made, head.made);
+      fix.take(i, [&](const Fixup& f) { r.fixups.push_back(f); });
+      link.take(i, [&](const Link& l) { r.links.push_back(l); });
+    }
+    return batch;
+  };
+  auto work = [&](Batch& batch) {
+    std::vector<std::uint32_t> vs;
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> owner;  // per made triangle: op, index
+    batch.ops.resize(batch.raw.size());
+    for (std::size_t n = 0; n < batch.raw.size(); ++n) {
+      const Raw& r = batch.raw[n];
+      Op& op = batch.ops[n];
+      op.id = OpId(batch.first + static_cast<std::uint32_t>(n));
+      fill(op, r.verts, r.star, vs);
+      op.error = s.err[r.k];
+      op.birth_res = birth(r.k);
+      owner.assign(r.made.size(), {kNone, 0});
+      for (const Fixup& f : r.fixups) {
+        bool found = false;
+        for (std::size_t j = 0; j < r.made.size(); ++j) {
+          if (r.made[j].id == f.tri) owner[j] = {f.owner, f.local}, found = true;
+        }
+        if (!found)
+          throw_internal("op assembly: a star triangle names a creator that did not make it");
       }
-      op.coarser.push_back({l.tri, static_cast<std::uint8_t>(l.edge), target});
-      ++s.stats.links;
-    });
-    emit(std::move(op));
-    if ((i & 0xffff) == 0) report(0.35 + 0.65 * double(i) / double(m));
-  }
+      for (std::size_t j = 0; j < r.made.size(); ++j) {
+        if (owner[j].first == kNone)
+          throw_internal("op assembly: a made triangle is in no later star nor in R^0");
+        op.pre.push_back({OpId(owner[j].first), owner[j].second});
+        op.parents.push_back(OpId(owner[j].first));
+        PreTriangle pt;
+        for (int k = 0; k < 3; ++k) pt.v[k] = vertex_index(vs, r.verts.size(), r.made[j].v[k]);
+        if (r.made[j].is_void) pt.flags |= FragmentTriangle::kVoid;
+        op.pre_tris.push_back(pt);
+      }
+      // Links: the newer of PreF's triangle with a->b and the live one across.
+      for (const Link& l : r.links) {
+        const std::array<std::uint32_t, 3>& v = r.star[l.tri].v;
+        const std::uint32_t a = v[l.edge], b = v[(l.edge + 1) % 3];
+        std::size_t inside = r.made.size();
+        int inside_edge = -1;
+        for (std::size_t j = 0; j < r.made.size(); ++j) {
+          const int x = index_of(r.made[j].v, a);
+          if (x >= 0 && r.made[j].v[(x + 1) % 3] == b) {
+            inside = j;
+            inside_edge = x;
+          }
+        }
+        if (inside == r.made.size())
+          throw_internal("op assembly: a fragment boundary edge has no PreF triangle");
+        EdgeRef target{TriRef{OpId(owner[inside].first), owner[inside].second},
+                       static_cast<std::uint8_t>(inside_edge)};
+        if (l.owner > owner[inside].first) {
+          target =
+              EdgeRef{TriRef{OpId(l.owner), l.local}, static_cast<std::uint8_t>(l.coarser_edge)};
+        }
+        op.coarser.push_back({l.tri, static_cast<std::uint8_t>(l.edge), target});
+        ++batch.links;
+      }
+      finish_op(op);
+    }
+    batch.raw = {};
+  };
+  auto merge = [&](Batch& batch, std::size_t b) {
+    for (Op& op : batch.ops) emit(std::move(op));
+    s.stats.links += batch.links;
+    const std::uint64_t done = std::min<std::uint64_t>(m, (b + 1) * kBatchOps);
+    if ((b & 0xff) == 0) report(0.35 + 0.65 * double(done) / double(m));
+  };
+  const unsigned threads = thread_count(s.options.threads);
+  ordered_pipeline(static_cast<std::size_t>(batches), threads, 2 * std::size_t(threads), make, work,
+                   merge);
   if (!fix.done() || !link.done()) throw_internal("op assembly: records name no op");
   s.stats.scratch_bytes += fixups.spilled_bytes() + links.spilled_bytes();
   s.stats.seconds_emit = since(t1);

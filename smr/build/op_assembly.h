@@ -36,6 +36,9 @@ struct AssemblyOptions {
   std::string tmp_dir;
   /// Budget of the external sorts, in bytes (tests use a few KiB to force spills).
   std::uint64_t memory_bytes = std::uint64_t{64} << 20;
+  /// Threads making the ops in finish() (0 = one per core); the ops do not depend on it. The
+  /// `position` given to finish() is then called from several threads at once.
+  unsigned threads = 1;
   /// Progress of finish() in [0, 1].
   std::function<void(double)> progress;
 };

@@ -1527,6 +1527,7 @@ class BlockPmBuilder {
     AssemblyOptions ao;
     ao.tmp_dir = opt_.tmp_dir;
     ao.memory_bytes = budget_ / 2;
+    ao.threads = opt_.threads;
     ao.progress = [this](double f) { report(0.9 + 0.1 * f); };
     assembler_ = std::make_unique<OpAssembler>(ao);
     auto faces = std::make_unique<storage::ExternalSorter<FaceRecord>>(opt_.tmp_dir, budget_ / 2);
