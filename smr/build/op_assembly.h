@@ -14,8 +14,10 @@
 //    with b->a alive just before i. Triangles with one directed edge live one after another, so
 //    the alive one is the last, by owner, whose owner is below i, provided its killer is above i:
 //    a merge of every triangle's edges with every op's boundary edges, both sorted by edge.
-// Memory holds 16 bytes per removal (its err, op id and DAG depth) and the sorts' budget, never the
-// triangles: a removal's record is spooled when it is added and read back when its op is made.
+// Memory holds 16 bytes per removal (its err, op id and DAG depth) and the budget, never the
+// triangles: a removal's record is spooled when it is added and read back when its op is made,
+// a chunk of records at a time (an 8th of the budget, read in runs of nearby records), and the
+// ops are made on `threads` workers a batch at a time, handed to the sink in id order.
 // The ops are the ones an in-memory replay of the ops in id order gives.
 #pragma once
 
@@ -34,7 +36,8 @@ namespace smr {
 struct AssemblyOptions {
   /// Scratch files' directory (empty = the system's temporary directory).
   std::string tmp_dir;
-  /// Budget of the external sorts, in bytes (tests use a few KiB to force spills).
+  /// Budget of the external sorts and the records' chunks, in bytes (tests use a few KiB to
+  /// force spills).
   std::uint64_t memory_bytes = std::uint64_t{64} << 20;
   /// Threads making the ops in finish() (0 = one per core); the ops do not depend on it. The
   /// `position` given to finish() is then called from several threads at once.
