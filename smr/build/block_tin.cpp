@@ -251,11 +251,7 @@ class SampleSpill {
       direct_->read_into(out, col0, row0, w, h);  // the whole window in one read, no copies
       return;
     }
-    std::vector<float> zbuf = std::move(out.z);
-    std::vector<std::uint8_t> vbuf = std::move(out.valid);
-    out = window_header(source.georef(), source.source(), col0, row0, w, h);
-    out.z = std::move(zbuf);
-    out.valid = std::move(vbuf);
+    set_window_header(out, source.georef(), source.source(), col0, row0, w, h);
     out.z.resize(std::size_t(w) * std::size_t(h));
     out.valid.resize(out.z.size());
     for (int ty = ty0; ty <= ty1; ++ty) {
@@ -413,11 +409,7 @@ class SampleSpill {
     for (const auto& t : cache.tiles) {
       if (t.tx != tx || t.ty != ty) continue;
       const auto [cw, rh] = extent(tx, ty);
-      std::vector<float> z = std::move(out.z);
-      std::vector<std::uint8_t> v = std::move(out.valid);
-      out = window_header(source.georef(), source.source(), tx * B_, ty * B_, cw, rh);
-      out.z = std::move(z);
-      out.valid = std::move(v);
+      set_window_header(out, source.georef(), source.source(), tx * B_, ty * B_, cw, rh);
       out.z.assign(t.z.begin(), t.z.end());
       if (std::find(t.v.begin(), t.v.end(), std::uint8_t{0}) != t.v.end()) {
         out.valid.assign(t.v.begin(), t.v.end());

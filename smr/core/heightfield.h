@@ -55,17 +55,24 @@ struct Heightfield {
   }
 };
 
-/// The header of window [col0, col0 + w) x [row0, row0 + h) of a raster with `georef` (its
-/// sample (0, 0) is the raster's (col0, row0)); no samples yet.
-inline Heightfield window_header(const Georef& georef, const std::string& source, int col0,
-                                 int row0, int w, int h) {
-  Heightfield out;
+/// Sets `out`'s header to window [col0, col0 + w) x [row0, row0 + h) of a raster with `georef`
+/// (its sample (0, 0) is the raster's (col0, row0)). Its sample buffers are kept as they are,
+/// for a reader filling window after window into them (their pages stay faulted in).
+inline void set_window_header(Heightfield& out, const Georef& georef, const std::string& source,
+                              int col0, int row0, int w, int h) {
   out.width = w;
   out.height = h;
   out.source = source;
   out.georef = georef;
   out.georef.x0 += col0 * georef.dx;
   out.georef.y0 += row0 * georef.dy;
+}
+
+/// The header of that window alone; no samples yet.
+inline Heightfield window_header(const Georef& georef, const std::string& source, int col0,
+                                 int row0, int w, int h) {
+  Heightfield out;
+  set_window_header(out, georef, source, col0, row0, w, h);
   return out;
 }
 
@@ -111,11 +118,7 @@ class HeightfieldWindows final : public RasterWindows {
     return out;
   }
   void read_into(Heightfield& out, int col0, int row0, int w, int h) const override {
-    std::vector<float> z = std::move(out.z);  // keep the buffers' pages
-    std::vector<std::uint8_t> valid = std::move(out.valid);
-    out = window_header(h_.georef, h_.source, col0, row0, w, h);
-    out.z = std::move(z);
-    out.valid = std::move(valid);
+    set_window_header(out, h_.georef, h_.source, col0, row0, w, h);
     out.z.resize(static_cast<std::size_t>(w) * static_cast<std::size_t>(h));
     out.valid.resize(h_.has_nodata() ? out.z.size() : 0);
     bool any_invalid = false;

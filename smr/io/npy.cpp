@@ -964,9 +964,8 @@ class NpyWindows final : public RasterWindows {
                   std::to_string(col0) + ", " + std::to_string(row0) + ") is outside '" + path_ +
                   "' (" + std::to_string(cols_) + " x " + std::to_string(rows_) + ")");
     }
-    std::vector<float> buffer = std::move(out.z);  // its pages, already faulted in
-    out = window_header(georef_, path_, col0, row0, w, h);
-    out.z = std::move(buffer);
+    set_window_header(out, georef_, path_, col0, row0, w, h);  // its pages, already faulted in
+    out.valid.clear();  // a plain .npy has no no-data samples
     const auto c0 = static_cast<std::size_t>(col0), r0 = static_cast<std::size_t>(row0);
     const auto ww = static_cast<std::size_t>(w), hh = static_cast<std::size_t>(h);
     out.z.resize(ww * hh);
