@@ -5,8 +5,11 @@
 // room when it is made); reading merges the runs and what is still in memory through a heap of
 // their heads, each run read through a buffer of its own.
 //
-//  - ExternalSorter: add() every record, then next() returns them in `Less` order. Stable: equal
-//    records come out in the order they were added, so a sort is a function of the sequence.
+//  - ExternalSorter: add() every record, then next() returns them in `Less` order. Stable by
+//    default: equal records come out in the order they were added, so a sort is a function of
+//    the sequence. With Ties::kAny they come out in some order (the same for the same sequence
+//    of adds) and no arrival number rides with each record: a third less to write and read for
+//    a 16-byte record, for records that Less orders totally or whose ties are interchangeable.
 //  - ExternalQueue: a priority queue (largest first) whose pushes are never larger than what was
 //    last popped, as in a backward sweep that sends messages to earlier items. It may be pushed
 //    and popped in any interleaving under that rule; equal records come out in push order.
@@ -32,23 +35,34 @@
 
 namespace smr::storage {
 
+/// What a sort does with records equal under its order (see above).
+enum class Ties { kArrival, kAny };
+
 namespace detail {
 
 // A record and its arrival number: equal records leave in arrival order.
-template <class T>
+template <class T, Ties kTies = Ties::kArrival>
 struct Item {
   T record;
   std::uint64_t seq;
 };
+template <class T>
+struct Item<T, Ties::kAny> {
+  T record;
+};
 
 // "a leaves before b" for items, from "a leaves before b" for records.
-template <class T, class Before>
+template <class T, class Before, Ties kTies = Ties::kArrival>
 struct ItemBefore {
   Before before;
-  bool operator()(const Item<T>& a, const Item<T>& b) const {
-    if (before(a.record, b.record)) return true;
-    if (before(b.record, a.record)) return false;
-    return a.seq < b.seq;
+  bool operator()(const Item<T, kTies>& a, const Item<T, kTies>& b) const {
+    if constexpr (kTies == Ties::kAny) {
+      return before(a.record, b.record);
+    } else {
+      if (before(a.record, b.record)) return true;
+      if (before(b.record, a.record)) return false;
+      return a.seq < b.seq;
+    }
   }
 };
 
@@ -57,38 +71,40 @@ struct ItemBefore {
 // when the heads are first asked for, so its buffer is sized by the runs there are then: the
 // buffers share `memory_bytes` (each at least 4 KiB). With `max_runs` set (a queue, whose runs
 // keep coming while it is read), reaching it merges the runs into one, in a new file.
-template <class T, class Before>
+template <class T, class Before, Ties kTies = Ties::kArrival>
 class Runs {
+  using Item = detail::Item<T, kTies>;
+
  public:
   Runs(std::string dir, std::uint64_t memory_bytes, std::size_t max_runs,
-       ItemBefore<T, Before> before)
+       ItemBefore<T, Before, kTies> before)
       : dir_(std::move(dir)),
         memory_bytes_(memory_bytes),
         max_runs_(max_runs),
         before_(std::move(before)) {}
 
   // Sorts `items` into leaving order and appends them as one run; empties `items`.
-  void spill(std::vector<Item<T>>& items) {
+  void spill(std::vector<Item>& items) {
     std::sort(items.begin(), items.end(), before_);
     write(items.data(), items.size());
     items.clear();
   }
   // Appends `n` items as one run (already in leaving order).
-  void write(const Item<T>* data, std::size_t n) {
+  void write(const Item* data, std::size_t n) {
     if (n == 0) return;
     if (!file_) file_ = std::make_unique<TempFile>(dir_, 0);
-    file_->write(end_ * sizeof(Item<T>), data, n * sizeof(Item<T>));
+    file_->write(end_ * sizeof(Item), data, n * sizeof(Item));
     runs_.push_back({end_, end_ + n, {}, 0});
     unread_.push_back(runs_.size() - 1);
     end_ += n;
-    written_ += n * sizeof(Item<T>);
+    written_ += n * sizeof(Item);
     ++made_;
     if (max_runs_ != 0 && heap_.size() + unread_.size() >= max_runs_) merge();
   }
   std::size_t count() const { return made_; }       // runs made, merged ones included
   std::uint64_t bytes() const { return written_; }  // written to scratch files in all
   // The first item of all runs (nullptr when they are done); pop() removes it.
-  const Item<T>* top() {
+  const Item* top() {
     start();
     return heap_.empty() ? nullptr : head(heap_.front());
   }
@@ -103,10 +119,10 @@ class Runs {
  private:
   struct Run {
     std::uint64_t next, end;  // items of the file not yet read
-    std::vector<Item<T>> buffer;
+    std::vector<Item> buffer;
     std::size_t pos;
   };
-  const Item<T>* head(std::size_t r) const { return &runs_[r].buffer[runs_[r].pos]; }
+  const Item* head(std::size_t r) const { return &runs_[r].buffer[runs_[r].pos]; }
   void start() {
     for (std::size_t r : unread_) push_run(r);
     unread_.clear();
@@ -116,14 +132,14 @@ class Runs {
     Run& run = runs_[r];
     if (run.pos == run.buffer.size()) {
       if (run.next == run.end) {
-        std::vector<Item<T>>().swap(run.buffer);
+        std::vector<Item>().swap(run.buffer);
         return;
       }
       if (run.buffer.capacity() == 0) run.buffer.reserve(buffer_items());
       const std::size_t n = static_cast<std::size_t>(
           std::min<std::uint64_t>(run.buffer.capacity(), run.end - run.next));
       run.buffer.resize(n);
-      file_->read(run.next * sizeof(Item<T>), run.buffer.data(), n * sizeof(Item<T>));
+      file_->read(run.next * sizeof(Item), run.buffer.data(), n * sizeof(Item));
       run.next += n;
       run.pos = 0;
     }
@@ -133,16 +149,16 @@ class Runs {
   // Every item left, in leaving order, as the one run of a new file.
   void merge() {
     auto merged = std::make_unique<TempFile>(dir_, 0);
-    std::vector<Item<T>> out;
+    std::vector<Item> out;
     out.reserve(buffer_items());
     std::uint64_t n = 0;
     auto flush = [&] {
-      merged->write(n * sizeof(Item<T>), out.data(), out.size() * sizeof(Item<T>));
+      merged->write(n * sizeof(Item), out.data(), out.size() * sizeof(Item));
       n += out.size();
-      written_ += out.size() * sizeof(Item<T>);
+      written_ += out.size() * sizeof(Item);
       out.clear();
     };
-    for (const Item<T>* h; (h = top()) != nullptr; pop()) {
+    for (const Item* h; (h = top()) != nullptr; pop()) {
       out.push_back(*h);
       if (out.size() == out.capacity()) flush();
     }
@@ -158,17 +174,17 @@ class Runs {
     return [this](std::size_t a, std::size_t b) { return before_(*head(b), *head(a)); };
   }
   std::size_t buffer_items() const {
-    const std::size_t floor = std::max<std::size_t>(1, 4096 / sizeof(Item<T>));
+    const std::size_t floor = std::max<std::size_t>(1, 4096 / sizeof(Item));
     const std::size_t runs =
         std::max<std::size_t>({std::size_t{1}, max_runs_, heap_.size() + unread_.size()});
-    const std::uint64_t share = memory_bytes_ / sizeof(Item<T>) / runs;
+    const std::uint64_t share = memory_bytes_ / sizeof(Item) / runs;
     return std::max<std::size_t>(floor, static_cast<std::size_t>(share));
   }
 
   std::string dir_;
   std::uint64_t memory_bytes_;
   std::size_t max_runs_;
-  ItemBefore<T, Before> before_;
+  ItemBefore<T, Before, kTies> before_;
   std::unique_ptr<TempFile> file_;
   std::uint64_t end_ = 0, written_ = 0;
   std::size_t made_ = 0;
@@ -178,10 +194,9 @@ class Runs {
 };
 
 // The in-memory records take half of the budget (at least 1024), the run buffers the other half.
-template <class T>
+template <class Item>
 std::size_t buffer_capacity(std::uint64_t memory_bytes) {
-  return static_cast<std::size_t>(
-      std::max<std::uint64_t>(1024, memory_bytes / 2 / sizeof(Item<T>)));
+  return static_cast<std::size_t>(std::max<std::uint64_t>(1024, memory_bytes / 2 / sizeof(Item)));
 }
 inline constexpr std::size_t kQueueMaxRuns = 64;
 
@@ -197,9 +212,10 @@ struct Greater {
 
 }  // namespace detail
 
-template <class T, class Less = std::less<T>>
+template <class T, class Less = std::less<T>, Ties kTies = Ties::kArrival>
 class ExternalSorter {
   static_assert(std::is_trivially_copyable_v<T>, "records are written to disk as bytes");
+  using Item = detail::Item<T, kTies>;
 
  public:
   /// `tmp_dir`: where runs go (empty = the system's temporary directory); `memory_bytes`: half
@@ -207,20 +223,29 @@ class ExternalSorter {
   ExternalSorter(const std::string& tmp_dir, std::uint64_t memory_bytes, Less less = {})
       : before_{less},
         runs_(scratch_dir(tmp_dir), memory_bytes / 2, 0, before_),
-        capacity_(detail::buffer_capacity<T>(memory_bytes)) {}
+        capacity_(detail::buffer_capacity<Item>(memory_bytes)) {}
 
   void add(const T& record) {
     if (reading_) throw_internal("ExternalSorter: add() after next()");
     if (buffer_.size() == capacity_) runs_.spill(buffer_);
-    buffer_.push_back({record, size_++});
+    if constexpr (kTies == Ties::kAny) {
+      buffer_.push_back({record});
+    } else {
+      buffer_.push_back({record, size_});
+    }
+    ++size_;
+  }
+  /// Ends the adding: sorts the records still in memory (the first next() does it otherwise),
+  /// so that a thread of its own can do it. Idempotent.
+  void seal() {
+    if (reading_) return;
+    reading_ = true;
+    std::sort(buffer_.begin(), buffer_.end(), before_);
   }
   /// The next record in order; false once all are out. The first call ends the adding.
   bool next(T& out) {
-    if (!reading_) {
-      reading_ = true;
-      std::sort(buffer_.begin(), buffer_.end(), before_);
-    }
-    const detail::Item<T>* run = runs_.top();
+    seal();
+    const Item* run = runs_.top();
     if (pos_ < buffer_.size() && (run == nullptr || before_(buffer_[pos_], *run))) {
       out = buffer_[pos_++].record;
       return true;
@@ -235,10 +260,10 @@ class ExternalSorter {
   std::uint64_t spilled_bytes() const { return runs_.bytes(); }
 
  private:
-  detail::ItemBefore<T, Less> before_;
-  detail::Runs<T, Less> runs_;
+  detail::ItemBefore<T, Less, kTies> before_;
+  detail::Runs<T, Less, kTies> runs_;
   std::size_t capacity_;
-  std::vector<detail::Item<T>> buffer_;
+  std::vector<Item> buffer_;
   std::size_t pos_ = 0;
   std::uint64_t size_ = 0;
   bool reading_ = false;
@@ -253,7 +278,7 @@ class ExternalQueue {
   ExternalQueue(const std::string& tmp_dir, std::uint64_t memory_bytes, Less less = {})
       : before_{Before{less}},
         runs_(scratch_dir(tmp_dir), memory_bytes / 2, detail::kQueueMaxRuns, before_),
-        capacity_(detail::buffer_capacity<T>(memory_bytes)) {}
+        capacity_(detail::buffer_capacity<detail::Item<T>>(memory_bytes)) {}
 
   /// Adds a record; it must not be larger than the last one popped.
   void push(const T& record) {

@@ -692,38 +692,33 @@ class Builder {
     std::sort(prescribed.begin(), prescribed.end());
     prescribed.erase(std::unique(prescribed.begin(), prescribed.end()), prescribed.end());
 
-    const Crmr tin = build_greedy_tin(w, g);
+    const GreedyMesh tin = build_greedy_mesh(w, g);
     stats_.seconds_greedy += since(clock);
 
     // The final triangles, into the global mesh.
     const std::uint32_t first_tri = static_cast<std::uint32_t>(tris_.size());
-    std::vector<std::uint32_t> local(tin.header.vertex_count, kNone);  // greedy vertex id -> ours
-    for (const Op& op : tin.ops) {
-      for (const FragmentTriangle& t : op.fragment) {
-        if (t.killer.valid()) continue;
-        MTri m;
-        for (int k = 0; k < 3; ++k) {
-          const Vertex& gv = op.vertices[t.v[k]];
-          std::uint32_t& ours = local.at(gv.id.value);
-          if (ours == kNone) {
-            const int col = static_cast<int>(std::lround((gv.p.x - w.georef.x0) / w.georef.dx));
-            const int row = static_cast<int>(std::lround((gv.p.y - w.georef.y0) / w.georef.dy));
-            const bool on_border = col == 0 || row == 0 || col == ww - 1 || row == wh - 1;
-            if (on_border &&
-                !std::binary_search(prescribed.begin(), prescribed.end(),
-                                    std::pair(std::uint32_t(col), std::uint32_t(row)))) {
-              throw_internal(dem_.source() + ": block (" + std::to_string(bx) + ", " +
-                             std::to_string(by) + ") put a vertex on its border at (" +
-                             std::to_string(c0 + col) + ", " + std::to_string(r0 + row) +
-                             ") that its neighbour does not have");
-            }
-            ours = global_vertex(c0 + col, r0 + row, static_cast<float>(gv.p.z));
+    std::vector<std::uint32_t> local(tin.vertices.size(), kNone);  // greedy vertex id -> ours
+    for (const GreedyMesh::Triangle& t : tin.triangles) {
+      MTri m;
+      for (int k = 0; k < 3; ++k) {
+        const GreedyMesh::Vertex& gv = tin.vertices.at(t.v[k]);
+        std::uint32_t& ours = local[t.v[k]];
+        if (ours == kNone) {
+          const int col = static_cast<int>(gv.col), row = static_cast<int>(gv.row);
+          const bool on_border = col == 0 || row == 0 || col == ww - 1 || row == wh - 1;
+          if (on_border && !std::binary_search(prescribed.begin(), prescribed.end(),
+                                               std::pair(std::uint32_t(col), std::uint32_t(row)))) {
+            throw_internal(dem_.source() + ": block (" + std::to_string(bx) + ", " +
+                           std::to_string(by) + ") put a vertex on its border at (" +
+                           std::to_string(c0 + col) + ", " + std::to_string(r0 + row) +
+                           ") that its neighbour does not have");
           }
-          m.v[k] = ours;
+          ours = global_vertex(c0 + col, r0 + row, gv.z);
         }
-        m.is_void = t.is_void();
-        tris_.push_back(m);
+        m.v[k] = ours;
       }
+      m.is_void = t.is_void;
+      tris_.push_back(m);
     }
     // Adjacency: within the block, and across its borders to earlier blocks.
     for (std::uint32_t t = first_tri; t < tris_.size(); ++t) {
@@ -978,9 +973,10 @@ class Builder {
 
   /// The bound of the samples in the closed triangle (window coordinates) against its plane;
   /// up = kInfeasible when it covers a no-data sample. With `outward`, rounded up by the exact
-  /// tolerance (a bound on new triangles).
+  /// tolerance (a bound on new triangles). The scan stops after the first row that takes up or
+  /// down past `limit`: the bound is then only a lower bound of the triangle's, above `limit`.
   TriBound exact_bound(const std::array<std::uint32_t, 3>& v, const Heightfield& w, int c0, int r0,
-                       bool outward) const {
+                       bool outward, double limit = kInfeasible) const {
     const MVert &a = verts_[v[0]], &b = verts_[v[1]], &c = verts_[v[2]];
     const Plane pl(a, b, c);
     TriBound tb;
@@ -1008,6 +1004,7 @@ class Builder {
       scanned_ += static_cast<std::uint64_t>(xr - xl + 1);
       const float* z = w.z.data() + base;
       scan_row(z, xl, xr, pa, pl.b * double(row) + pc, up, down, lo, hi);
+      if (up > limit || down > limit) break;
     }
     tb.up = up;
     tb.down = down;
@@ -1473,7 +1470,10 @@ class Builder {
   /// Plans the removal of `v`: its hole's triangulation and error (kInfeasible if impossible).
   /// With a window w and `estimate`, no sample is scanned: the error is the removed vertex's
   /// own deviation from the new triangles, a lower bound of the exact one (p.lower_bound).
-  void plan(std::uint32_t v, Plan& p, const Heightfield* w, int c0, int r0, bool estimate) const {
+  /// Exact errors are scanned only until they pass `limit` (a removal that would not be made):
+  /// p.err is then a lower bound above it (p.lower_bound) and p.bounds incomplete.
+  void plan(std::uint32_t v, Plan& p, const Heightfield* w, int c0, int r0, bool estimate,
+            double limit = kInfeasible) const {
     p.err = kInfeasible;
     p.lower_bound = false;
     ++plans_;
@@ -1504,8 +1504,14 @@ class Builder {
       return;
     }
     for (const auto& nt : p.tris) {
-      p.bounds.push_back(w != nullptr ? exact_bound(nt, *w, c0, r0, true) : overlay_bound(nt, p));
+      p.bounds.push_back(w != nullptr ? exact_bound(nt, *w, c0, r0, true, limit)
+                                      : overlay_bound(nt, p));
       err = std::max(err, p.bounds.back().err());
+      if (err > limit) {
+        p.err = err;
+        p.lower_bound = true;
+        return;
+      }
     }
     p.err = err;
   }
@@ -1854,9 +1860,9 @@ class Builder {
           if (stamp_[v] == round_stamp_) continue;
           if (n == chosen.size()) chosen.emplace_back();
           Plan& q = chosen[n].second;
-          plan(v, q, w, c0, r0, false);
+          plan(v, q, w, c0, r0, false, eps);
           cost_[v] = q.err;
-          dirty_[v] = 0;
+          dirty_[v] = q.lower_bound ? 2 : 0;
           if (q.err > eps) continue;
           chosen[n++].first = v;
           stamp_[v] = round_stamp_;

@@ -6,7 +6,7 @@
 // The DEM is read one leaf block at a time (RasterWindows), never whole:
 //  1. Each block border line is simplified on its own (1-D, within max_error), so the two blocks
 //     that share it agree on its vertices; each leaf block is then triangulated by greedy
-//     Delaunay insertion (build_greedy_tin) from those border vertices to max_error. The union of
+//     Delaunay insertion (build_greedy_mesh) from those border vertices to max_error. The union of
 //     the blocks is made Delaunay across the border lines by Lawson flips, with a greedy
 //     insertion wherever a flipped triangle would exceed max_error: the finest mesh M^m, a
 //     Delaunay triangulation with exact per-triangle errors.

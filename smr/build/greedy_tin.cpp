@@ -179,9 +179,11 @@ class OpStore {
 
 class Builder {
  public:
-  Builder(const Heightfield& dem, const GreedyTinOptions& options)
+  /// `mesh_only`: no ops are made (run_mesh()).
+  Builder(const Heightfield& dem, const GreedyTinOptions& options, bool mesh_only = false)
       : dem_(dem),
         opt_(options),
+        mesh_only_(mesh_only),
         tol_(options.tolerance >= 0.0 ? options.tolerance : exact_tolerance(dem)) {
     if (dem.width < 2 || dem.height < 2) {
       throw_input(dem.source + ": a DEM needs at least 2x2 samples, got " +
@@ -211,6 +213,38 @@ class Builder {
   }
 
   Crmr run() {
+    const double err0 = refine();
+    // The finest mesh's error: the largest error of any surviving triangle (those under the stop
+    // tolerance never enter the queue, so scan them all).
+    double err_final = 0.0;
+    for (const BuildTri& t : tris_) {
+      if (t.alive) err_final = std::max(err_final, t.err);
+    }
+    return finish(err0, err_final);
+  }
+
+  GreedyMesh run_mesh() {
+    refine();
+    GreedyMesh mesh;
+    mesh.vertices.reserve(verts_.size());
+    for (const BuildVertex& v : verts_) mesh.vertices.push_back({v.col, v.row, v.z});
+    // By creation: ops are made in creation order and each holds its survivors in that order.
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> alive;  // (seq, record)
+    for (std::uint32_t id = 0; id < tris_.size(); ++id) {
+      if (tris_[id].alive) alive.push_back({tris_[id].seq, id});
+    }
+    std::sort(alive.begin(), alive.end());
+    mesh.triangles.reserve(alive.size());
+    for (const auto& [seq, id] : alive)
+      mesh.triangles.push_back({tris_[id].v, tris_[id].is_void != 0});
+    return mesh;
+  }
+
+ private:
+  // The insertions: R^0 (the corners, the initial vertices, refined until holes are exact and
+  // to base_vertices), then the sample of largest error until every one is within the stop
+  // error. Returns R^0's error. Unless mesh_only_, each op is closed as it ends.
+  double refine() {
     const std::uint32_t w = dem_.width - 1, h = dem_.height - 1;
     // R^0: the corner triangulation, refined until holes are exact (and to base_vertices).
     begin_op(kMixed);
@@ -240,7 +274,7 @@ class Builder {
       insert_top();
     }
     const double err0 = heap_.empty() ? 0.0 : top_err();
-    close_op();
+    if (!mesh_only_) close_op();
     err0_ = err0;
 
     // R^1..R^m: one op per insertion, coalesced while the mesh error exceeds its start.
@@ -251,19 +285,12 @@ class Builder {
       begin_op(e_start);
       insert_top();
       while (!heap_.empty() && top_err() > e_start) insert_top();
-      close_op();
+      if (!mesh_only_) close_op();
       if (opt_.progress && (++steps & 0xfff) == 0) report_progress();
     }
-    // The finest mesh's error: the largest error of any surviving triangle (those under the stop
-    // tolerance never enter the queue, so scan them all).
-    double err_final = 0.0;
-    for (const BuildTri& t : tris_) {
-      if (t.alive) err_final = std::max(err_final, t.err);
-    }
-    return finish(err0, err_final);
+    return err0;
   }
 
- private:
   // ---- vertices and samples ----
   std::uint32_t add_vertex(std::uint32_t col, std::uint32_t row) {
     verts_.push_back({col, row, has_data(col, row) ? dem_.at(col, row) : fill_z_});
@@ -361,7 +388,7 @@ class Builder {
     t.op = current_op_ & ((1u << BuildTri::kOpBits) - 1);  // begin_op checks the range
     t.seq = next_seq_++;
     f->info() = {id, current_op_, kNone};
-    op_created_.push_back(id);
+    if (!mesh_only_) op_created_.push_back(id);
     scan(t);
     push(id);
     return id;
@@ -500,7 +527,11 @@ class Builder {
     BuildTri& t = tris_[id];
     t.alive = 0;
     heap_remove(id);
-    if (t.op != current_op_) op_killed_.push_back(id);
+    if (mesh_only_) {
+      free_tris_.push_back(id);  // no op refers to it
+    } else if (t.op != current_op_) {
+      op_killed_.push_back(id);
+    }
   }
 
   void insert_top() {
@@ -753,6 +784,7 @@ class Builder {
 
   const Heightfield& dem_;
   const GreedyTinOptions& opt_;
+  const bool mesh_only_;
   const double tol_;
   double stop_error_ = 0.0;
   double err0_ = 0.0;
@@ -804,6 +836,10 @@ double exact_tolerance(const Heightfield& dem) {
 
 Crmr build_greedy_tin(const Heightfield& dem, const GreedyTinOptions& options) {
   return Builder(dem, options).run();
+}
+
+GreedyMesh build_greedy_mesh(const Heightfield& dem, const GreedyTinOptions& options) {
+  return Builder(dem, options, true).run_mesh();
 }
 
 }  // namespace smr

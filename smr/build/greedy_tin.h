@@ -5,6 +5,7 @@
 // (Brown 4.4.3.3 coalescing).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <utility>
@@ -44,6 +45,23 @@ struct GreedyTinOptions {
 /// covers a valid sample other than its vertices, so holes are represented exactly.
 /// Throws smr::Error on unusable input (fewer than 2x2 samples, no valid sample).
 Crmr build_greedy_tin(const Heightfield& dem, const GreedyTinOptions& options = {});
+
+/// The finest mesh of the same insertions, without the CRMR (no ops are made): for a builder
+/// that makes its own hierarchy from it (block_tin.cpp's leaf blocks).
+struct GreedyMesh {
+  struct Vertex {
+    std::uint32_t col = 0, row = 0;
+    float z = 0.0f;  // the sample, or the fill value at a no-data sample
+  };
+  struct Triangle {
+    std::array<std::uint32_t, 3> v{};  // vertex indices, counter-clockwise
+    bool is_void = false;
+  };
+  std::vector<Vertex> vertices;  // in insertion order (the corners first)
+  /// In the order build_greedy_tin's ops hold them (by op, then fragment index).
+  std::vector<Triangle> triangles;
+};
+GreedyMesh build_greedy_mesh(const Heightfield& dem, const GreedyTinOptions& options = {});
 
 /// The tolerance below which a vertical error counts as zero for `dem` (float rounding).
 double exact_tolerance(const Heightfield& dem);

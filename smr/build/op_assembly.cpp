@@ -46,15 +46,32 @@ struct RawFixup {  // triangle `tri` made by `creator` is triangle `local` of de
 };
 // A directed edge of a triangle (an answer: edge `edge` of triangle `local` of dest's star, made
 // by `creator`) or a fragment boundary edge asking for the triangle across (edge `edge` of star
-// triangle `local` of removal `dest`; its key is the reversed edge b->a). Sorted by key only (the
-// sort is stable), so each edge's triangles and questions meet in one group.
+// triangle `local` of removal `dest`; its key is the reversed edge b->a). Sorted by key only, so
+// each edge's triangles and questions meet in one group; their order in it does not matter (a
+// question has one answer at most), so the sort keeps no arrival numbers. 20 bytes: there are
+// about four for every triangle ever made.
 struct EdgeItem {
-  std::uint64_t key = 0;
-  std::uint32_t dest = 0, creator = 0, local = 0;
-  std::uint8_t edge = 0, question = 0;
-  bool operator<(const EdgeItem& o) const { return key < o.key; }
+  static constexpr std::uint32_t kMaxLocal = (std::uint32_t{1} << 29) - 1;
+  std::uint32_t a = 0, b = 0;  // the key, a->b
+  std::uint32_t dest = 0, creator = 0;
+  std::uint32_t packed = 0;  // local << 3 | question << 2 | edge
+
+  static EdgeItem make(std::uint32_t a, std::uint32_t b, std::uint32_t dest, std::uint32_t creator,
+                       std::uint32_t local, std::uint32_t edge, bool question) {
+    if (local > kMaxLocal) throw_internal("op assembly: a star or R^0 of more than 2^29 triangles");
+    return {a, b, dest, creator, local << 3 | std::uint32_t(question) << 2 | edge};
+  }
+  std::uint64_t key() const { return edge_key(a, b); }
+  std::uint32_t local() const { return packed >> 3; }
+  std::uint32_t edge() const { return packed & 3; }
+  bool question() const { return (packed & 4) != 0; }
+  bool operator<(const EdgeItem& o) const { return a < o.a || (a == o.a && b < o.b); }
 };
+static_assert(sizeof(EdgeItem) == 20);
+using EdgeSorter = ExternalSorter<EdgeItem, std::less<EdgeItem>, storage::Ties::kAny>;
 // The same, by op ids.
+// Fixups, links and the order are each unique under their order: their sorts keep no arrival
+// numbers.
 struct Fixup {
   std::uint32_t op = 0, tri = 0, owner = 0, local = 0;
   bool operator<(const Fixup& o) const { return op < o.op || (op == o.op && tri < o.tri); }
@@ -100,11 +117,14 @@ int index_of(const std::array<std::uint32_t, 3>& v, std::uint32_t x) {
   return -1;
 }
 
+template <class T>
+using UniqueSorter = ExternalSorter<T, std::less<T>, storage::Ties::kAny>;
+
 // Reads a sorter's stream one op at a time.
 template <class T>
 class Cursor {
  public:
-  explicit Cursor(ExternalSorter<T>& s) : s_(s) { more_ = s_.next(head_); }
+  explicit Cursor(UniqueSorter<T>& s) : s_(s) { more_ = s_.next(head_); }
   // Calls f(record) for each record whose op is `op`; records of earlier ops are an error.
   template <class F>
   void take(std::uint32_t op, F&& f) {
@@ -117,7 +137,7 @@ class Cursor {
   bool done() const { return !more_; }
 
  private:
-  ExternalSorter<T>& s_;
+  UniqueSorter<T>& s_;
   T head_{};
   bool more_ = false;
 };
@@ -130,16 +150,16 @@ struct OpAssembler::State {
         dir(storage::scratch_dir(options.tmp_dir)),
         spool(dir),
         fixups(dir),
-        edges(std::make_unique<ExternalSorter<EdgeItem>>(dir, budget(4))),
-        order(std::make_unique<ExternalSorter<OrderKey>>(dir, budget(4))) {}
+        edges(std::make_unique<EdgeSorter>(dir, budget(4))),
+        order(std::make_unique<UniqueSorter<OrderKey>>(dir, budget(4))) {}
 
   AssemblyOptions options;
   std::string dir;
   RecordFile<std::uint8_t> spool;
   RecordFile<RawFixup> fixups;
-  std::unique_ptr<ExternalSorter<EdgeItem>> edges;  // filled as removals come
-  std::unique_ptr<ExternalSorter<OrderKey>> order;  // filled as removals come
-  std::vector<double> err;                          // per removal
+  std::unique_ptr<EdgeSorter> edges;              // filled as removals come
+  std::unique_ptr<UniqueSorter<OrderKey>> order;  // filled as removals come
+  std::vector<double> err;                        // per removal
   std::vector<std::uint8_t> record;
   AssemblyStats stats;
   bool finished = false;
@@ -184,7 +204,7 @@ std::uint32_t OpAssembler::add_removal(std::span<const std::uint32_t> vertices,
       s.fixups.push({t.creator, t.id, k, j});
     }
     for (std::uint32_t i = 0; i < 3; ++i) {
-      s.edges->add({edge_key(t.v[i], t.v[(i + 1) % 3]), k, t.creator, j, std::uint8_t(i), 0});
+      s.edges->add(EdgeItem::make(t.v[i], t.v[(i + 1) % 3], k, t.creator, j, i, false));
     }
   }
   // F's boundary edges: a star triangle's edges whose reverse no star triangle has.
@@ -196,7 +216,7 @@ std::uint32_t OpAssembler::add_removal(std::span<const std::uint32_t> vertices,
         const int x = index_of(o.v, b);
         inner = inner || (x >= 0 && o.v[(x + 1) % 3] == a);
       }
-      if (!inner) s.edges->add({edge_key(b, a), k, kNone, j, std::uint8_t(i), 1});
+      if (!inner) s.edges->add(EdgeItem::make(b, a, k, kNone, j, i, true));
     }
   }
   s.err.push_back(e);
@@ -239,7 +259,7 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
       s.fixups.push({t.creator, t.id, kNone, j});
     }
     for (std::uint32_t i = 0; i < 3; ++i) {
-      s.edges->add({edge_key(t.v[i], t.v[(i + 1) % 3]), kNone, t.creator, j, std::uint8_t(i), 0});
+      s.edges->add(EdgeItem::make(t.v[i], t.v[(i + 1) % 3], kNone, t.creator, j, i, false));
     }
   }
   s.spool.flush();
@@ -263,12 +283,17 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
   constexpr std::uint32_t kNever = kNone;  // killer of a finest triangle: never replaced
   report(0.05);
 
-  ExternalSorter<Fixup> fixups(s.dir, s.budget(4));
-  s.fixups.for_each([&](const RawFixup& f) {
-    fixups.add({op_of[f.creator], f.tri, op_id(f.dest), f.local});
-  });
-  ExternalSorter<Link> links(s.dir, s.budget(4));
-  {
+  // The two joins are independent (both only read op_of): the fixups' on one thread, the
+  // links' on another.
+  UniqueSorter<Fixup> fixups(s.dir, s.budget(4));
+  UniqueSorter<Link> links(s.dir, s.budget(4));
+  auto join_fixups = [&] {
+    s.fixups.for_each([&](const RawFixup& f) {
+      fixups.add({op_of[f.creator], f.tri, op_id(f.dest), f.local});
+    });
+    fixups.seal();
+  };
+  auto join_links = [&] {
     // Each edge's group: the question of op i is answered by the triangle across alive just
     // before i (owner < i < killer; one at most, as triangles with one directed edge live one
     // after another).
@@ -277,25 +302,33 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
     bool more = s.edges->next(e);
     while (more) {
       group.clear();
-      const std::uint64_t key = e.key;
-      for (; more && e.key == key; more = s.edges->next(e)) group.push_back(e);
+      const std::uint64_t key = e.key();
+      for (; more && e.key() == key; more = s.edges->next(e)) group.push_back(e);
       for (const EdgeItem& q : group) {
-        if (q.question == 0) continue;
+        if (!q.question()) continue;
         const std::uint32_t i = op_of[q.dest];
         for (const EdgeItem& r : group) {
-          if (r.question != 0) continue;
+          if (r.question()) continue;
           const std::uint32_t owner = op_id(r.dest);
           const std::uint32_t killer = r.creator == kNone ? kNever : op_of[r.creator];
           if (owner < i && i < killer) {
-            links.add({i, q.local, q.edge, owner, r.local, r.edge});
+            links.add({i, q.local(), q.edge(), owner, r.local(), r.edge()});
             break;
           }
         }
       }
     }
-    s.stats.scratch_bytes += s.edges->spilled_bytes();
-    s.edges.reset();
-  }
+    links.seal();
+  };
+  parallel_for(2, std::min(2u, thread_count(s.options.threads)), [&](std::size_t job) {
+    if (job == 0) {
+      join_links();
+    } else {
+      join_fixups();
+    }
+  });
+  s.stats.scratch_bytes += s.edges->spilled_bytes();
+  s.edges.reset();
   s.stats.scratch_bytes += s.spool.bytes() + s.fixups.bytes() + ops.bytes();
   report(0.35);
 

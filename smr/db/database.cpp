@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <condition_variable>
+#include <cstring>
 #include <deque>
 #include <exception>
 #include <filesystem>
@@ -12,6 +13,7 @@
 #include <set>
 #include <span>
 #include <thread>
+#include <type_traits>
 
 #include <malloc.h>
 
@@ -235,7 +237,9 @@ WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header
     ++report.rtree_nodes;
     writer.append(Table::kRtree, id, node);
   });
-  storage::ExternalSorter<Locator> locators(tmp_dir, side_sort_bytes(options));
+  // Ids are unique: the locators' sort keeps no arrival numbers.
+  storage::ExternalSorter<Locator, std::less<Locator>, storage::Ties::kAny> locators(
+      tmp_dir, side_sort_bytes(options));
 
   // Leaves, a window of them at a time: their pages are encoded on every core and appended in
   // order, with their R-tree leaves.
@@ -394,6 +398,97 @@ struct OpRecord {
   std::uint32_t parent_count = 0;
 };
 
+// The spool's copy of an op: its fields as they are in memory, the vectors' sizes first (every
+// part is trivially copyable), so spooling and reading back are copies, not a page's encoding.
+// Read back by this process only: no version, no byte order.
+struct SpoolHead {
+  OpId id;
+  double birth_res = 0.0, error = 0.0;
+  std::uint32_t new_vertex_count = 0;
+  std::uint32_t sizes[7] = {};  // vertices, fragment, pre, pre_tris, coarser, parents, children
+  Box3 box;
+  Sphere sphere;
+  NormalCone cone;
+  Box3 roi;
+  NormalCone subtree_cone;
+};
+
+template <class T>
+void spool_vector(Bytes& out, const std::vector<T>& v) {
+  static_assert(std::is_trivially_copyable_v<T>);
+  const auto* b = reinterpret_cast<const std::uint8_t*>(v.data());
+  out.insert(out.end(), b, b + v.size() * sizeof(T));
+}
+template <class T>
+void unspool_vector(ByteView& in, std::vector<T>& v, std::uint32_t n, std::uint64_t id) {
+  static_assert(std::is_trivially_copyable_v<T>);
+  if (in.size() < std::size_t{n} * sizeof(T))
+    throw_internal("database writer: the scratch copy of op " + std::to_string(id) +
+                   " is truncated");
+  v.resize(n);
+  std::memcpy(v.data(), in.data(), std::size_t{n} * sizeof(T));
+  in = in.subspan(std::size_t{n} * sizeof(T));
+}
+
+Bytes spool_op(const Op& op) {
+  SpoolHead h;
+  h.id = op.id;
+  h.birth_res = op.birth_res;
+  h.error = op.error;
+  h.new_vertex_count = op.new_vertex_count;
+  const std::size_t sizes[7] = {op.vertices.size(), op.fragment.size(), op.pre.size(),
+                                op.pre_tris.size(), op.coarser.size(),  op.parents.size(),
+                                op.children.size()};
+  for (int i = 0; i < 7; ++i) h.sizes[i] = static_cast<std::uint32_t>(sizes[i]);
+  h.box = op.box;
+  h.sphere = op.sphere;
+  h.cone = op.cone;
+  h.roi = op.roi;
+  h.subtree_cone = op.subtree_cone;
+  Bytes out(sizeof h);
+  std::memcpy(out.data(), &h, sizeof h);
+  spool_vector(out, op.vertices);
+  spool_vector(out, op.fragment);
+  spool_vector(out, op.pre);
+  spool_vector(out, op.pre_tris);
+  spool_vector(out, op.coarser);
+  spool_vector(out, op.parents);
+  spool_vector(out, op.children);
+  return out;
+}
+
+Op unspool_op(ByteView in, std::uint64_t id) {
+  SpoolHead h;
+  if (in.size() < sizeof h)
+    throw_internal("database writer: the scratch copy of op " + std::to_string(id) +
+                   " is truncated");
+  std::memcpy(&h, in.data(), sizeof h);
+  in = in.subspan(sizeof h);
+  if (h.id.value != id)
+    throw_internal("database writer: the scratch file lost op " + std::to_string(id));
+  Op op;
+  op.id = h.id;
+  op.birth_res = h.birth_res;
+  op.error = h.error;
+  op.new_vertex_count = h.new_vertex_count;
+  unspool_vector(in, op.vertices, h.sizes[0], id);
+  unspool_vector(in, op.fragment, h.sizes[1], id);
+  unspool_vector(in, op.pre, h.sizes[2], id);
+  unspool_vector(in, op.pre_tris, h.sizes[3], id);
+  unspool_vector(in, op.coarser, h.sizes[4], id);
+  unspool_vector(in, op.parents, h.sizes[5], id);
+  unspool_vector(in, op.children, h.sizes[6], id);
+  if (!in.empty())
+    throw_internal("database writer: the scratch copy of op " + std::to_string(id) +
+                   " has trailing bytes");
+  op.box = h.box;
+  op.sphere = h.sphere;
+  op.cone = h.cone;
+  op.roi = h.roi;
+  op.subtree_cone = h.subtree_cone;
+  return op;
+}
+
 // A child's ROI, subtree cone and height, on its way to a parent (the backward sweep).
 struct Message {
   std::uint64_t to = 0, from = 0;
@@ -416,7 +511,7 @@ struct DatabaseStreamWriter::State {
   WriteOptions options;
   storage::DatabaseWriter writer;
   std::string tmp_dir;
-  RecordFile<std::uint8_t> spool;     // the ops, each a one-op raw page, in id order
+  RecordFile<std::uint8_t> spool;     // the ops (spool_op), in id order
   RecordFile<OpRecord> records;       // one per op, in id order
   RecordFile<std::uint64_t> parents;  // every op's parents, in id order
   std::unique_ptr<index::EntryOrder> order;
@@ -449,8 +544,7 @@ struct DatabaseStreamWriter::State {
     // The spooled copy: ROI and subtree cone are the op's own until finish() derives them.
     op.roi = op.box;
     op.subtree_cone = canonical_cone(op.cone);
-    const Op* one[] = {&op};
-    const Bytes bytes = encode_page(one, grid, storage::CodecId::kRaw, false);
+    const Bytes bytes = spool_op(op);
     OpRecord r;
     r.entry = entry_of(op, op.box, op.cone);
     r.entry.spool_at = spool.count();
@@ -641,11 +735,7 @@ WriteReport DatabaseStreamWriter::finish() {
         std::vector<const Op*> ops(page.size());
         for (std::size_t i = 0, at = 0; i < page.size(); at += page[i].spool_size, ++i) {
           const OpEntry& e = page[i];
-          std::vector<Op> one = decode_page(ByteView(bytes).subspan(at, e.spool_size), s.grid,
-                                            "scratch op " + std::to_string(e.id));
-          if (one.size() != 1 || one[0].id.value != e.id)
-            throw_internal("database writer: the scratch file lost op " + std::to_string(e.id));
-          Op& op = held.emplace_back(std::move(one[0]));
+          Op& op = held.emplace_back(unspool_op(ByteView(bytes).subspan(at, e.spool_size), e.id));
           op.roi = from_index(e.roi);
           op.subtree_cone = e.cone;
           op.error += s.shift;

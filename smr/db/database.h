@@ -77,8 +77,8 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
 
 /// Writes a database from ops streamed in id order (an OpSink: a builder hands each op over as it
 /// makes it and never holds the whole CRMR). Each op is snapped to the grid (choose_grid on the
-/// header given to begin()) and spooled, as a one-op raw page, to an anonymous scratch file in
-/// `tmp_dir` (storage::TempFile: gone with the process however it ends), with a fixed-size
+/// header given to begin()) and spooled, its fields copied as they are, to an anonymous scratch
+/// file in `tmp_dir` (storage::TempFile: gone with the process however it ends), with a fixed-size
 /// index record and its parents' ids in two more. Memory holds no per-op data: finish() derives
 /// ROIs and subtree cones by a backward sweep over the records (children send theirs to their
 /// parents through an external queue), orders the R-tree entries by an external sort, writes the

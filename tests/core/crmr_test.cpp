@@ -89,6 +89,36 @@ TEST_P(PerDataset, BuildIsDeterministic) {
   }
 }
 
+// The mesh-only build (what block_tin's leaves use) is the CRMR's finest mesh, triangle for
+// triangle in the ops' order, with the same corners in the same rotation, the same heights and
+// the same void flags.
+TEST_P(PerDataset, GreedyMeshIsTheFinestMeshOfTheCrmr) {
+  const test::Dataset& d = test::dataset(GetParam());
+  GreedyTinOptions opt;
+  opt.max_error = d.max_error;
+  const GreedyMesh mesh = build_greedy_mesh(d.dem, opt);
+  std::size_t i = 0;
+  for (const Op& op : d.crmr.ops) {
+    for (const FragmentTriangle& t : op.fragment) {
+      if (t.killer.valid()) continue;
+      ASSERT_LT(i, mesh.triangles.size());
+      const GreedyMesh::Triangle& m = mesh.triangles[i++];
+      EXPECT_EQ(m.is_void, t.is_void()) << "triangle " << i - 1;
+      for (int k = 0; k < 3; ++k) {
+        const Vertex& want = op.vertices[t.v[k]];
+        ASSERT_LT(m.v[k], mesh.vertices.size());
+        const GreedyMesh::Vertex& got = mesh.vertices[m.v[k]];
+        EXPECT_EQ(m.v[k], want.id.value) << "triangle " << i - 1 << " corner " << k;
+        EXPECT_EQ(d.dem.georef.x0 + got.col * d.dem.georef.dx, want.p.x);
+        EXPECT_EQ(d.dem.georef.y0 + got.row * d.dem.georef.dy, want.p.y);
+        EXPECT_EQ(double(got.z), want.p.z);
+      }
+    }
+  }
+  EXPECT_EQ(i, mesh.triangles.size());
+  EXPECT_EQ(mesh.vertices.size(), d.crmr.header.vertex_count);
+}
+
 INSTANTIATE_TEST_SUITE_P(Dems, PerDataset, ::testing::ValuesIn(test::dataset_names()),
                          [](const auto& p) { return p.param; });
 
