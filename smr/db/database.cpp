@@ -730,7 +730,10 @@ WriteReport DatabaseStreamWriter::finish() {
           pieces[i] = {page[i].spool_at, page[i].spool_size, total};
           total += page[i].spool_size;
         }
-        Bytes bytes(total);
+        // Each thread reads its pages into one buffer it keeps (a page's ops are ~100 KiB: a
+        // fresh buffer would be mapped, faulted in and unmapped for every page).
+        thread_local Bytes bytes;
+        bytes.resize(total);
         s.spool.read_pieces(pieces, bytes.data());
         std::vector<const Op*> ops(page.size());
         for (std::size_t i = 0, at = 0; i < page.size(); at += page[i].spool_size, ++i) {
