@@ -505,19 +505,22 @@ smr::WriteOptions write_options(const IngestArgs& a, smr::tools::GdalProgress& p
 
 nlohmann::json database_report(const smr::WriteReport& w, const IngestArgs& a,
                                const std::string& db_path, std::uint64_t vertices) {
-  return {{"path", db_path},
-          {"codec", a.codec},
-          {"pages", w.pages},
-          {"rtree_nodes", w.rtree_nodes},
-          {"page_bytes", w.page_bytes},
-          {"locator_bytes", w.node_bytes},
-          {"rtree_bytes", w.rtree_bytes},
-          {"file_bytes", w.file_bytes},
-          {"bytes_per_vertex", double(w.file_bytes) / double(std::max<std::uint64_t>(1, vertices))},
-          {"z_quantum", w.grid.step.z},
-          {"z_shift", w.z_shift},
-          {"dag_depth", w.dag_depth},
-          {"write_seconds", w.seconds}};
+  return {
+      {"path", db_path},
+      {"codec", a.codec},
+      {"pages", w.pages},
+      {"rtree_nodes", w.rtree_nodes},
+      {"page_bytes", w.page_bytes},
+      {"locator_bytes", w.node_bytes},
+      {"rtree_bytes", w.rtree_bytes},
+      {"file_bytes", w.file_bytes},
+      {"bytes_per_vertex", double(w.file_bytes) / double(std::max<std::uint64_t>(1, vertices))},
+      {"z_quantum", w.grid.step.z},
+      {"z_shift", w.z_shift},
+      {"dag_depth", w.dag_depth},
+      {"write_seconds", w.seconds},
+      {"write_phases_seconds",
+       {{"sweep", w.seconds_sweep}, {"tables", w.seconds_tables}, {"commit", w.seconds_commit}}}};
 }
 
 // Between the block builder and the database writer: names the source by file name only (as

@@ -192,6 +192,10 @@ struct Locator {
 
 using EntrySorter = storage::ExternalSorter<SortedEntry>;
 
+double seconds_since(std::chrono::steady_clock::time_point t) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+}
+
 index::BuildOptions rtree_options(const CrmrInfo& header, const WriteOptions& options) {
   index::BuildOptions bo;
   bo.leaf_weight = options.page_bytes;
@@ -227,6 +231,7 @@ WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header
   auto progress = [&](double f) {
     if (options.progress) options.progress(f);
   };
+  const auto started = std::chrono::steady_clock::now();
   WriteReport report;
   report.grid = grid;
   report.z_shift = z_shift;
@@ -328,7 +333,10 @@ WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header
       {"parameters", options.parameters}};
   const std::string text = meta.dump();
   writer.put(Table::kMeta, "meta", storage::seal(storage::as_bytes(text)));  // last
+  const auto committing = std::chrono::steady_clock::now();
+  report.seconds_tables = seconds_since(started);
   writer.finish();
+  report.seconds_commit = seconds_since(committing);
   report.file_bytes = storage::Env::open_read_only(writer.path()).file_bytes();
   report.dag_depth = counts.dag_depth;
   report.triangles = counts.triangles;
@@ -385,7 +393,7 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
         return ops;
       },
       options, tmp_dir);
-  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  report.seconds = seconds_since(t0);
   return report;
 }
 
@@ -416,6 +424,7 @@ struct SpoolHead {
 template <class T>
 void spool_vector(Bytes& out, const std::vector<T>& v) {
   static_assert(std::is_trivially_copyable_v<T>);
+  if (v.empty()) return;
   const auto* b = reinterpret_cast<const std::uint8_t*>(v.data());
   out.insert(out.end(), b, b + v.size() * sizeof(T));
 }
@@ -426,6 +435,7 @@ void unspool_vector(ByteView& in, std::vector<T>& v, std::uint32_t n, std::uint6
     throw_internal("database writer: the scratch copy of op " + std::to_string(id) +
                    " is truncated");
   v.resize(n);
+  if (n == 0) return;  // memcpy must not see an empty vector's null data()
   std::memcpy(v.data(), in.data(), std::size_t{n} * sizeof(T));
   in = in.subspan(std::size_t{n} * sizeof(T));
 }
@@ -717,6 +727,7 @@ WriteReport DatabaseStreamWriter::finish() {
   counts.ops = s.records.count();
   counts.triangles = s.triangles;
   counts.dag_depth = s.sweep(sorted, &scratch);
+  const double seconds_sweep = seconds_since(t0);
   s.header.err0 += s.shift;
   s.header.err_final += s.shift;
   WriteReport report = write_tables(
@@ -749,7 +760,8 @@ WriteReport DatabaseStreamWriter::finish() {
       s.options, s.tmp_dir);
   report.spool_bytes = s.spool.bytes();
   report.scratch_bytes += scratch + s.records.bytes() + s.parents.bytes();
-  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  report.seconds_sweep = seconds_sweep;
+  report.seconds = seconds_since(t0);
   return report;
 }
 

@@ -67,6 +67,9 @@ struct WriteReport {
   std::uint64_t spool_bytes = 0;    // DatabaseStreamWriter: ops held in its scratch file
   std::uint64_t scratch_bytes = 0;  // other scratch data: index records, sort runs
   double seconds = 0.0;  // DatabaseStreamWriter: finish() alone (spooling ran during the build)
+  // Of `seconds`: the spooler's last ops and the backward sweep (DatabaseStreamWriter); the pages,
+  // locators and R-tree; LMDB's commit, the compacting copy, its fsync and the rename.
+  double seconds_sweep = 0.0, seconds_tables = 0.0, seconds_commit = 0.0;
 };
 
 /// Writes `crmr` to a new database file at `path`, atomically: the meta record is written last
