@@ -227,6 +227,9 @@ class ExternalSorter {
 
   void add(const T& record) {
     if (reading_) throw_internal("ExternalSorter: add() after next()");
+    // Room for a whole run at once: growing by doubling would copy it and hold it twice, and
+    // pages not filled are never touched.
+    if (buffer_.capacity() == 0) buffer_.reserve(capacity_);
     if (buffer_.size() == capacity_) runs_.spill(buffer_);
     if constexpr (kTies == Ties::kAny) {
       buffer_.push_back({record});
@@ -282,6 +285,7 @@ class ExternalQueue {
 
   /// Adds a record; it must not be larger than the last one popped.
   void push(const T& record) {
+    if (heap_.capacity() == 0) heap_.reserve(capacity_);  // as ExternalSorter::add
     if (heap_.size() == capacity_) runs_.spill(heap_);
     heap_.push_back({record, seq_++});
     std::push_heap(heap_.begin(), heap_.end(), after());
