@@ -406,96 +406,135 @@ struct OpRecord {
   std::uint32_t parent_count = 0;
 };
 
-// The spool's copy of an op: its fields as they are in memory, the vectors' sizes first (every
-// part is trivially copyable), so spooling and reading back are copies, not a page's encoding.
-// Read back by this process only: no version, no byte order.
-struct SpoolHead {
-  OpId id;
-  double birth_res = 0.0, error = 0.0;
-  std::uint32_t new_vertex_count = 0;
-  std::uint32_t sizes[7] = {};  // vertices, fragment, pre, pre_tris, coarser, parents, children
-  Box3 box;
-  Sphere sphere;
-  NormalCone cone;
-  Box3 roi;
-  NormalCone subtree_cone;
-};
-
-template <class T>
-void spool_vector(Bytes& out, const std::vector<T>& v) {
-  static_assert(std::is_trivially_copyable_v<T>);
-  if (v.empty()) return;
-  const auto* b = reinterpret_cast<const std::uint8_t*>(v.data());
-  out.insert(out.end(), b, b + v.size() * sizeof(T));
+// The spool's copy of an op, for this process only (no version, no byte order): positions as
+// their grid coordinates (the op is snapped before it is spooled), ids and indices as varints of
+// their differences from the op's id or the previous one, resolutions, errors and bounds as
+// doubles. About a third of the fields copied raw and a tenth of a page's encoding's work (no
+// vertex table shared between ops, no geometry codec). roi and subtree_cone are not kept:
+// finish() derives them.
+void spool_op(const Op& op, const QuantGrid& grid, Bytes& out) {
+  out.clear();
+  ByteWriter w(out);
+  const std::uint64_t id = op.id.value;
+  w.varint(id);
+  w.f64(op.birth_res);
+  w.f64(op.error);
+  w.varint(op.new_vertex_count);
+  for (const Vec3& p : {op.box.lo, op.box.hi, op.sphere.center, op.cone.axis}) {
+    for (int k = 0; k < 3; ++k) w.f64(p[k]);
+  }
+  w.f64(op.sphere.radius);
+  w.f64(op.cone.half_angle);
+  w.varint(op.vertices.size());
+  std::uint64_t prev_id = id;
+  std::array<std::int32_t, 3> prev_q{};
+  for (const Vertex& v : op.vertices) {
+    w.svarint(std::int64_t(v.id.value - prev_id));
+    prev_id = v.id.value;
+    const std::array<std::int32_t, 3> q = grid.quantize(v.p);
+    if (grid.dequantize(q) != v.p)
+      throw_internal("database writer: op " + std::to_string(id) + " has vertex " +
+                     std::to_string(v.id.value) + " off the quantization grid");
+    for (int k = 0; k < 3; ++k) w.svarint(std::int64_t(q[k]) - prev_q[k]);
+    prev_q = q;
+  }
+  w.varint(op.fragment.size());
+  for (const FragmentTriangle& t : op.fragment) {
+    for (std::uint32_t v : t.v) w.varint(v);
+    for (std::int32_t n : t.nbr) w.varint(std::uint64_t(std::int64_t(n) + 1));
+    w.svarint(t.killer.valid() ? std::int64_t(t.killer.value - id) : 0);
+    w.f64(t.death_res);
+    w.u8(t.flags);
+  }
+  w.varint(op.pre.size());
+  for (const TriRef& r : op.pre) {
+    w.svarint(std::int64_t(id - r.op.value));
+    w.varint(r.index);
+  }
+  w.varint(op.pre_tris.size());
+  for (const PreTriangle& t : op.pre_tris) {
+    for (std::uint32_t v : t.v) w.varint(v);
+    w.u8(t.flags);
+  }
+  w.varint(op.coarser.size());
+  for (const CoarserLink& c : op.coarser) {
+    w.varint(c.tri);
+    w.u8(c.edge);
+    w.svarint(std::int64_t(id - c.coarser.tri.op.value));
+    w.varint(c.coarser.tri.index);
+    w.u8(c.coarser.edge);
+  }
+  w.varint(op.parents.size());
+  for (OpId p : op.parents) w.svarint(std::int64_t(id - p.value));
+  w.varint(op.children.size());
+  for (OpId c : op.children) w.svarint(std::int64_t(c.value - id));
 }
-template <class T>
-void unspool_vector(ByteView& in, std::vector<T>& v, std::uint32_t n, std::uint64_t id) {
-  static_assert(std::is_trivially_copyable_v<T>);
-  if (in.size() < std::size_t{n} * sizeof(T))
-    throw_internal("database writer: the scratch copy of op " + std::to_string(id) +
-                   " is truncated");
-  v.resize(n);
-  if (n == 0) return;  // memcpy must not see an empty vector's null data()
-  std::memcpy(v.data(), in.data(), std::size_t{n} * sizeof(T));
-  in = in.subspan(std::size_t{n} * sizeof(T));
-}
 
-Bytes spool_op(const Op& op) {
-  SpoolHead h;
-  h.id = op.id;
-  h.birth_res = op.birth_res;
-  h.error = op.error;
-  h.new_vertex_count = op.new_vertex_count;
-  const std::size_t sizes[7] = {op.vertices.size(), op.fragment.size(), op.pre.size(),
-                                op.pre_tris.size(), op.coarser.size(),  op.parents.size(),
-                                op.children.size()};
-  for (int i = 0; i < 7; ++i) h.sizes[i] = static_cast<std::uint32_t>(sizes[i]);
-  h.box = op.box;
-  h.sphere = op.sphere;
-  h.cone = op.cone;
-  h.roi = op.roi;
-  h.subtree_cone = op.subtree_cone;
-  Bytes out(sizeof h);
-  std::memcpy(out.data(), &h, sizeof h);
-  spool_vector(out, op.vertices);
-  spool_vector(out, op.fragment);
-  spool_vector(out, op.pre);
-  spool_vector(out, op.pre_tris);
-  spool_vector(out, op.coarser);
-  spool_vector(out, op.parents);
-  spool_vector(out, op.children);
-  return out;
-}
-
-Op unspool_op(ByteView in, std::uint64_t id) {
-  SpoolHead h;
-  if (in.size() < sizeof h)
-    throw_internal("database writer: the scratch copy of op " + std::to_string(id) +
-                   " is truncated");
-  std::memcpy(&h, in.data(), sizeof h);
-  in = in.subspan(sizeof h);
-  if (h.id.value != id)
-    throw_internal("database writer: the scratch file lost op " + std::to_string(id));
+Op unspool_op(ByteView in, std::uint64_t id, const QuantGrid& grid) {
+  ByteReader r(in, "scratch op " + std::to_string(id));
   Op op;
-  op.id = h.id;
-  op.birth_res = h.birth_res;
-  op.error = h.error;
-  op.new_vertex_count = h.new_vertex_count;
-  unspool_vector(in, op.vertices, h.sizes[0], id);
-  unspool_vector(in, op.fragment, h.sizes[1], id);
-  unspool_vector(in, op.pre, h.sizes[2], id);
-  unspool_vector(in, op.pre_tris, h.sizes[3], id);
-  unspool_vector(in, op.coarser, h.sizes[4], id);
-  unspool_vector(in, op.parents, h.sizes[5], id);
-  unspool_vector(in, op.children, h.sizes[6], id);
-  if (!in.empty())
+  op.id = OpId(r.varint());
+  if (op.id.value != id)
+    throw_internal("database writer: the scratch file lost op " + std::to_string(id));
+  op.birth_res = r.f64();
+  op.error = r.f64();
+  op.new_vertex_count = static_cast<std::uint32_t>(r.varint());
+  for (Vec3* p : {&op.box.lo, &op.box.hi, &op.sphere.center, &op.cone.axis}) {
+    for (int k = 0; k < 3; ++k) (*p)[k] = r.f64();
+  }
+  op.sphere.radius = r.f64();
+  op.cone.half_angle = r.f64();
+  // Counts are checked against the bytes left (each element takes at least one) before sizing.
+  auto count = [&](std::size_t least) {
+    const std::uint64_t n = r.varint();
+    if (n > r.remaining() / least)
+      throw_internal("database writer: the scratch copy of op " + std::to_string(id) +
+                     " is truncated");
+    return static_cast<std::size_t>(n);
+  };
+  op.vertices.resize(count(4));
+  std::uint64_t prev_id = id;
+  std::array<std::int32_t, 3> q{};
+  for (Vertex& v : op.vertices) {
+    prev_id += static_cast<std::uint64_t>(r.svarint());
+    v.id = VertexId(prev_id);
+    for (int k = 0; k < 3; ++k) q[k] = static_cast<std::int32_t>(q[k] + r.svarint());
+    v.p = grid.dequantize(q);
+  }
+  op.fragment.resize(count(15));
+  for (FragmentTriangle& t : op.fragment) {
+    for (std::uint32_t& v : t.v) v = static_cast<std::uint32_t>(r.varint());
+    for (std::int32_t& n : t.nbr) n = static_cast<std::int32_t>(std::int64_t(r.varint()) - 1);
+    const std::int64_t killer = r.svarint();
+    if (killer != 0) t.killer = OpId(id + static_cast<std::uint64_t>(killer));
+    t.death_res = r.f64();
+    t.flags = r.u8();
+  }
+  op.pre.resize(count(2));
+  for (TriRef& t : op.pre) {
+    t.op = OpId(id - static_cast<std::uint64_t>(r.svarint()));
+    t.index = static_cast<std::uint32_t>(r.varint());
+  }
+  op.pre_tris.resize(count(4));
+  for (PreTriangle& t : op.pre_tris) {
+    for (std::uint32_t& v : t.v) v = static_cast<std::uint32_t>(r.varint());
+    t.flags = r.u8();
+  }
+  op.coarser.resize(count(5));
+  for (CoarserLink& c : op.coarser) {
+    c.tri = static_cast<std::uint32_t>(r.varint());
+    c.edge = r.u8();
+    c.coarser.tri.op = OpId(id - static_cast<std::uint64_t>(r.svarint()));
+    c.coarser.tri.index = static_cast<std::uint32_t>(r.varint());
+    c.coarser.edge = r.u8();
+  }
+  op.parents.resize(count(1));
+  for (OpId& p : op.parents) p = OpId(id - static_cast<std::uint64_t>(r.svarint()));
+  op.children.resize(count(1));
+  for (OpId& c : op.children) c = OpId(id + static_cast<std::uint64_t>(r.svarint()));
+  if (r.remaining() != 0)
     throw_internal("database writer: the scratch copy of op " + std::to_string(id) +
                    " has trailing bytes");
-  op.box = h.box;
-  op.sphere = h.sphere;
-  op.cone = h.cone;
-  op.roi = h.roi;
-  op.subtree_cone = h.subtree_cone;
   return op;
 }
 
@@ -522,6 +561,7 @@ struct DatabaseStreamWriter::State {
   storage::DatabaseWriter writer;
   std::string tmp_dir;
   RecordFile<std::uint8_t> spool;     // the ops (spool_op), in id order
+  Bytes spooled;                      // the spooler's buffer for one op
   RecordFile<OpRecord> records;       // one per op, in id order
   RecordFile<std::uint64_t> parents;  // every op's parents, in id order
   std::unique_ptr<index::EntryOrder> order;
@@ -554,7 +594,8 @@ struct DatabaseStreamWriter::State {
     // The spooled copy: ROI and subtree cone are the op's own until finish() derives them.
     op.roi = op.box;
     op.subtree_cone = canonical_cone(op.cone);
-    const Bytes bytes = spool_op(op);
+    Bytes& bytes = spooled;
+    spool_op(op, grid, bytes);
     OpRecord r;
     r.entry = entry_of(op, op.box, op.cone);
     r.entry.spool_at = spool.count();
@@ -749,7 +790,8 @@ WriteReport DatabaseStreamWriter::finish() {
         std::vector<const Op*> ops(page.size());
         for (std::size_t i = 0, at = 0; i < page.size(); at += page[i].spool_size, ++i) {
           const OpEntry& e = page[i];
-          Op& op = held.emplace_back(unspool_op(ByteView(bytes).subspan(at, e.spool_size), e.id));
+          Op& op = held.emplace_back(
+              unspool_op(ByteView(bytes).subspan(at, e.spool_size), e.id, s.grid));
           op.roi = from_index(e.roi);
           op.subtree_cone = e.cone;
           op.error += s.shift;
