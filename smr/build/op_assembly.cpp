@@ -69,9 +69,9 @@ struct EdgeItem {
 };
 static_assert(sizeof(EdgeItem) == 20);
 using EdgeSorter = ExternalSorter<EdgeItem, std::less<EdgeItem>, storage::Ties::kAny>;
-// The same, by op ids.
 // Fixups, links and the order are each unique under their order: their sorts keep no arrival
 // numbers.
+// The same, by op ids.
 struct Fixup {
   std::uint32_t op = 0, tri = 0, owner = 0, local = 0;
   bool operator<(const Fixup& o) const { return op < o.op || (op == o.op && tri < o.tri); }

@@ -56,6 +56,11 @@ class ChunkPool {
   ~ChunkPool() {
     for (T* c : free_) ::operator delete(c, std::align_val_t(alignof(T)));
   }
+  /// Chunks kept for reuse.
+  std::size_t pooled() {
+    std::lock_guard lock(mu_);
+    return free_.size();
+  }
 
  private:
   ChunkPool() { free_.reserve(kMaxChunks); }
@@ -71,6 +76,8 @@ class Chunked {
 
  public:
   static constexpr std::size_t kChunk = std::size_t{1} << kChunkBits;
+  /// Where freed chunks wait for the next array of this type.
+  using Pool = detail::ChunkPool<T, kChunk * sizeof(T)>;
 
   Chunked() = default;
   Chunked(const Chunked&) = delete;
@@ -105,7 +112,6 @@ class Chunked {
   }
 
  private:
-  using Pool = detail::ChunkPool<T, kChunk * sizeof(T)>;
   static void free_chunk(T*& c) {
     if (c != nullptr) Pool::instance().give(c);
     c = nullptr;
