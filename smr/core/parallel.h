@@ -50,7 +50,16 @@ class WorkerPool {
   /// any f is rethrown once every thread has left the batch.
   template <class F>
   void for_each(std::size_t n, F&& f) {
+    for_each(n, std::forward<F>(f), [] {});
+  }
+  /// The same, but the calling thread first runs `first()` while the helpers start on the items
+  /// (work of its own that the batch does not need: the previous batch's results, in order),
+  /// then joins them. If first() throws, the items not started are skipped and, once every
+  /// helper has left the batch, its exception is rethrown.
+  template <class F, class G>
+  void for_each(std::size_t n, F&& f, G&& first) {
     if (helpers_.empty() || n <= 1) {
+      first();
       for (std::size_t i = 0; i < n; ++i) f(i);
       return;
     }
@@ -66,6 +75,13 @@ class WorkerPool {
       ++generation_;
     }
     start_cv_.notify_all();
+    try {
+      first();
+    } catch (...) {
+      std::lock_guard lock(mu_);
+      if (!error_) error_ = std::current_exception();
+      failed_ = true;
+    }
     drain();
     std::unique_lock lock(mu_);
     idle_cv_.wait(lock, [&] { return busy_ == 0; });

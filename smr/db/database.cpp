@@ -246,46 +246,60 @@ WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header
   storage::ExternalSorter<Locator, std::less<Locator>, storage::Ties::kAny> locators(
       tmp_dir, side_sort_bytes(options));
 
-  // Leaves, a window of them at a time: their pages are encoded on every core and appended in
-  // order, with their R-tree leaves.
+  // Leaves, a window of them at a time: their pages are encoded on every core, and while the
+  // helpers start on a window the calling thread appends the previous one's pages, in order,
+  // with their locators and R-tree leaves.
   const unsigned threads = thread_count(options.threads);
   const std::size_t window = 8 * std::size_t(threads);
-  std::vector<std::vector<OpEntry>> leaves;
-  std::vector<Bytes> pages(window);
+  struct Window {
+    std::vector<std::vector<OpEntry>> leaves;
+    std::vector<Bytes> pages;
+  };
+  Window filling, encoded;
   std::vector<index::Entry> leaf_entries;
   std::uint64_t placed = 0;
   WorkerPool pool(threads);  // its threads keep their codec contexts from window to window
-  auto write_window = [&] {
-    pool.for_each(leaves.size(), [&](std::size_t j) {
-      std::vector<Op> held;
-      held.reserve(leaves[j].size());
-      pages[j] = storage::seal(encode_page(ops_of(leaves[j], held), grid, options.codec));
-    });
-    for (std::size_t j = 0; j < leaves.size(); ++j) {
+  auto append_encoded = [&] {
+    for (std::size_t j = 0; j < encoded.leaves.size(); ++j) {
+      const std::vector<OpEntry>& leaf = encoded.leaves[j];
       const std::uint64_t page = report.pages++;
-      report.page_bytes += pages[j].size();
-      writer.append(Table::kPages, page, pages[j]);
+      report.page_bytes += encoded.pages[j].size();
+      writer.append(Table::kPages, page, encoded.pages[j]);
       leaf_entries.clear();
-      for (std::uint32_t slot = 0; slot < leaves[j].size(); ++slot) {
-        locators.add({leaves[j][slot].id, page, slot});
-        leaf_entries.push_back(leaves[j][slot].index_entry());
+      for (std::uint32_t slot = 0; slot < leaf.size(); ++slot) {
+        locators.add({leaf[slot].id, page, slot});
+        leaf_entries.push_back(leaf[slot].index_entry());
       }
       tree.add_leaf(leaf_entries);
-      placed += leaves[j].size();
+      placed += leaf.size();
     }
-    leaves.clear();
+    encoded.leaves.clear();
     progress(0.9 * double(placed) / double(std::max<std::uint64_t>(1, counts.ops)));
+  };
+  auto write_window = [&] {
+    filling.pages.resize(filling.leaves.size());
+    pool.for_each(
+        filling.leaves.size(),
+        [&](std::size_t j) {
+          std::vector<Op> held;
+          held.reserve(filling.leaves[j].size());
+          filling.pages[j] =
+              storage::seal(encode_page(ops_of(filling.leaves[j], held), grid, options.codec));
+        },
+        append_encoded);
+    std::swap(filling, encoded);
   };
   index::LeafPacker packer(bo);
   SortedEntry s;
   while (sorted.next(s)) {
     if (packer.starts_leaf(s.entry.weight)) {
-      if (leaves.size() == window) write_window();
-      leaves.emplace_back();
+      if (filling.leaves.size() == window) write_window();
+      filling.leaves.emplace_back();
     }
-    leaves.back().push_back(s.entry);
+    filling.leaves.back().push_back(s.entry);
   }
   write_window();
+  append_encoded();
   if (placed != counts.ops)
     throw_internal("database writer: " + std::to_string(placed) + " ops reached the pages, not " +
                    std::to_string(counts.ops));

@@ -140,5 +140,52 @@ TEST(WorkerPool, ManyBatchesOnTheSameThreadsEachIndexOnce) {
   EXPECT_EQ(sum.load(), 4950u);
 }
 
+// The calling thread's own work runs while the helpers take the batch's items (the stream
+// writer appends one window of pages while the next is encoded), then it joins them; a failure
+// of its own work is rethrown only after the helpers have left the batch.
+TEST(WorkerPool, CallersOwnWorkOverlapsTheBatch) {
+  WorkerPool pool(2);
+  const std::thread::id caller = std::this_thread::get_id();
+  std::vector<std::atomic<int>> hits(64);
+  std::atomic<int> done{0};
+  int firsts = 0;
+  bool overlapped = false;
+  pool.for_each(
+      hits.size(),
+      [&](std::size_t i) {
+        std::this_thread::sleep_for(std::chrono::microseconds(200));
+        ++hits[i];
+        ++done;
+      },
+      [&] {
+        EXPECT_EQ(std::this_thread::get_id(), caller);
+        ++firsts;
+        // The helper finishes items while the caller is still here (however slowly it is
+        // scheduled: up to 10 s).
+        const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+        while (done.load() == 0 && std::chrono::steady_clock::now() < until) {
+          std::this_thread::sleep_for(std::chrono::microseconds(100));
+        }
+        overlapped = done.load() > 0;
+      });
+  EXPECT_EQ(firsts, 1);
+  for (const auto& h : hits) ASSERT_EQ(h.load(), 1);
+  EXPECT_TRUE(overlapped) << "the helper waited for the caller's own work";
+
+  std::atomic<int> started{0};
+  EXPECT_THROW(pool.for_each(
+                   1000,
+                   [&](std::size_t) {
+                     ++started;
+                     std::this_thread::sleep_for(std::chrono::microseconds(100));
+                   },
+                   [] { throw std::runtime_error("first"); }),
+               std::runtime_error);
+  EXPECT_LT(started.load(), 1000) << "items went on after the caller's work failed";
+  std::atomic<std::size_t> sum{0};
+  pool.for_each(100, [&](std::size_t i) { sum += i; });
+  EXPECT_EQ(sum.load(), 4950u) << "the pool works after a failure";
+}
+
 }  // namespace
 }  // namespace smr
