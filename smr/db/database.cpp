@@ -471,13 +471,7 @@ void spool_op(const Op& op, const QuantGrid& grid, Bytes& out) {
     w.u8(t.flags);
   }
   w.varint(op.coarser.size());
-  for (const CoarserLink& c : op.coarser) {
-    w.varint(c.tri);
-    w.u8(c.edge);
-    w.svarint(std::int64_t(id - c.coarser.tri.op.value));
-    w.varint(c.coarser.tri.index);
-    w.u8(c.coarser.edge);
-  }
+  for (const CoarserLink& c : op.coarser) write_link(w, c, id);
   w.varint(op.parents.size());
   for (OpId p : op.parents) w.svarint(std::int64_t(id - p.value));
   w.varint(op.children.size());
@@ -535,13 +529,7 @@ Op unspool_op(ByteView in, std::uint64_t id, const QuantGrid& grid) {
     t.flags = r.u8();
   }
   op.coarser.resize(count(5));
-  for (CoarserLink& c : op.coarser) {
-    c.tri = static_cast<std::uint32_t>(r.varint());
-    c.edge = r.u8();
-    c.coarser.tri.op = OpId(id - static_cast<std::uint64_t>(r.svarint()));
-    c.coarser.tri.index = static_cast<std::uint32_t>(r.varint());
-    c.coarser.edge = r.u8();
-  }
+  for (CoarserLink& c : op.coarser) c = read_link(r, id);
   op.parents.resize(count(1));
   for (OpId& p : op.parents) p = OpId(id - static_cast<std::uint64_t>(r.svarint()));
   op.children.resize(count(1));

@@ -25,6 +25,24 @@ std::uint64_t count_of(const std::vector<T>& v) {
 
 }  // namespace
 
+void write_link(ByteWriter& w, const CoarserLink& link, std::uint64_t id) {
+  w.varint(link.tri);
+  w.u8(link.edge);
+  w.svarint(std::int64_t(id - link.coarser.tri.op.value));
+  w.varint(link.coarser.tri.index);
+  w.u8(link.coarser.edge);
+}
+
+CoarserLink read_link(ByteReader& r, std::uint64_t id) {
+  CoarserLink l;
+  l.tri = std::uint32_t(r.varint());
+  l.edge = r.u8();
+  l.coarser.tri.op = OpId(id - std::uint64_t(r.svarint()));
+  l.coarser.tri.index = std::uint32_t(r.varint());
+  l.coarser.edge = r.u8();
+  return l;
+}
+
 Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid, storage::CodecId codec,
                   bool compress_records) {
   // The page's vertices, in order of first use, and each op's local -> page index.
@@ -126,13 +144,7 @@ Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid, storage
     for (std::uint32_t v : pre_voids) w.varint(v);
     // Hypermesh links.
     w.varint(op.coarser.size());
-    for (const CoarserLink& l : op.coarser) {
-      w.varint(l.tri);
-      w.u8(l.edge);
-      w.svarint(std::int64_t(id - l.coarser.tri.op.value));
-      w.varint(l.coarser.tri.index);
-      w.u8(l.coarser.edge);
-    }
+    for (const CoarserLink& l : op.coarser) write_link(w, l, id);
     // ROI, in grid steps outside the op's own box.
     const auto blo = grid.quantize(op.box.lo), bhi = grid.quantize(op.box.hi);
     const auto rlo = grid.quantize(op.roi.lo), rhi = grid.quantize(op.roi.hi);
@@ -279,12 +291,7 @@ std::vector<Op> decode_page(ByteView page, const QuantGrid& grid, const std::str
     const std::uint64_t nl = count(r.remaining(), "coarser link");
     op.coarser.resize(nl);
     for (CoarserLink& l : op.coarser) {
-      l.tri = std::uint32_t(r.varint());
-      l.edge = r.u8();
-      const std::int64_t d = r.svarint();
-      l.coarser.tri.op = OpId(id - std::uint64_t(d));
-      l.coarser.tri.index = std::uint32_t(r.varint());
-      l.coarser.edge = r.u8();
+      l = read_link(r, id);
       if (l.tri >= nf || l.edge > 2 || l.coarser.edge > 2) r.fail("coarser link out of range");
     }
     if (nf == 0 && npre == 0) r.fail("an op without triangles");

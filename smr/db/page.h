@@ -36,6 +36,11 @@ storage::Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid
 std::vector<Op> decode_page(storage::ByteView page, const QuantGrid& grid,
                             const std::string& context);
 
+/// One Hypermesh link of op `id` as pages store it (the stream writer's spool too): its triangle
+/// and edge, the coarser triangle's op as a difference from `id`, its index and edge.
+void write_link(storage::ByteWriter& w, const CoarserLink& link, std::uint64_t id);
+CoarserLink read_link(storage::ByteReader& r, std::uint64_t id);
+
 /// Heap bytes held by an op (what the page cache charges for it).
 std::size_t op_memory_bytes(const Op& op);
 /// What a heap block of `bytes` really takes (glibc malloc: an 8-byte header, 16-byte granules,
