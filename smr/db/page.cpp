@@ -43,8 +43,7 @@ CoarserLink read_link(ByteReader& r, std::uint64_t id) {
   return l;
 }
 
-Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid, storage::CodecId codec,
-                  bool compress_records) {
+Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid, storage::CodecId codec) {
   // The page's vertices, in order of first use, and each op's local -> page index.
   std::unordered_map<std::uint64_t, std::uint32_t> page_index;
   std::vector<std::uint64_t> ids;
@@ -162,13 +161,9 @@ Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid, storage
   Bytes out;
   ByteWriter pw(out);
   pw.u8(kPageFormat);
-  pw.u8(static_cast<std::uint8_t>(codec) | (compress_records ? 0 : kRawRecords));
+  pw.u8(static_cast<std::uint8_t>(codec));
   pw.varint(ops.size());
-  if (compress_records) {
-    pw.blob(storage::zstd_compress(records));
-  } else {
-    pw.blob(records);
-  }
+  pw.blob(storage::zstd_compress(records));
   Bytes geo;
   storage::encode_geometry(codec, geometry, geo);
   pw.blob(geo);
@@ -178,17 +173,14 @@ Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid, storage
 std::vector<Op> decode_page(ByteView page, const QuantGrid& grid, const std::string& context) {
   ByteReader pr(page, context);
   if (pr.u8() != kPageFormat) pr.fail("unknown page format");
-  const std::uint8_t codec_field = pr.u8();
-  const bool raw_records = (codec_field & kRawRecords) != 0;
-  const auto codec_byte = static_cast<std::uint8_t>(codec_field & ~kRawRecords);
+  const std::uint8_t codec_byte = pr.u8();
   if (codec_byte > static_cast<std::uint8_t>(storage::CodecId::kDraco)) pr.fail("unknown codec");
   const auto codec = static_cast<storage::CodecId>(codec_byte);
   const std::uint64_t op_count = pr.varint();
   const ByteView packed = pr.blob();
   const ByteView geo_bytes = pr.blob();
   pr.expect_end();
-  const Bytes records = raw_records ? Bytes(packed.begin(), packed.end())
-                                    : storage::zstd_decompress(packed, kMaxRecordBytes, context);
+  const Bytes records = storage::zstd_decompress(packed, kMaxRecordBytes, context);
   const GeometryBlob geometry = storage::decode_geometry(codec, geo_bytes, context);
 
   ByteReader r(records, context + " records");

@@ -22,14 +22,11 @@
 namespace smr {
 
 inline constexpr std::uint8_t kPageFormat = 2;  // 2: subtree normal cones
-/// Set in the codec byte when the records blob is stored uncompressed (scratch copies of ops,
-/// which are read back once; database pages always compress their records).
-inline constexpr std::uint8_t kRawRecords = 0x80;
 
 /// Encodes `ops` (in the given order; the decoder returns them in it). The ops' positions must
 /// lie on `grid` (quantize() the model first); throws kInternal otherwise.
 storage::Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid,
-                           storage::CodecId codec, bool compress_records = true);
+                           storage::CodecId codec);
 
 /// Decodes a page; `context` (e.g. "pages/12") names it in every error. Malformed input throws
 /// smr::Error (kCorrupt), never crashes.
