@@ -24,6 +24,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <future>
 #include <memory>
 #include <string>
 #include <type_traits>
@@ -37,6 +38,12 @@ namespace smr::storage {
 
 /// What a sort does with records equal under its order (see above).
 enum class Ties { kArrival, kAny };
+
+/// Where an ExternalSorter sorts and writes a full buffer: on the adding thread, or on a thread
+/// of its own while the adding goes on into a second buffer (each buffer then a quarter of the
+/// budget, not a half: twice the runs, the same bytes written and read, for an adder whose own
+/// thread is the one that is short of time).
+enum class Spill { kInline, kBackground };
 
 namespace detail {
 
@@ -220,17 +227,34 @@ class ExternalSorter {
  public:
   /// `tmp_dir`: where runs go (empty = the system's temporary directory); `memory_bytes`: half
   /// for records in memory (at least 1024), half for the runs' read buffers.
-  ExternalSorter(const std::string& tmp_dir, std::uint64_t memory_bytes, Less less = {})
+  ExternalSorter(const std::string& tmp_dir, std::uint64_t memory_bytes, Less less = {},
+                 Spill spill = Spill::kInline)
       : before_{less},
         runs_(scratch_dir(tmp_dir), memory_bytes / 2, 0, before_),
-        capacity_(detail::buffer_capacity<Item>(memory_bytes)) {}
+        capacity_(detail::buffer_capacity<Item>(spill == Spill::kBackground ? memory_bytes / 2
+                                                                            : memory_bytes)),
+        background_(spill == Spill::kBackground) {}
+  ~ExternalSorter() {
+    if (pending_.valid()) pending_.wait();  // its exception, if any, goes with it
+  }
+  ExternalSorter(const ExternalSorter&) = delete;
+  ExternalSorter& operator=(const ExternalSorter&) = delete;
 
   void add(const T& record) {
     if (reading_) throw_internal("ExternalSorter: add() after next()");
     // Room for a whole run at once: growing by doubling would copy it and hold it twice, and
     // pages not filled are never touched.
     if (buffer_.capacity() == 0) buffer_.reserve(capacity_);
-    if (buffer_.size() == capacity_) runs_.spill(buffer_);
+    if (buffer_.size() == capacity_) {
+      if (background_) {
+        finish_spill();  // one run at a time, in the order of the adds
+        spilling_.swap(buffer_);
+        if (buffer_.capacity() == 0) buffer_.reserve(capacity_);
+        pending_ = std::async(std::launch::async, [this] { runs_.spill(spilling_); });
+      } else {
+        runs_.spill(buffer_);
+      }
+    }
     if constexpr (kTies == Ties::kAny) {
       buffer_.push_back({record});
     } else {
@@ -243,6 +267,8 @@ class ExternalSorter {
   void seal() {
     if (reading_) return;
     reading_ = true;
+    finish_spill();
+    std::vector<Item>().swap(spilling_);  // its half of the budget goes to the runs' buffers
     std::sort(buffer_.begin(), buffer_.end(), before_);
   }
   /// The next record in order; false once all are out. The first call ends the adding.
@@ -259,17 +285,26 @@ class ExternalSorter {
     return true;
   }
   std::uint64_t size() const { return size_; }
+  /// Runs made so far (with Spill::kBackground, the one being written may not count yet).
   std::size_t runs() const { return runs_.count(); }
   std::uint64_t spilled_bytes() const { return runs_.bytes(); }
 
  private:
+  // Waits for the background spill, if one is running; rethrows what it threw.
+  void finish_spill() {
+    if (pending_.valid()) pending_.get();
+  }
+
   detail::ItemBefore<T, Less, kTies> before_;
   detail::Runs<T, Less, kTies> runs_;
   std::size_t capacity_;
+  bool background_;
   std::vector<Item> buffer_;
+  std::vector<Item> spilling_;  // the buffer the background spill sorts and writes
   std::size_t pos_ = 0;
   std::uint64_t size_ = 0;
   bool reading_ = false;
+  std::future<void> pending_;  // last: it is waited for before the rest goes
 };
 
 template <class T, class Less = std::less<T>>

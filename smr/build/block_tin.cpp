@@ -9,6 +9,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstring>
 #include <deque>
 #include <filesystem>
@@ -191,24 +192,28 @@ class SampleSpill {
     std::deque<Tile> tiles;
   };
 
-  /// Stores tile (tx, ty) from window w, whose sample (0, 0) is grid (c0, r0); given a cache,
-  /// puts the tile in it too (its samples are at hand: no read brings them back).
-  void put(int tx, int ty, const Heightfield& w, int c0, int r0, Cache* warm = nullptr) {
+  /// Puts tile (tx, ty), stored already, in `cache` from window w, whose sample (0, 0) is grid
+  /// (c0, r0): its samples are at hand, no read brings them back.
+  void warm(Cache& cache, int tx, int ty, const Heightfield& w, int c0, int r0) const {
     const auto [cw, rh] = extent(tx, ty);
-    if (warm != nullptr) {
-      bool fresh = false;
-      Cache::Tile& t = entry(*warm, tx, ty, fresh);
-      for (int r = 0; r < rh; ++r) {
-        const std::size_t from = w.index(tx * B_ - c0, ty * B_ - r0 + r);
-        const std::size_t to = std::size_t(r) * std::size_t(cw);
-        std::memcpy(t.z.data() + to, w.z.data() + from, std::size_t(cw) * sizeof(float));
-        if (w.valid.empty()) {
-          std::fill_n(t.v.begin() + std::ptrdiff_t(to), cw, std::uint8_t{1});
-        } else {
-          std::memcpy(t.v.data() + to, w.valid.data() + from, std::size_t(cw));
-        }
+    bool fresh = false;
+    Cache::Tile& t = entry(cache, tx, ty, fresh);
+    for (int r = 0; r < rh; ++r) {
+      const std::size_t from = w.index(tx * B_ - c0, ty * B_ - r0 + r);
+      const std::size_t to = std::size_t(r) * std::size_t(cw);
+      std::memcpy(t.z.data() + to, w.z.data() + from, std::size_t(cw) * sizeof(float));
+      if (w.valid.empty()) {
+        std::fill_n(t.v.begin() + std::ptrdiff_t(to), cw, std::uint8_t{1});
+      } else {
+        std::memcpy(t.v.data() + to, w.valid.data() + from, std::size_t(cw));
       }
     }
+  }
+
+  /// Stores tile (tx, ty) from window w, whose sample (0, 0) is grid (c0, r0). One thread at a
+  /// time stores tiles; others may read the tiles stored before meanwhile.
+  void put(int tx, int ty, const Heightfield& w, int c0, int r0) {
+    const auto [cw, rh] = extent(tx, ty);
     if (direct_ != nullptr) {
       stored_[std::size_t(ty) * std::size_t(nx_) + std::size_t(tx)] = 1;
       return;
@@ -586,9 +591,21 @@ class Builder {
     double tol = 0.0;     // the tolerance so far: the largest |z| of this and earlier blocks
   };
 
-  /// Reads leaf (bx, by) (main thread, in block order: the reader is not shared between threads
-  /// and the tolerance is a running maximum), copies it to the scratch file, counts its samples.
-  LeafInput read_leaf(int bx, int by) {
+  /// Reads leaf k = (bx, by), copies it to the scratch file, counts its samples. The workers
+  /// read the leaves one at a time in block order (the reader is not shared between threads and
+  /// the tolerance is a running maximum): each waits for the previous leaf's read, so the
+  /// calling thread, which merges the leaves in order, is left the merges.
+  LeafInput read_leaf(std::size_t k) {
+    std::unique_lock lock(read_mu_);
+    read_cv_.wait(lock, [&] { return next_read_ == k; });
+    struct Next {  // the next leaf's turn, however this read ends
+      Builder& b;
+      ~Next() {
+        ++b.next_read_;
+        b.read_cv_.notify_all();
+      }
+    } next{*this};
+    const int bx = int(k % std::size_t(bw_)), by = int(k / std::size_t(bw_));
     const Clock::time_point t0 = Clock::now();
     LeafInput in;
     in.halo = spare_window();
@@ -606,15 +623,15 @@ class Builder {
                                           block_row1(by) - r0 + 1);
     const Heightfield& w = in.w;
     stats_.max_block_samples = std::max<std::uint64_t>(stats_.max_block_samples, in.halo.z.size());
-    if (spill_) spill_->put(bx, by, w, c0, r0, &repair_tiles_);
+    if (spill_) spill_->put(bx, by, w, c0, r0);
     for (std::size_t i = 0; i < w.z.size(); ++i) {
       if (!w.valid.empty() && w.valid[i] == 0) continue;
       ++valid_samples_;
-      if (opt_.max_error != 0.0) tol_ = std::max(tol_, 1e-9 * std::abs(double(w.z[i])));
+      if (opt_.max_error != 0.0) read_tol_ = std::max(read_tol_, 1e-9 * std::abs(double(w.z[i])));
     }
-    if (opt_.max_error != 0.0) tol_ = std::max(tol_, 1e-9);
-    in.tol = tol_;
-    leaf_tol_.push_back(tol_);
+    if (opt_.max_error != 0.0) read_tol_ = std::max(read_tol_, 1e-9);
+    in.tol = read_tol_;
+    leaf_tol_[k] = read_tol_;
     ++stats_.leaf_blocks;
     stats_.samples += w.z.size();
     stats_.seconds_read += std::chrono::duration<double>(Clock::now() - t0).count();
@@ -817,6 +834,7 @@ class Builder {
   void leaf_pass() {
     const std::size_t n = std::size_t(bw_) * std::size_t(bh_);
     struct Item {
+      std::size_t k = 0;
       LeafInput in;
       BlockTinStats stats;
       std::unique_ptr<Builder> builder;   // the leaf's TIN
@@ -831,14 +849,15 @@ class Builder {
     const std::size_t items = interleave ? n + std::size_t(bw_) + 1 + kLevel0Lag : n;
     std::deque<std::unique_ptr<UpperBlock>> ready;  // copied at merges, waiting for their item
     if (interleave) leaf_vertices_.assign(n, {});
+    leaf_tol_.assign(n, 0.0);
+    next_read_ = 0;
+    read_tol_ = tol_;
     ordered_pipeline(
         items, threads, in_flight,
         [&](std::size_t k) {
           auto item = std::make_unique<Item>();
-          if (k < n) {
-            item->in = read_leaf(int(k % std::size_t(bw_)), int(k / std::size_t(bw_)));
-            item->builder = make_worker(item->stats);
-          }
+          item->k = k;
+          if (k < n) item->builder = make_worker(item->stats);
           if (interleave && k >= kLevel0Lag) {
             item->block = std::move(ready.front());
             ready.pop_front();
@@ -847,14 +866,20 @@ class Builder {
         },
         [this](Item& item) {
           if (item.builder) {
+            item.in = read_leaf(item.k);
             item.builder->build_leaf(item.in);
-            give_back(std::move(item.in.halo));  // the samples are done with: their buffers
-            give_back(std::move(item.in.w));     // serve the next leaves
-          }
+            give_back(std::move(item.in.halo));  // the halo is done with: its buffers serve the
+          }                                      // next leaves (the window's, after the merge)
           if (item.block) decimate_block(*item.block);
         },
         [&](Item& item, std::size_t k) {
           if (item.builder) {
+            // The repair's tiles get the leaf's window, which is at hand, in merge order.
+            if (spill_) {
+              spill_->warm(repair_tiles_, item.in.bx, item.in.by, item.in.w,
+                           block_col0(item.in.bx), block_row0(item.in.by));
+            }
+            give_back(std::move(item.in.w));
             std::vector<EdgeTask> glued;
             merge_leaf(*item.builder, interleave ? &glued : nullptr, k);
             if (interleave) repair(glued);
@@ -867,6 +892,7 @@ class Builder {
           }
           report(0.7 * double(std::min(k + 1, n)) / double(n));
         });
+    tol_ = read_tol_;
     leaf_vertices_ = {};
     spare_windows_ = {};
     window_buffer() = Heightfield{};
@@ -2042,6 +2068,10 @@ class Builder {
   std::vector<std::vector<std::uint32_t>> leaf_vertices_;  // interleaved pass: per leaf block
   bool level0_done_ = false;                               // by the interleaved leaf pass
   std::vector<double> leaf_tol_;  // the running tolerance after each leaf's read
+  std::mutex read_mu_;            // the leaf pass's reads: one at a time, in block order
+  std::condition_variable read_cv_;
+  std::size_t next_read_ = 0;  // the leaf whose read is next
+  double read_tol_ = 0.0;      // the running tolerance of the reads (tol_ once they are done)
   double tol_ = 0.0, range_ = 0.0, stop_error_ = 0.0, eps0_ = 0.0, err_final_ = 0.0;
   std::uint64_t finest_vertices_ = 0, finest_triangles_ = 0;
   std::vector<MVert> verts_;

@@ -150,8 +150,12 @@ struct OpAssembler::State {
         dir(storage::scratch_dir(options.tmp_dir)),
         spool(dir),
         fixups(dir),
-        edges(std::make_unique<EdgeSorter>(dir, budget(4))),
-        order(std::make_unique<UniqueSorter<OrderKey>>(dir, budget(4))) {}
+        // Both are filled on the builder's thread, whose time is the one that counts: full
+        // buffers are sorted and written on threads of their own.
+        edges(std::make_unique<EdgeSorter>(dir, budget(4), std::less<EdgeItem>{},
+                                           storage::Spill::kBackground)),
+        order(std::make_unique<UniqueSorter<OrderKey>>(dir, budget(4), std::less<OrderKey>{},
+                                                       storage::Spill::kBackground)) {}
 
   AssemblyOptions options;
   std::string dir;

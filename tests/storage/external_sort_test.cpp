@@ -31,28 +31,33 @@ std::vector<Rec> random_records(std::size_t n, std::uint32_t keys, unsigned seed
   return v;
 }
 
+// Both spill modes: with Spill::kBackground, full buffers are sorted and written on another
+// thread while the adds go on; the output must not change.
 TEST(ExternalSorter, MatchesStableSortAcrossManyRuns) {
-  for (const std::uint64_t memory :
-       {std::uint64_t{0}, std::uint64_t{100} << 10, std::uint64_t{64} << 20}) {
-    const std::vector<Rec> in = random_records(200000, 5000, 7);
-    ExternalSorter<Rec, ByKey> sorter("", memory);
-    for (const Rec& r : in) sorter.add(r);
-    std::vector<Rec> want = in;
-    std::stable_sort(want.begin(), want.end(), ByKey{});
-    std::vector<Rec> got;
-    Rec r{};
-    while (sorter.next(r)) got.push_back(r);
-    ASSERT_EQ(got.size(), want.size()) << memory;
-    for (std::size_t i = 0; i < got.size(); ++i) {
-      ASSERT_EQ(std::tie(got[i].key, got[i].tag), std::tie(want[i].key, want[i].tag))
-          << "record " << i << " with a budget of " << memory;
-    }
-    EXPECT_EQ(sorter.size(), in.size());
-    if (memory < (std::uint64_t{1} << 20)) {
-      EXPECT_GT(sorter.runs(), 8u) << "the budget should have forced runs";
-      EXPECT_GT(sorter.spilled_bytes(), 0u);
-    } else {
-      EXPECT_EQ(sorter.runs(), 0u);
+  for (const Spill spill : {Spill::kInline, Spill::kBackground}) {
+    for (const std::uint64_t memory :
+         {std::uint64_t{0}, std::uint64_t{100} << 10, std::uint64_t{64} << 20}) {
+      SCOPED_TRACE(spill == Spill::kInline ? "inline spills" : "background spills");
+      const std::vector<Rec> in = random_records(200000, 5000, 7);
+      ExternalSorter<Rec, ByKey> sorter("", memory, ByKey{}, spill);
+      for (const Rec& r : in) sorter.add(r);
+      std::vector<Rec> want = in;
+      std::stable_sort(want.begin(), want.end(), ByKey{});
+      std::vector<Rec> got;
+      Rec r{};
+      while (sorter.next(r)) got.push_back(r);
+      ASSERT_EQ(got.size(), want.size()) << memory;
+      for (std::size_t i = 0; i < got.size(); ++i) {
+        ASSERT_EQ(std::tie(got[i].key, got[i].tag), std::tie(want[i].key, want[i].tag))
+            << "record " << i << " with a budget of " << memory;
+      }
+      EXPECT_EQ(sorter.size(), in.size());
+      if (memory < (std::uint64_t{1} << 20)) {
+        EXPECT_GT(sorter.runs(), 8u) << "the budget should have forced runs";
+        EXPECT_GT(sorter.spilled_bytes(), 0u);
+      } else {
+        EXPECT_EQ(sorter.runs(), 0u);
+      }
     }
   }
 }
@@ -95,13 +100,18 @@ TEST(ExternalSorter, EmptyAndAddAfterReadingIsAnError) {
   EXPECT_THROW(sorter.add(r), Error);
 }
 
+// A background spill's error reaches the adder too: at the next full buffer, or at seal().
 TEST(ExternalSorter, MissingDirectoryNamesIt) {
-  ExternalSorter<Rec, ByKey> sorter("/nonexistent/smrdb-tmp", 0);
-  try {
-    for (std::uint32_t i = 0; i < 5000; ++i) sorter.add({i, i, 0.0});
-    FAIL() << "spilling into a missing directory should throw";
-  } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find("/nonexistent/smrdb-tmp"), std::string::npos) << e.what();
+  for (const Spill spill : {Spill::kInline, Spill::kBackground}) {
+    ExternalSorter<Rec, ByKey> sorter("/nonexistent/smrdb-tmp", 0, ByKey{}, spill);
+    try {
+      for (std::uint32_t i = 0; i < 5000; ++i) sorter.add({i, i, 0.0});
+      sorter.seal();
+      FAIL() << "spilling into a missing directory should throw";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("/nonexistent/smrdb-tmp"), std::string::npos)
+          << e.what();
+    }
   }
 }
 
