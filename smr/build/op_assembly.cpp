@@ -288,9 +288,9 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
   report(0.05);
 
   // The two joins are independent (both only read op_of): the fixups' on one thread, the
-  // links' on another.
-  UniqueSorter<Fixup> fixups(s.dir, s.budget(4));
-  UniqueSorter<Link> links(s.dir, s.budget(4));
+  // links' on another, each sorting its output's full buffers on a third.
+  UniqueSorter<Fixup> fixups(s.dir, s.budget(4), std::less<Fixup>{}, storage::Spill::kBackground);
+  UniqueSorter<Link> links(s.dir, s.budget(4), std::less<Link>{}, storage::Spill::kBackground);
   auto join_fixups = [&] {
     s.fixups.for_each([&](const RawFixup& f) {
       fixups.add({op_of[f.creator], f.tri, op_id(f.dest), f.local});

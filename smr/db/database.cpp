@@ -761,7 +761,8 @@ WriteReport DatabaseStreamWriter::finish() {
   s.hand_over();
   s.drain();
   std::uint64_t scratch = 0;
-  EntrySorter sorted(s.tmp_dir, entry_sort_bytes(s.options));
+  // The sweep is one thread's work: full buffers of entries are sorted on another.
+  EntrySorter sorted(s.tmp_dir, entry_sort_bytes(s.options), {}, storage::Spill::kBackground);
   TableCounts counts;
   counts.ops = s.records.count();
   counts.triangles = s.triangles;
