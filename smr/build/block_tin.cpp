@@ -1651,8 +1651,12 @@ class Builder {
     }
     if (!spill_) throw_internal("block TIN: an exact level without the samples' scratch copy");
     const unsigned threads = thread_count(opt_.threads);
+    // Several blocks per worker in flight: the copies are small (the live mesh shrinks level by
+    // level; windows are the workers' own), and the workers go on while this thread copies and
+    // merges, and past a slow block (one in flight per worker left them idle for a tenth of the
+    // upper levels on the 8193² terrain).
     ordered_pipeline(
-        with_candidates.size(), threads, threads,
+        with_candidates.size(), threads, 4 * std::size_t(threads),
         [&](std::size_t i) {
           const std::size_t k = with_candidates[i];
           const int c0 = int(k % std::size_t(nx)) * span, r0 = int(k / std::size_t(nx)) * span;
