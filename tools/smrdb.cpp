@@ -3,6 +3,7 @@
 #include <malloc.h>
 #include <sys/resource.h>
 
+#include <atomic>
 #include <charconv>
 #include <chrono>
 #include <cmath>
@@ -12,6 +13,7 @@
 #include <filesystem>
 #include <iostream>
 #include <optional>
+#include <span>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -387,7 +389,9 @@ struct IngestArgs {
 
 // What `--json` reports of a CRMR, counted op by op (in memory, or as the ops stream by).
 struct CrmrCounts {
-  std::uint64_t ops = 0, triangles = 0, finest = 0, base = 0, vertices = 0;
+  // add() may run on several threads at once (a sink's encode()).
+  std::atomic<std::uint64_t> ops = 0, triangles = 0, finest = 0, base = 0;
+  std::uint64_t vertices = 0;
   double err0 = 0.0, err_final = 0.0;
   void header(const smr::CrmrInfo& h) {
     vertices = h.vertex_count;
@@ -395,17 +399,19 @@ struct CrmrCounts {
     err_final = h.err_final;
   }
   void add(const smr::Op& op) {
-    for (const auto& t : op.fragment) finest += !t.killer.valid() && !t.is_void();
+    std::uint64_t f = 0;
+    for (const auto& t : op.fragment) f += !t.killer.valid() && !t.is_void();
+    finest.fetch_add(f, std::memory_order_relaxed);
     if (op.id.value == 0) base = op.fragment.size();
-    triangles += op.fragment.size();
-    ++ops;
+    triangles.fetch_add(op.fragment.size(), std::memory_order_relaxed);
+    ops.fetch_add(1, std::memory_order_relaxed);
   }
   nlohmann::json json(double build_seconds) const {
-    return {{"ops", ops},
-            {"fragment_triangles", triangles},
+    return {{"ops", ops.load()},
+            {"fragment_triangles", triangles.load()},
             {"vertices", vertices},
-            {"finest_triangles", finest},
-            {"base_triangles", base},
+            {"finest_triangles", finest.load()},
+            {"base_triangles", base.load()},
             {"err0", err0},
             {"err_final", err_final},
             {"build_seconds", build_seconds}};
@@ -538,7 +544,13 @@ class IngestTap final : public smr::OpSink {
     counts.add(op);
     inner_.add(std::move(op));
   }
-  CrmrCounts counts;
+  bool encodes() const override { return inner_.encodes(); }
+  void encode(smr::Op& op, std::vector<std::uint8_t>& out) const override {
+    counts.add(op);
+    inner_.encode(op, out);
+  }
+  void add_encoded(std::span<const std::uint8_t> op) override { inner_.add_encoded(op); }
+  mutable CrmrCounts counts;
 
  private:
   smr::OpSink& inner_;

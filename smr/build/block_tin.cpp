@@ -876,8 +876,8 @@ class Builder {
           if (item.builder) {
             // The repair's tiles get the leaf's window, which is at hand, in merge order.
             if (spill_) {
-              spill_->warm(repair_tiles_, item.in.bx, item.in.by, item.in.w,
-                           block_col0(item.in.bx), block_row0(item.in.by));
+              spill_->warm(repair_tiles_, item.in.bx, item.in.by, item.in.w, block_col0(item.in.bx),
+                           block_row0(item.in.by));
             }
             give_back(std::move(item.in.w));
             std::vector<EdgeTask> glued;

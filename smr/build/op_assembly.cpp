@@ -142,6 +142,23 @@ class Cursor {
   bool more_ = false;
 };
 
+// A default op that keeps `op`'s vectors' buffers, for the next op made in it.
+void clear_keeping_buffers(Op& op) {
+  Op fresh;
+  auto keep = [](auto& from, auto& to) {
+    from.clear();
+    to.swap(from);
+  };
+  keep(op.vertices, fresh.vertices);
+  keep(op.fragment, fresh.fragment);
+  keep(op.pre, fresh.pre);
+  keep(op.pre_tris, fresh.pre_tris);
+  keep(op.coarser, fresh.coarser);
+  keep(op.parents, fresh.parents);
+  keep(op.children, fresh.children);
+  op = std::move(fresh);
+}
+
 }  // namespace
 
 struct OpAssembler::State {
@@ -369,6 +386,7 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
     op.vertices.reserve(vs.size());
     for (std::uint32_t v : vs) op.vertices.push_back({VertexId(v), position(v)});
     op.fragment.resize(frag.size());
+    op.children.reserve(frag.size());
     for (std::size_t i = 0; i < frag.size(); ++i) {
       FragmentTriangle& ft = op.fragment[i];
       for (int k = 0; k < 3; ++k) ft.v[k] = vertex_index(vs, first.size(), frag[i].v[k]);
@@ -383,27 +401,45 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
   };
   // Sorted parents and children, bounds (workers); then the DAG depth and the sink, in id order
   // (the calling thread).
-  auto finish_op = [&](Op& op) {
+  auto sort_ids = [](Op& op) {
     for (std::vector<OpId>* ids : {&op.parents, &op.children}) {
       std::sort(ids->begin(), ids->end());
       ids->erase(std::unique(ids->begin(), ids->end()), ids->end());
     }
+  };
+  auto finish_op = [&](Op& op) {
+    sort_ids(op);
     compute_op_bounds(op);
   };
-  auto emit = [&](Op&& op) {
-    std::uint32_t& d = depth[op.id.value];
-    for (OpId p : op.parents) d = std::max(d, depth[p.value] + 1);
+  auto deepen = [&](std::uint64_t id, std::span<const OpId> parents) {
+    std::uint32_t& d = depth[id];
+    for (OpId p : parents) d = std::max(d, depth[p.value] + 1);
     s.stats.dag_height = std::max<std::uint64_t>(s.stats.dag_height, d);
+  };
+  auto emit = [&](Op&& op) {
+    deepen(op.id.value, op.parents);
     sink.add(std::move(op));
   };
+  // A sink that encodes (OpSink::encodes) gets each op encoded where it is made, the op freed
+  // there (a glibc arena's chunks freed by another thread cost its lock: the spooler freeing
+  // the workers' ops took a third of this stage's time), and the bytes in id order.
+  const bool encoding = sink.encodes();
   {
     Op op;
     op.id = OpId(0);
     std::vector<std::uint32_t> vs;
     fill(op, {}, base, vs);
     op.error = err0;
-    finish_op(op);
-    emit(std::move(op));
+    if (encoding) {
+      sort_ids(op);
+      std::vector<std::uint8_t> bytes;
+      sink.encode(op, bytes);
+      deepen(0, op.parents);
+      sink.add_encoded(bytes);
+    } else {
+      finish_op(op);
+      emit(std::move(op));
+    }
   }
 
   // The ops in batches through a pipeline: the calling thread reads each batch's records and
@@ -421,7 +457,11 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
   struct Batch {
     std::uint32_t first = 0;  // op id of raw[0]
     std::vector<Raw> raw;
-    std::vector<Op> ops;
+    std::vector<Op> ops;  // or, encoding, each op's bytes and parents:
+    std::vector<std::uint8_t> encoded;
+    std::vector<std::size_t> encoded_end;
+    std::vector<OpId> parents;
+    std::vector<std::size_t> parents_end;
     std::uint64_t links = 0;
   };
   constexpr std::uint32_t kBatchOps = 256;
@@ -437,8 +477,24 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
   std::vector<RecordFile<std::uint8_t>::Piece> pieces;
   const std::uint64_t chunk_bytes = std::max<std::uint64_t>(s.budget(8), 1 << 16);
   std::uint64_t at = 0;
+  // Merged batches, whose buffers the next batches reuse: no fresh (for the encoded bytes,
+  // mapped) memory per batch, and the records' buffers are made and freed on this thread, not
+  // made here and freed on a worker.
+  std::vector<std::unique_ptr<Batch>> spare;
   auto make = [&](std::size_t b) {
-    auto batch = std::make_unique<Batch>();
+    std::unique_ptr<Batch> batch;
+    if (spare.empty()) {
+      batch = std::make_unique<Batch>();
+    } else {
+      batch = std::move(spare.back());
+      spare.pop_back();
+      batch->ops.clear();
+      batch->encoded.clear();
+      batch->encoded_end.clear();
+      batch->parents.clear();
+      batch->parents_end.clear();
+      batch->links = 0;
+    }
     batch->first = static_cast<std::uint32_t>(b * kBatchOps + 1);
     const std::uint32_t last =
         static_cast<std::uint32_t>(std::min<std::uint64_t>(m, (b + 1) * kBatchOps));
@@ -471,6 +527,8 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
       p = get(p, r.verts, head.vertices);
       p = get(p, r.star, head.star);
       get(p, r.made, head.made);
+      r.fixups.clear();
+      r.links.clear();
       fix.take(i, [&](const Fixup& f) { r.fixups.push_back(f); });
       link.take(i, [&](const Link& l) { r.links.push_back(l); });
     }
@@ -479,15 +537,22 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
   auto work = [&](Batch& batch) {
     std::vector<std::uint32_t> vs;
     std::vector<std::pair<std::uint32_t, std::uint32_t>> owner;  // per made triangle: op, index
-    batch.ops.resize(batch.raw.size());
+    // Encoding, one op at a time, its buffers reused from op to op.
+    thread_local Op reused;
+    if (!encoding) batch.ops.resize(batch.raw.size());
     for (std::size_t n = 0; n < batch.raw.size(); ++n) {
       const Raw& r = batch.raw[n];
-      Op& op = batch.ops[n];
+      Op& op = encoding ? reused : batch.ops[n];
+      if (encoding) clear_keeping_buffers(op);
       op.id = OpId(batch.first + static_cast<std::uint32_t>(n));
       fill(op, r.verts, r.star, vs);
       op.error = s.err[r.k];
       op.birth_res = birth(r.k);
       owner.assign(r.made.size(), {kNone, 0});
+      op.pre.reserve(r.made.size());
+      op.pre_tris.reserve(r.made.size());
+      op.parents.reserve(r.made.size());
+      op.coarser.reserve(r.links.size());
       for (const Fixup& f : r.fixups) {
         bool found = false;
         for (std::size_t j = 0; j < r.made.size(); ++j) {
@@ -530,13 +595,30 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
         op.coarser.push_back({l.tri, static_cast<std::uint8_t>(l.edge), target});
         ++batch.links;
       }
-      finish_op(op);
+      if (!encoding) {
+        finish_op(op);
+        continue;
+      }
+      sort_ids(op);
+      sink.encode(op, batch.encoded);
+      batch.encoded_end.push_back(batch.encoded.size());
+      batch.parents.insert(batch.parents.end(), op.parents.begin(), op.parents.end());
+      batch.parents_end.push_back(batch.parents.size());
     }
-    batch.raw = {};
   };
   auto merge = [&](Batch& batch, std::size_t b) {
     for (Op& op : batch.ops) emit(std::move(op));
+    const std::span<const std::uint8_t> encoded(batch.encoded);
+    const std::span<const OpId> parents(batch.parents);
+    for (std::size_t n = 0; n < batch.encoded_end.size(); ++n) {
+      const std::size_t e0 = n == 0 ? 0 : batch.encoded_end[n - 1];
+      const std::size_t p0 = n == 0 ? 0 : batch.parents_end[n - 1];
+      deepen(batch.first + static_cast<std::uint32_t>(n),
+             parents.subspan(p0, batch.parents_end[n] - p0));
+      sink.add_encoded(encoded.subspan(e0, batch.encoded_end[n] - e0));
+    }
     s.stats.links += batch.links;
+    spare.push_back(std::make_unique<Batch>(std::move(batch)));
     const std::uint64_t done = std::min<std::uint64_t>(m, (b + 1) * kBatchOps);
     if ((b & 0xff) == 0) report(0.35 + 0.65 * double(done) / double(m));
   };

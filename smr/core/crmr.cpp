@@ -40,6 +40,13 @@ std::uint64_t Crmr::triangle_count() const {
   return n;
 }
 
+void OpSink::encode(Op& /*op*/, std::vector<std::uint8_t>& /*out*/) const {
+  throw_internal("op sink: encode() on a sink that takes ops whole (encodes() is false)");
+}
+void OpSink::add_encoded(std::span<const std::uint8_t> /*op*/) {
+  throw_internal("op sink: add_encoded() on a sink that takes ops whole (encodes() is false)");
+}
+
 void CrmrCollector::add(Op&& op) {
   if (op.id.value != crmr_.ops.size())
     throw_internal("op sink: op " + std::to_string(op.id.value) + " arrived out of id order");
@@ -87,9 +94,10 @@ void derive_fragment_neighbours(Op& op) {
 }
 
 void compute_op_bounds(Op& op) {
-  std::vector<Vec3> points, normals;
-  points.reserve(3 * (op.fragment.size() + op.pre_tris.size()));
-  normals.reserve(op.fragment.size() + op.pre_tris.size());
+  // The thread's scratch, kept: builders call this for every op, on several threads at once.
+  thread_local std::vector<Vec3> points, normals;
+  points.clear();
+  normals.clear();
   auto add = [&](const Vec3& a, const Vec3& b, const Vec3& c) {
     points.insert(points.end(), {a, b, c});
     normals.push_back(triangle_normal(a, b, c));

@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -78,6 +79,17 @@ class OpSink {
   virtual ~OpSink() = default;
   virtual void begin(const CrmrInfo& header, std::uint64_t op_count) = 0;
   virtual void add(Op&& op) = 0;
+
+  /// A sink that keeps ops as bytes (a database writer's spool) may split add() in two, so a
+  /// builder that makes ops on several threads does the op's own share there and add(), which
+  /// runs in id order on one thread, is left the rest: encode() (after begin(); from any thread,
+  /// for several ops at once, in any order) turns an op into bytes appended to `out`, computing
+  /// the op's bounds itself (the builder need not), and add_encoded() takes one op's bytes, in
+  /// id order. The op is then freed by the thread that made it, not by the sink's. A builder
+  /// uses the pair when encodes() is true, for every op instead of add().
+  virtual bool encodes() const { return false; }
+  virtual void encode(Op& op, std::vector<std::uint8_t>& out) const;
+  virtual void add_encoded(std::span<const std::uint8_t> op);
 };
 
 /// The in-memory sink: collects the ops into a Crmr; take() computes the ROIs and returns it.

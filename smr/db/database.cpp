@@ -427,8 +427,7 @@ struct OpRecord {
 // terrain: 108 MB for 372 576 ops, against 377 MB for a raw copy of the fields). roi and
 // subtree_cone are not kept: finish() derives them.
 void spool_op(const Op& op, const QuantGrid& grid, Bytes& out) {
-  out.clear();
-  ByteWriter w(out);
+  ByteWriter w(out);  // appends
   const std::uint64_t id = op.id.value;
   w.varint(id);
   w.f64(op.birth_res);
@@ -540,6 +539,36 @@ Op unspool_op(ByteView in, std::uint64_t id, const QuantGrid& grid) {
   return op;
 }
 
+// An op made ready for the spool (DatabaseStreamWriter::encode): this head, its parents' ids,
+// then its spool_op bytes. Only this process reads it, right away.
+struct EncodedHead {
+  OpEntry entry;  // spool_at and spool_size not set yet
+  Box3 vertices;  // of its (snapped) vertices
+  double moved = 0.0;
+  std::uint32_t parent_count = 0;
+  std::uint32_t triangles = 0;
+};
+
+// Snaps the op and encodes it (quantize()'s snap and bounds). The bounds are recomputed unless
+// `bounds_set` says the builder computed them and nothing moved.
+void encode_op(Op& op, const QuantGrid& grid, bool bounds_set, Bytes& out) {
+  EncodedHead h;
+  h.moved = snap_vertices(op, grid);
+  for (const Vertex& v : op.vertices) h.vertices.add(v.p);
+  if (h.moved != 0.0 || !bounds_set) compute_op_bounds(op);
+  h.entry = entry_of(op, op.box, op.cone);
+  h.parent_count = static_cast<std::uint32_t>(op.parents.size());
+  h.triangles = static_cast<std::uint32_t>(op.fragment.size());
+  const std::size_t at = out.size();
+  out.resize(at + sizeof h + op.parents.size() * sizeof(std::uint64_t));
+  std::memcpy(out.data() + at, &h, sizeof h);
+  for (std::size_t i = 0; i < op.parents.size(); ++i) {
+    const std::uint64_t p = op.parents[i].value;
+    std::memcpy(out.data() + at + sizeof h + i * sizeof p, &p, sizeof p);
+  }
+  spool_op(op, grid, out);  // without ROI and subtree cone: finish() derives them
+}
+
 // A child's ROI, subtree cone and height, on its way to a parent (the backward sweep).
 struct Message {
   std::uint64_t to = 0, from = 0;
@@ -572,7 +601,9 @@ struct DatabaseStreamWriter::State {
   double shift = 0.0;
   std::uint64_t triangles = 0;
   bool begun = false, finished = false;
-  std::uint64_t next_id = 0;
+  std::uint64_t next_id = 0;        // add()'s or add_encoded()'s next op
+  std::uint64_t next_appended = 0;  // append()'s
+  enum class Input { kNone, kOps, kEncoded } input = Input::kNone;
 
   // Spooling runs on its own thread, in id order, while the builder makes the next ops. Ops are
   // handed over in batches (one lock and one wake-up per batch, not per op) and the scratch file
@@ -587,24 +618,38 @@ struct DatabaseStreamWriter::State {
   std::thread spooler;
 
   void spool_one(Op& op) {
-    // quantize(): snap, track the largest move, recompute the bounds (the builder computed them
-    // from these very positions when nothing moved).
-    const double moved = snap_vertices(op, grid);
-    shift = std::max(shift, moved);
-    for (const Vertex& v : op.vertices) header.bounds.add(v.p);
-    if (moved != 0.0) compute_op_bounds(op);
-    spool_op(op, grid, spooled);  // without ROI and subtree cone: finish() derives them
+    spooled.clear();
+    encode_op(op, grid, true, spooled);
+    append(spooled);
+  }
+  // The ordered half: an encoded op (encode_op) into the spool, its record and its parents.
+  void append(ByteView encoded) {
+    EncodedHead h;
+    if (encoded.size() < sizeof h) throw_internal("database writer: a truncated encoded op");
+    std::memcpy(&h, encoded.data(), sizeof h);
+    const std::size_t head = sizeof h + std::size_t(h.parent_count) * sizeof(std::uint64_t);
+    if (encoded.size() < head) throw_internal("database writer: a truncated encoded op");
+    if (h.entry.id != next_appended)
+      throw_internal("database writer: op " + std::to_string(h.entry.id) +
+                     " arrived out of id order");
+    ++next_appended;
+    shift = std::max(shift, h.moved);
+    header.bounds.add(h.vertices);
     OpRecord r;
-    r.entry = entry_of(op, op.box, op.cone);
+    r.entry = h.entry;
     r.entry.spool_at = spool.count();
-    r.entry.spool_size = static_cast<std::uint32_t>(spooled.size());
+    r.entry.spool_size = static_cast<std::uint32_t>(encoded.size() - head);
     r.parents_at = parents.count();
-    r.parent_count = static_cast<std::uint32_t>(op.parents.size());
-    for (OpId p : op.parents) parents.push(p.value);
+    r.parent_count = h.parent_count;
+    for (std::uint32_t i = 0; i < h.parent_count; ++i) {
+      std::uint64_t p = 0;
+      std::memcpy(&p, encoded.data() + sizeof h + i * sizeof p, sizeof p);
+      parents.push(p);
+    }
     records.push(r);
     order->observe(r.entry.index_entry());
-    triangles += op.fragment.size();
-    spool.append(spooled.data(), spooled.size());
+    triangles += h.triangles;
+    spool.append(encoded.data() + head, encoded.size() - head);
   }
   void run() {
     for (;;) {
@@ -742,9 +787,28 @@ void DatabaseStreamWriter::begin(const CrmrInfo& header, std::uint64_t /*op_coun
   s_->spooler = std::thread([s = s_.get()] { s->run(); });
 }
 
+void DatabaseStreamWriter::encode(Op& op, std::vector<std::uint8_t>& out) const {
+  const State& s = *s_;
+  if (!s.begun || s.finished) throw_internal("database writer: encode() outside begin/finish");
+  encode_op(op, s.grid, false, out);
+}
+
+void DatabaseStreamWriter::add_encoded(std::span<const std::uint8_t> op) {
+  State& s = *s_;
+  if (!s.begun || s.finished) throw_internal("database writer: add_encoded() outside begin/finish");
+  if (s.input == State::Input::kOps)
+    throw_internal("database writer: add_encoded() after add(): one or the other");
+  s.input = State::Input::kEncoded;
+  s.append(op);  // on this thread: the op's own work was done by encode()
+  ++s.next_id;
+}
+
 void DatabaseStreamWriter::add(Op&& op) {
   State& s = *s_;
   if (!s.begun || s.finished) throw_internal("database writer: add() outside begin/finish");
+  if (s.input == State::Input::kEncoded)
+    throw_internal("database writer: add() after add_encoded(): one or the other");
+  s.input = State::Input::kOps;
   if (op.id.value != s.next_id)
     throw_internal("database writer: op " + std::to_string(op.id.value) +
                    " arrived out of id order");

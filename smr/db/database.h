@@ -99,6 +99,11 @@ class DatabaseStreamWriter final : public OpSink {
   ~DatabaseStreamWriter() override;  // without finish(): nothing is left at `path`
   void begin(const CrmrInfo& header, std::uint64_t op_count) override;
   void add(Op&& op) override;
+  /// Snaps the op, computes its bounds and encodes it for the spool: the work add() does on
+  /// its own thread, done by the caller's. A writer takes either add() or add_encoded(), not both.
+  bool encodes() const override { return true; }
+  void encode(Op& op, std::vector<std::uint8_t>& out) const override;
+  void add_encoded(std::span<const std::uint8_t> op) override;
   WriteReport finish();
   /// The header as stored: bounds of the snapped vertices, errors raised by the largest move.
   const CrmrInfo& header() const;

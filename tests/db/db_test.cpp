@@ -12,6 +12,7 @@
 
 #include "smr/build/block_tin.h"
 #include "smr/core/invariants.h"
+#include "smr/core/parallel.h"
 #include "smr/db/database.h"
 #include "smr/db/page.h"
 #include "smr/extract/extract.h"
@@ -217,6 +218,27 @@ void expect_streamed_equals_whole(const Crmr& crmr, const WriteOptions& o, const
   EXPECT_EQ(r.ops, crmr.ops.size());
   EXPECT_GT(r.spool_bytes, 0u);
   EXPECT_TRUE(fs::is_empty(scratch)) << "the scratch file is visible";
+
+  // The split path (OpSink::encodes): ops encoded on several threads, last first, their bounds
+  // cleared (encode computes them), then handed over in id order: the same bytes again.
+  DatabaseStreamWriter e(dir.file("encoded.smrdb"), o, scratch);
+  ASSERT_TRUE(e.encodes());
+  e.begin(crmr.header, crmr.ops.size());
+  const std::size_t n = crmr.ops.size();
+  std::vector<std::vector<std::uint8_t>> encoded(n);
+  parallel_for(n, 3, [&](std::size_t i) {
+    Op op = crmr.ops[n - 1 - i];
+    op.box = Box3{};
+    op.sphere = Sphere{};
+    op.cone = NormalCone{};
+    e.encode(op, encoded[n - 1 - i]);
+  });
+  for (const std::vector<std::uint8_t>& bytes : encoded) e.add_encoded(bytes);
+  e.finish();
+  EXPECT_TRUE(read_file(dir.file("whole.smrdb")) == read_file(dir.file("encoded.smrdb")))
+      << "the database from encoded ops differs from the whole CRMR's";
+  EXPECT_EQ(e.header(), whole.header);
+  EXPECT_TRUE(fs::is_empty(scratch)) << "the scratch file is visible";
 }
 
 TEST(DatabaseStreamWriter, WritesTheBytesOfTheWholeCrmr) {
@@ -304,6 +326,18 @@ TEST(DatabaseStreamWriter, RefusesMisuseAndLeavesNothingWhenDropped) {
     w.begin(d.crmr.header, 0);
     w.add(Op(d.crmr.ops[0]));
     EXPECT_THROW(w.add(Op(d.crmr.ops[2])), Error);
+    std::vector<std::uint8_t> bytes;
+    Op op = d.crmr.ops[1];
+    w.encode(op, bytes);
+    EXPECT_THROW(w.add_encoded(bytes), Error) << "add() and add_encoded() mixed";
+  }
+  {
+    DatabaseStreamWriter w(path, {}, dir.path().string());
+    w.begin(d.crmr.header, 0);
+    std::vector<std::uint8_t> bytes;
+    Op op = d.crmr.ops[1];
+    w.encode(op, bytes);
+    EXPECT_THROW(w.add_encoded(bytes), Error) << "op 1 before op 0";
   }
   EXPECT_TRUE(fs::is_empty(dir.path())) << "a dropped writer left files behind";
   {
