@@ -17,7 +17,8 @@
 // Memory holds 16 bytes per removal (its err, op id and DAG depth) and the budget, never the
 // triangles: a removal's record is spooled when it is added and read back when its op is made,
 // a chunk of records at a time (an 8th of the budget, read in runs of nearby records), and the
-// ops are made on `threads` workers a batch at a time, handed to the sink in id order.
+// ops are made on `threads` workers a batch at a time, handed to the sink in id order (to a sink
+// that encodes, OpSink::encodes, encoded by the workers and handed over as bytes).
 // The ops are the ones an in-memory replay of the ops in id order gives.
 #pragma once
 
