@@ -285,7 +285,8 @@ class ExternalSorter {
     return true;
   }
   std::uint64_t size() const { return size_; }
-  /// Runs made so far (with Spill::kBackground, the one being written may not count yet).
+  /// Runs made so far and the bytes they took (with Spill::kBackground, ask after seal() or the
+  /// first next(): a run may be being written until then).
   std::size_t runs() const { return runs_.count(); }
   std::uint64_t spilled_bytes() const { return runs_.bytes(); }
 

@@ -622,7 +622,8 @@ class Builder {
     HeightfieldWindows(in.halo).read_into(in.w, c0 - hc0, r0 - hr0, block_col1(bx) - c0 + 1,
                                           block_row1(by) - r0 + 1);
     const Heightfield& w = in.w;
-    stats_.max_block_samples = std::max<std::uint64_t>(stats_.max_block_samples, in.halo.z.size());
+    // Not stats_.max_block_samples: this thread merges level-0 blocks into it meanwhile.
+    read_max_samples_ = std::max<std::uint64_t>(read_max_samples_, in.halo.z.size());
     if (spill_) spill_->put(bx, by, w, c0, r0);
     for (std::size_t i = 0; i < w.z.size(); ++i) {
       if (!w.valid.empty() && w.valid[i] == 0) continue;
@@ -893,6 +894,7 @@ class Builder {
           report(0.7 * double(std::min(k + 1, n)) / double(n));
         });
     tol_ = read_tol_;
+    stats_.max_block_samples = std::max(stats_.max_block_samples, read_max_samples_);
     leaf_vertices_ = {};
     spare_windows_ = {};
     window_buffer() = Heightfield{};
@@ -2076,6 +2078,7 @@ class Builder {
   std::condition_variable read_cv_;
   std::size_t next_read_ = 0;  // the leaf whose read is next
   double read_tol_ = 0.0;      // the running tolerance of the reads (tol_ once they are done)
+  std::uint64_t read_max_samples_ = 0;  // the reads' largest window (with its halo)
   double tol_ = 0.0, range_ = 0.0, stop_error_ = 0.0, eps0_ = 0.0, err_final_ = 0.0;
   std::uint64_t finest_vertices_ = 0, finest_triangles_ = 0;
   std::vector<MVert> verts_;
