@@ -9,7 +9,6 @@
 #include <array>
 #include <chrono>
 #include <cmath>
-#include <condition_variable>
 #include <cstring>
 #include <deque>
 #include <filesystem>
@@ -592,19 +591,13 @@ class Builder {
   };
 
   /// Reads leaf k = (bx, by), copies it to the scratch file, counts its samples. The workers
-  /// read the leaves one at a time in block order (the reader is not shared between threads and
-  /// the tolerance is a running maximum): each waits for the previous leaf's read, so the
-  /// calling thread, which merges the leaves in order, is left the merges.
+  /// read the leaves one at a time in block order (read_turns_: the reader is not shared between
+  /// threads and the tolerance is a running maximum), so the calling thread, which merges the
+  /// leaves in order, is left the merges.
   LeafInput read_leaf(std::size_t k) {
-    std::unique_lock lock(read_mu_);
-    read_cv_.wait(lock, [&] { return next_read_ == k; });
-    struct Next {  // the next leaf's turn, however this read ends
-      Builder& b;
-      ~Next() {
-        ++b.next_read_;
-        b.read_cv_.notify_all();
-      }
-    } next{*this};
+    return read_turns_.run(k, [&] { return read_leaf_now(k); });
+  }
+  LeafInput read_leaf_now(std::size_t k) {
     const int bx = int(k % std::size_t(bw_)), by = int(k / std::size_t(bw_));
     const Clock::time_point t0 = Clock::now();
     LeafInput in;
@@ -851,7 +844,7 @@ class Builder {
     std::deque<std::unique_ptr<UpperBlock>> ready;  // copied at merges, waiting for their item
     if (interleave) leaf_vertices_.assign(n, {});
     leaf_tol_.assign(n, 0.0);
-    next_read_ = 0;
+    read_turns_.reset();
     read_tol_ = tol_;
     ordered_pipeline(
         items, threads, in_flight,
@@ -2074,10 +2067,8 @@ class Builder {
   std::vector<std::vector<std::uint32_t>> leaf_vertices_;  // interleaved pass: per leaf block
   bool level0_done_ = false;                               // by the interleaved leaf pass
   std::vector<double> leaf_tol_;  // the running tolerance after each leaf's read
-  std::mutex read_mu_;            // the leaf pass's reads: one at a time, in block order
-  std::condition_variable read_cv_;
-  std::size_t next_read_ = 0;  // the leaf whose read is next
-  double read_tol_ = 0.0;      // the running tolerance of the reads (tol_ once they are done)
+  Turnstile read_turns_;          // the leaf pass's reads: one at a time, in block order
+  double read_tol_ = 0.0;         // the running tolerance of the reads (tol_ once they are done)
   std::uint64_t read_max_samples_ = 0;  // the reads' largest window (with its halo)
   double tol_ = 0.0, range_ = 0.0, stop_error_ = 0.0, eps0_ = 0.0, err_final_ = 0.0;
   std::uint64_t finest_vertices_ = 0, finest_triangles_ = 0;

@@ -1,7 +1,8 @@
 // Parallel helpers for work whose results are combined in order, so that output never depends
 // on the thread count: parallel_for (independent items, results by index; WorkerPool runs many
-// such batches on the same threads) and ordered_pipeline (items made and merged in order on the
-// calling thread, worked on by a pool).
+// such batches on the same threads), ordered_pipeline (items made and merged in order on the
+// calling thread, worked on by a pool) and Turnstile (a step of the workers' that runs in item
+// order).
 #pragma once
 
 #include <algorithm>
@@ -24,6 +25,39 @@ namespace smr {
 inline unsigned thread_count(unsigned requested) {
   return requested != 0 ? requested : std::max(1u, std::thread::hardware_concurrency());
 }
+
+/// Turns taken in order by several threads: run(k, f) runs f() once turns 0..k-1 have run, one
+/// turn at a time, and lets turn k + 1 go however f() ends (a throw included). For a step of
+/// ordered_pipeline's workers that must follow the items' order (a reader that is not shared, a
+/// running total), so that the calling thread is left only the merges. Every turn from 0 must
+/// come, or later ones wait for ever: ordered_pipeline's workers take the items in order, so
+/// an item's earlier ones are always taken.
+class Turnstile {
+ public:
+  template <class F>
+  decltype(auto) run(std::size_t k, F&& f) {
+    std::unique_lock lock(mu_);
+    cv_.wait(lock, [&] { return next_ == k; });
+    struct Next {
+      Turnstile& t;
+      ~Next() {
+        ++t.next_;
+        t.cv_.notify_all();
+      }
+    } next{*this};
+    return f();
+  }
+  /// Starts again from turn 0 (no turn may be waiting).
+  void reset() {
+    std::lock_guard lock(mu_);
+    next_ = 0;
+  }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable cv_;
+  std::size_t next_ = 0;
+};
 
 /// A fixed set of threads that runs batches of independent items one batch after another: a
 /// caller with many small batches starts its threads (and whatever they keep thread_local, such

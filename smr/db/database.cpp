@@ -601,8 +601,8 @@ struct DatabaseStreamWriter::State {
   double shift = 0.0;
   std::uint64_t triangles = 0;
   bool begun = false, finished = false;
-  std::uint64_t next_id = 0;        // add()'s or add_encoded()'s next op
-  std::uint64_t next_appended = 0;  // append()'s
+  std::uint64_t next_id = 0;        // add()'s next op (checked as it comes, on its thread)
+  std::uint64_t next_appended = 0;  // append()'s, whichever way the op came
   enum class Input { kNone, kOps, kEncoded } input = Input::kNone;
 
   // Spooling runs on its own thread, in id order, while the builder makes the next ops. Ops are
@@ -799,8 +799,7 @@ void DatabaseStreamWriter::add_encoded(std::span<const std::uint8_t> op) {
   if (s.input == State::Input::kOps)
     throw_internal("database writer: add_encoded() after add(): one or the other");
   s.input = State::Input::kEncoded;
-  s.append(op);  // on this thread: the op's own work was done by encode()
-  ++s.next_id;
+  s.append(op);  // on this thread (the op's own work was done by encode()); checks the id order
 }
 
 void DatabaseStreamWriter::add(Op&& op) {

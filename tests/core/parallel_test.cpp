@@ -187,5 +187,40 @@ TEST(WorkerPool, CallersOwnWorkOverlapsTheBatch) {
   EXPECT_EQ(sum.load(), 4950u) << "the pool works after a failure";
 }
 
+// Turns taken from many threads, started last turn first, run one at a time, 0, 1, 2, ...; a turn
+// that throws still lets the next one go; reset() starts again from 0.
+TEST(Turnstile, TurnsRunInOrderOneAtATimeAndAThrowPassesTheTurnOn) {
+  constexpr std::size_t kTurns = 64;
+  Turnstile turns;
+  for (int round = 0; round < 2; ++round) {
+    turns.reset();
+    std::vector<std::size_t> order;
+    std::atomic<int> inside{0};
+    bool overlapped = false;
+    std::vector<std::thread> threads;
+    for (std::size_t t = 8; t-- > 0;) {  // the threads with the later turns start first
+      threads.emplace_back([&, t] {
+        for (std::size_t k = t; k < kTurns; k += 8) {  // each its own turns, in order
+          try {
+            turns.run(k, [&] {
+              if (inside.fetch_add(1) != 0) overlapped = true;
+              std::this_thread::sleep_for(std::chrono::microseconds(50));
+              order.push_back(k);
+              inside.fetch_sub(1);
+              if (k % 10 == 3) throw std::runtime_error("turn failed");
+            });
+          } catch (const std::runtime_error&) {
+          }
+        }
+      });
+    }
+    for (std::thread& t : threads) t.join();
+    EXPECT_FALSE(overlapped) << "two turns ran at once";
+    std::vector<std::size_t> want(kTurns);
+    std::iota(want.begin(), want.end(), std::size_t{0});
+    EXPECT_EQ(order, want);
+  }
+}
+
 }  // namespace
 }  // namespace smr
