@@ -20,6 +20,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "smr/build/exact_intersection.h"
 #include "smr/build/op_assembly.h"
 #include "smr/core/geometry.h"
 #include "smr/core/parallel.h"
@@ -365,6 +366,102 @@ class StarDistance {
   mutable std::vector<std::pair<double, std::size_t>> raised_;
 };
 
+// Live triangles by their bounding boxes, for the self-intersection test: a hierarchy of uniform
+// grids (cell sizes cell * 2^level), each triangle in the one cell of the level whose cells are
+// at least its box's extent that holds its box's centre. At a level of cell size s, a box then
+// meets only triangles of the cells holding its own box grown by s / 2; where that range has more
+// cells than the level holds, the level's cells are scanned instead.
+class TriangleGrid {
+ public:
+  void reset(const Vec3& origin, double cell) {
+    origin_ = origin;
+    cell_ = cell > 0.0 ? cell : 1.0;
+    levels_.assign(kLevels, {});
+    where_.clear();
+  }
+  void insert(std::uint32_t id, const Box3& b) {
+    const Vec3 e = b.hi - b.lo;
+    const double extent = std::max({e.x, e.y, e.z});
+    int level = 0;
+    double size = cell_;
+    while (size < extent && level + 1 < kLevels) size *= 2.0, ++level;
+    const std::uint64_t key = key_of(index_of(0.5 * (b.lo + b.hi), size));
+    levels_[level][key].push_back(id);
+    if (where_.size() <= id) where_.resize(std::size_t(id) + 1, {kNoLevel, 0});
+    where_[id] = {level, key};
+  }
+  void erase(std::uint32_t id) {
+    if (id >= where_.size() || where_[id].first == kNoLevel) return;
+    auto& cells = levels_[std::size_t(where_[id].first)];
+    auto it = cells.find(where_[id].second);
+    auto& ids = it->second;
+    *std::find(ids.begin(), ids.end(), id) = ids.back();
+    ids.pop_back();
+    if (ids.empty()) cells.erase(it);
+    where_[id].first = kNoLevel;
+  }
+  // f(id) for every triangle whose box may meet b (and some that do not).
+  template <class F>
+  void visit(const Box3& b, F&& f) const {
+    double size = cell_;
+    for (int level = 0; level < kLevels; ++level, size *= 2.0) {
+      const auto& cells = levels_[std::size_t(level)];
+      if (cells.empty()) continue;
+      const Vec3 half(0.5 * size);
+      const std::array<std::int64_t, 3> lo = index_of(b.lo - half, size),
+                                        hi = index_of(b.hi + half, size);
+      double range = 1.0;
+      for (int k = 0; k < 3; ++k) range *= double(hi[std::size_t(k)] - lo[std::size_t(k)] + 1);
+      const auto inside = [&](std::uint64_t key) {
+        for (int k = 0; k < 3; ++k) {
+          const auto i = std::int64_t((key >> (21 * k)) & kMask) - kOffset;
+          if (i < lo[std::size_t(k)] || i > hi[std::size_t(k)]) return false;
+        }
+        return true;
+      };
+      if (range > double(cells.size())) {
+        for (const auto& [key, ids] : cells) {
+          if (!inside(key)) continue;
+          for (std::uint32_t id : ids) f(id);
+        }
+        continue;
+      }
+      for (std::int64_t x = lo[0]; x <= hi[0]; ++x) {
+        for (std::int64_t y = lo[1]; y <= hi[1]; ++y) {
+          for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
+            auto it = cells.find(key_of({x, y, z}));
+            if (it == cells.end()) continue;
+            for (std::uint32_t id : it->second) f(id);
+          }
+        }
+      }
+    }
+  }
+
+ private:
+  static constexpr int kLevels = 40;
+  static constexpr int kNoLevel = -1;
+  static constexpr std::int64_t kOffset = std::int64_t{1} << 20;
+  static constexpr std::uint64_t kMask = (std::uint64_t{1} << 21) - 1;
+  std::array<std::int64_t, 3> index_of(const Vec3& p, double size) const {
+    std::array<std::int64_t, 3> i{};
+    for (int k = 0; k < 3; ++k) {
+      const double c = std::floor((p[k] - origin_[k]) / size);
+      i[std::size_t(k)] = std::int64_t(std::clamp(c, -double(kOffset), double(kOffset - 1)));
+    }
+    return i;
+  }
+  static std::uint64_t key_of(const std::array<std::int64_t, 3>& i) {
+    std::uint64_t key = 0;
+    for (int k = 0; k < 3; ++k) key |= std::uint64_t(i[std::size_t(k)] + kOffset) << (21 * k);
+    return key;
+  }
+  Vec3 origin_{0.0};
+  double cell_ = 1.0;
+  std::vector<std::unordered_map<std::uint64_t, std::vector<std::uint32_t>>> levels_;
+  std::vector<std::pair<int, std::uint64_t>> where_;  // triangle -> (level, cell); kNoLevel: none
+};
+
 constexpr int kBoundDepth = 3;
 
 class Builder {
@@ -449,7 +546,13 @@ class Builder {
     const auto id = static_cast<std::uint32_t>(tris_.size());
     tris_.push_back(t);
     for (std::uint32_t v : t.v) star_[v].push_back(id);
+    if (grid_ready_) grid_.insert(id, box_of(t.v));
     return id;
+  }
+  Box3 box_of(const std::array<std::uint32_t, 3>& v) const {
+    Box3 b;
+    for (std::uint32_t w : v) b.add(pos_[w]);
+    return b;
   }
   void unlink_triangle(std::uint32_t id, std::uint32_t except) {
     for (std::uint32_t v : tris_[id].v) {
@@ -501,6 +604,7 @@ class Builder {
     boundary_.assign(n, 0);
     stamp_.assign(n, 0);
     mark_.assign(n, 0);
+    blocked_.assign(n, {});
     tris_.reserve(triangles * 2);
     cos_max_turn_ = std::cos(options_.max_normal_turn_degrees * 3.14159265358979323846 / 180.0);
   }
@@ -712,7 +816,9 @@ class Builder {
     ranked_.clear();
     for (std::uint32_t to : cand_) ranked_.push_back({cost(from, to), to});
     std::sort(ranked_.begin(), ranked_.end());
+    const std::vector<std::uint32_t>& blocked = blocked_[from];
     for (const auto& [c, to] : ranked_) {
+      if (std::find(blocked.begin(), blocked.end(), to) != blocked.end()) continue;
       if (valid(from, to, cand_)) return {c, to};
     }
     return {0.0, kNone};
@@ -815,6 +921,89 @@ class Builder {
     return e;
   }
 
+  // ---- self-intersections ------------------------------------------------------------------
+
+  // Whether collapsing from -> to would make a new triangle cross another triangle of the mesh
+  // (one that stays, or another new one) anywhere but in the corners and edges they share
+  // (exact_intersection.h). Such a collapse is refused (QemPmOptions::no_self_intersections),
+  // so no level of the simplification crosses itself where the source did not.
+  bool crosses_after(std::uint32_t from, std::uint32_t to) {
+    if (!options_.no_self_intersections) return false;
+    if (!grid_ready_) build_grid();
+    made_.clear();
+    for (std::uint32_t id : star_[from]) {
+      const Tri& t = tris_[id];
+      if (has(t, to)) continue;
+      MeshTriangle m{{}, t.v};
+      for (std::uint32_t& w : m.id) {
+        if (w == from) w = to;
+      }
+      for (int k = 0; k < 3; ++k) m.p[std::size_t(k)] = pos_[m.id[std::size_t(k)]];
+      made_.push_back(m);
+    }
+    if (tri_mark_.size() < tris_.size()) tri_mark_.resize(tris_.size() + tris_.size() / 2, 0);
+    if (++tri_mark_value_ == 0) {
+      std::fill(tri_mark_.begin(), tri_mark_.end(), 0u);
+      tri_mark_value_ = 1;
+    }
+    const std::uint32_t old_star = tri_mark_value_;
+    for (std::uint32_t id : star_[from]) tri_mark_[id] = old_star;
+    // The triangles near the new star (one grid query for all of it), then pair by pair.
+    Box3 all;
+    made_boxes_.clear();
+    for (const MeshTriangle& m : made_) {
+      Box3 b;
+      for (const Vec3& p : m.p) b.add(p);
+      made_boxes_.push_back(b);
+      all.add(b);
+    }
+    near_.clear();
+    grid_.visit(all, [&](std::uint32_t id) {
+      if (tri_mark_[id] == old_star) return;
+      const Box3 tb = box_of(tris_[id].v);
+      if (overlap(tb, all)) near_.push_back({id, tb});
+    });
+    bool crossed = false;
+    for (std::size_t i = 0; i < made_.size() && !crossed; ++i) {
+      const MeshTriangle& m = made_[i];
+      for (std::size_t j = i + 1; j < made_.size() && !crossed; ++j) {
+        crossed = triangles_cross(m, made_[j]);
+      }
+      for (std::size_t j = 0; j < near_.size() && !crossed; ++j) {
+        if (!overlap(near_[j].second, made_boxes_[i])) continue;
+        const Tri& t = tris_[near_[j].first];
+        crossed = triangles_cross(m, {{pos_[t.v[0]], pos_[t.v[1]], pos_[t.v[2]]}, t.v});
+      }
+    }
+    if (crossed) ++stats_.rejected_intersection;
+    return crossed;
+  }
+
+  static bool overlap(const Box3& a, const Box3& b) {
+    return a.lo.x <= b.hi.x && a.lo.y <= b.hi.y && a.lo.z <= b.hi.z && b.lo.x <= a.hi.x &&
+           b.lo.y <= a.hi.y && b.lo.z <= a.hi.z;
+  }
+
+  // The grid over the live triangles, made at the first test: cells of the mean edge length.
+  void build_grid() {
+    Box3 bounds;
+    double edges = 0.0;
+    std::size_t count = 0;
+    for (const Tri& t : tris_) {
+      if (t.destroyer != kNone) continue;
+      for (int k = 0; k < 3; ++k) {
+        bounds.add(pos_[t.v[std::size_t(k)]]);
+        edges += glm::length(pos_[t.v[std::size_t(k)]] - pos_[t.v[std::size_t((k + 1) % 3)]]);
+        ++count;
+      }
+    }
+    grid_.reset(bounds.empty() ? Vec3(0.0) : bounds.lo, count ? edges / double(count) : 1.0);
+    for (std::uint32_t id = 0; id < tris_.size(); ++id) {
+      if (tris_[id].destroyer == kNone) grid_.insert(id, box_of(tris_[id].v));
+    }
+    grid_ready_ = true;
+  }
+
   // ---- simplification -----------------------------------------------------------------------
 
   // `new_e`: the bounds of the new triangles, in star order (collapse_error's new_e_).
@@ -830,6 +1019,8 @@ class Builder {
       old_tris_.push_back(id);
       tris_[id].destroyer = c;
       unlink_triangle(id, from);
+      if (grid_ready_) grid_.erase(id);
+      for (std::uint32_t w : tris_[id].v) blocked_[w].clear();  // their neighbourhoods change
     }
     col.old_end = static_cast<std::uint32_t>(old_tris_.size());
     star_[from].clear();
@@ -923,6 +1114,11 @@ class Builder {
       if (error > tolerance) {
         if (known) w = {top.stamp, top.to, error};
         waiting.push_back({top, error});
+        continue;
+      }
+      if (crosses_after(top.from, top.to)) {
+        blocked_[top.from].push_back(top.to);
+        push_best(top.from);
         continue;
       }
       apply(top.from, top.to, error, new_e_);
@@ -1404,6 +1600,11 @@ class Builder {
           b.have_error = true;
         }
         if (b.error > tolerance) continue;
+        if (crosses_after(v, b.to)) {
+          blocked_[v].push_back(b.to);
+          dirty_list_.push_back(v);
+          continue;
+        }
         const std::uint32_t to = b.to;
         taken_[v] = taken_[to] = taken_stamp_;
         for (std::uint32_t w : ring_) taken_[w] = taken_stamp_;
@@ -1463,6 +1664,16 @@ class Builder {
   std::vector<double> new_e_;  // new triangle -> its bound (collapse_error)
   std::vector<std::uint32_t> nf_, cand_, ring_, local_;
   mutable std::vector<std::uint32_t> mark_;  // per vertex: next_mark()'s values
+  // Self-intersections: the live triangles by box, per vertex the targets refused since its
+  // neighbourhood last changed, per triangle marks (the old star), the new star under test.
+  TriangleGrid grid_;
+  bool grid_ready_ = false;
+  std::vector<std::vector<std::uint32_t>> blocked_;
+  std::vector<std::uint32_t> tri_mark_;
+  std::uint32_t tri_mark_value_ = 0;
+  std::vector<MeshTriangle> made_;
+  std::vector<Box3> made_boxes_;
+  std::vector<std::pair<std::uint32_t, Box3>> near_;
   mutable std::uint32_t mark_value_ = 0;
   std::vector<std::pair<double, std::uint32_t>> ranked_;
   std::unordered_map<std::uint64_t, std::uint32_t> frag_edges_;

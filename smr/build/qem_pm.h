@@ -64,6 +64,9 @@ struct QemPmOptions {
   /// removal would cost most): refinement then spawns them (Brown Fig. 4.9d), each inside the op
   /// that follows it in the split order, at the error its absence costs.
   bool spawn_components = true;
+  /// Refuse a collapse that would make a new triangle cross another triangle (exactly, anywhere
+  /// but in shared corners and edges), so that simplification introduces no self-intersection.
+  bool no_self_intersections = true;
   /// Progress in [0, 1]; called at most a few hundred times.
   std::function<void(double)> progress;
 };
@@ -73,7 +76,8 @@ struct QemPmStats {
   std::uint64_t spawned_components = 0;
   std::uint64_t base_vertices = 0, base_triangles = 0;
   std::uint64_t rejected_link = 0, rejected_flip = 0, rejected_boundary = 0;
-  std::uint64_t bounds_computed = 0;  // guaranteed bounds of candidate collapses computed
+  std::uint64_t rejected_intersection = 0;  // collapses refused: a new triangle would cross another
+  std::uint64_t bounds_computed = 0;        // guaranteed bounds of candidate collapses computed
 };
 
 // Out of core (DESIGN.md section 4; Hoppe 1998's block construction, in 3-D): the triangles are

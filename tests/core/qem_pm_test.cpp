@@ -22,6 +22,7 @@
 #include "tests/support/meshes.h"
 #include "tests/support/oracles.h"
 #include "tests/support/sanitized.h"
+#include "tests/support/self_intersections.h"
 
 namespace smr {
 namespace {
@@ -40,6 +41,43 @@ std::vector<TriRef> level(const Crmr& crmr, bool finest) {
     }
   }
   return out;
+}
+
+// The corners of `refs`' triangles, void ones left out.
+std::vector<std::array<Vec3, 3>> corners_of(const Crmr& crmr, const std::vector<TriRef>& refs) {
+  std::vector<std::array<Vec3, 3>> out;
+  for (const TriRef& ref : refs) {
+    const Op& op = crmr.ops[ref.op.value];
+    const FragmentTriangle& t = op.fragment[ref.index];
+    if (!t.is_void()) out.push_back({op.position(t, 0), op.position(t, 1), op.position(t, 2)});
+  }
+  return out;
+}
+
+// A collapse whose new triangles would cross any triangle of the mesh is refused
+// (QemPmOptions::no_self_intersections), so each collapse removes crossings and adds none: the
+// base mesh R^0, the last state of the simplification, crosses itself in no more pairs of
+// triangles than the source (CGAL's self_intersections counts them, independently of the
+// builder's own test). Cuts mixing resolutions are reported, not bounded: two triangles from
+// different states of the simplification are never tested against each other.
+std::size_t expect_base_crosses_no_more_than_the_source(const Crmr& crmr, const std::string& name) {
+  const std::size_t source = test::crossing_pairs(corners_of(crmr, level(crmr, true)));
+  const std::size_t base = test::crossing_pairs(corners_of(crmr, level(crmr, false)));
+  EXPECT_LE(base, source) << "simplification made the mesh cross itself";
+  std::size_t cuts = 0, crossing_cuts = 0, worst = 0;
+  for (const test::NamedSpec& c : test::mesh_rcf_spread(crmr.header)) {
+    const Extraction e =
+        extract_minimal_surface(crmr, make_rcf(c.spec, ModelKind::kMesh3d, nullptr));
+    const std::size_t n = test::crossing_pairs(corners_of(crmr, e.triangles));
+    ++cuts;
+    if (n > source) ++crossing_cuts;
+    worst = std::max(worst, n);
+  }
+  std::printf(
+      "%s: crossing pairs: source %zu, base %zu; %zu of %zu cuts cross more than the "
+      "source (most pairs in a cut: %zu)\n",
+      name.c_str(), source, base, crossing_cuts, cuts, worst);
+  return base;
 }
 
 // A triangle as its vertex ids, rotated so the smallest comes first (orientation kept).
@@ -256,6 +294,24 @@ TEST_P(QemPm, ExtractionsAreManifoldSatisfyTheRcfAndHoldTheErrorBound) {
   expect_extractions_hold(b.crmr, b.source);
 }
 
+TEST_P(QemPm, SimplificationMakesNoSelfIntersection) {
+  expect_base_crosses_no_more_than_the_source(built(GetParam()).crmr, GetParam());
+}
+
+// Without the test, simplification of the elephant with holes crosses itself, so the oracle above
+// has something to catch.
+TEST(QemPmOptions, WithoutTheIntersectionTestTheBaseMeshCrossesItself) {
+  const char* name = "elephant-with-holes.off";
+  QemPmOptions o;
+  o.no_self_intersections = false;
+  QemPmStats stats;
+  const Crmr plain = build_qem_pm(built(name).source, name, o, &stats);
+  EXPECT_EQ(stats.rejected_intersection, 0u);
+  EXPECT_GT(built(name).stats.rejected_intersection, 0u);
+  EXPECT_EQ(test::crossing_pairs(corners_of(plain, level(plain, true))), 0u);
+  EXPECT_GT(test::crossing_pairs(corners_of(plain, level(plain, false))), 0u);
+}
+
 // Without coalescing every vertex split is its own op, and the CRMR is as valid.
 TEST(QemPmOptions, OneOpPerSplitWithoutCoalescing) {
   const TriangleMesh mesh = test::built_mesh("elephant-with-holes.off").source;
@@ -365,6 +421,10 @@ TEST_P(BlockPm, CrmrInvariantsHoldAndTheFinestMeshIsTheSource) {
 
 TEST_P(BlockPm, ExtractionsAcrossBlockBordersAreManifoldAndHoldTheRcfAndTheBound) {
   expect_extractions_hold(block_built(GetParam()).crmr, built(GetParam()).source);
+}
+
+TEST_P(BlockPm, SimplificationMakesNoSelfIntersection) {
+  expect_base_crosses_no_more_than_the_source(block_built(GetParam()).crmr, GetParam());
 }
 
 TEST(BlockPmBuild, DeterministicWhateverTheBudgetAndTheThreads) {
