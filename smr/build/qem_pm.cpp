@@ -1383,7 +1383,8 @@ class Builder {
                 " boundary-weight=" + std::to_string(options_.boundary_weight) +
                 " base-vertices=" + std::to_string(options_.base_vertices) +
                 " max-base-error=" + std::to_string(options_.max_base_error) +
-                " bound-band=" + std::to_string(options_.bound_band);
+                " bound-band=" + std::to_string(options_.bound_band) +
+                " no-self-intersections=" + (options_.no_self_intersections ? "yes" : "no");
 
     const std::vector<std::vector<std::uint32_t>> groups = coalesce(split_order());
     const std::size_t nt = tris_.size();
