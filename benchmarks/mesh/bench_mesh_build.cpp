@@ -149,6 +149,7 @@ json ours_json(const smr::Crmr& crmr, const smr::QemPmStats& stats) {
           {"bounds_computed", stats.bounds_computed},
           {"rejected_link", stats.rejected_link},
           {"rejected_flip", stats.rejected_flip},
+          {"rejected_intersection", stats.rejected_intersection},
           {"rejected_boundary", stats.rejected_boundary},
           {"err0", crmr.header.err0},
           {"err_final", crmr.header.err_final},

@@ -39,65 +39,46 @@ bool strictly_one_side(const Vec3& u, const Vec3& w, const D&... d) {
 }  // namespace
 
 bool triangles_cross(const MeshTriangle& a, const MeshTriangle& b) {
-  // A quick separation in double before the exact predicates: most pairs the builder tests are
-  // neighbours whose other corners lie clearly off each other's plane.
-  {
-    std::array<int, 3> ka{-1, -1, -1};
-    int shared = 0;
-    for (int i = 0; i < 3; ++i) {
-      for (int j = 0; j < 3; ++j) {
-        if (a.id[std::size_t(i)] == b.id[std::size_t(j)]) ka[std::size_t(shared++)] = i;
-      }
-    }
-    const Vec3 &a0 = a.p[0], &b0 = b.p[0];
-    const Vec3 au = a.p[1] - a0, aw = a.p[2] - a0, bu = b.p[1] - b0, bw = b.p[2] - b0;
-    if (shared == 0) {
-      if (strictly_one_side(bu, bw, a.p[0] - b0, a.p[1] - b0, a.p[2] - b0) ||
-          strictly_one_side(au, aw, b.p[0] - a0, b.p[1] - a0, b.p[2] - a0)) {
-        return false;
-      }
-    } else if (shared == 1) {
-      // Both other corners of one triangle strictly on one side of the other's plane: it meets
-      // that plane only in the shared corner.
-      const Vec3& v = a.p[std::size_t(ka[0])];
-      const Vec3& a1 = a.p[std::size_t((ka[0] + 1) % 3)];
-      const Vec3& a2 = a.p[std::size_t((ka[0] + 2) % 3)];
-      std::array<Vec3, 2> bo{};
-      int n = 0;
-      for (int j = 0; j < 3; ++j) {
-        if (b.id[std::size_t(j)] != a.id[std::size_t(ka[0])])
-          bo[std::size_t(n++)] = b.p[std::size_t(j)];
-      }
-      if (strictly_one_side(bu, bw, a1 - v, a2 - v) ||
-          strictly_one_side(au, aw, bo[0] - v, bo[1] - v)) {
-        return false;
-      }
-    } else if (shared == 2) {
-      // Not coplanar: a shared edge is all they can share.
-      const Vec3& r = a.p[std::size_t(3 - ka[0] - ka[1])];
-      for (int j = 0; j < 3; ++j) {
-        const std::uint32_t id = b.id[std::size_t(j)];
-        if (id != a.id[std::size_t(ka[0])] && id != a.id[std::size_t(ka[1])]) {
-          if (side(bu, bw, r - b0) != 0) return false;
-        }
-      }
-    }
-  }
-  const std::array<Point, 3> pa{point(a.p[0]), point(a.p[1]), point(a.p[2])};
-  const std::array<Point, 3> pb{point(b.p[0]), point(b.p[1]), point(b.p[2])};
-  if (CGAL::collinear(pa[0], pa[1], pa[2]) || CGAL::collinear(pb[0], pb[1], pb[2])) return false;
-  // Shared corners: ka[i] in a matches kb[i] in b.
+  // Shared corners: a.p[ka[i]] is b.p[kb[i]] (the same vertex id, or the same position).
   std::array<int, 3> ka{}, kb{};
   int shared = 0;
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) {
-      if (a.id[i] == b.id[j]) {
-        ka[shared] = i;
-        kb[shared] = j;
+      const auto si = std::size_t(i), sj = std::size_t(j);
+      if (a.id[si] == b.id[sj] || a.p[si] == b.p[sj]) {
+        ka[std::size_t(shared)] = i;
+        kb[std::size_t(shared)] = j;
         ++shared;
+        break;
       }
     }
   }
+  const auto pa_ = [&](int k) -> const Vec3& { return a.p[std::size_t(k % 3)]; };
+  const auto pb_ = [&](int k) -> const Vec3& { return b.p[std::size_t(k % 3)]; };
+  // A quick separation in double before the exact predicates: most pairs the builder tests are
+  // neighbours whose other corners lie clearly off each other's plane.
+  const Vec3 au = pa_(1) - pa_(0), aw = pa_(2) - pa_(0), bu = pb_(1) - pb_(0), bw = pb_(2) - pb_(0);
+  if (shared == 0) {
+    if (strictly_one_side(bu, bw, pa_(0) - pb_(0), pa_(1) - pb_(0), pa_(2) - pb_(0)) ||
+        strictly_one_side(au, aw, pb_(0) - pa_(0), pb_(1) - pa_(0), pb_(2) - pa_(0))) {
+      return false;
+    }
+  } else if (shared == 1) {
+    // Both other corners of one triangle strictly on one side of the other's plane: it meets
+    // that plane only in the shared corner.
+    const Vec3& v = pa_(ka[0]);
+    if (strictly_one_side(bu, bw, pa_(ka[0] + 1) - v, pa_(ka[0] + 2) - v) ||
+        strictly_one_side(au, aw, pb_(kb[0] + 1) - v, pb_(kb[0] + 2) - v)) {
+      return false;
+    }
+  } else if (shared == 2) {
+    // Not coplanar: a shared edge is all they can share.
+    if (side(bu, bw, pa_(3 - ka[0] - ka[1]) - pb_(0)) != 0) return false;
+  }
+
+  const std::array<Point, 3> pa{point(pa_(0)), point(pa_(1)), point(pa_(2))};
+  const std::array<Point, 3> pb{point(pb_(0)), point(pb_(1)), point(pb_(2))};
+  if (CGAL::collinear(pa[0], pa[1], pa[2]) || CGAL::collinear(pb[0], pb[1], pb[2])) return false;
   const K::Triangle_3 ta(pa[0], pa[1], pa[2]), tb(pb[0], pb[1], pb[2]);
   switch (shared) {
     case 0:
@@ -106,18 +87,18 @@ bool triangles_cross(const MeshTriangle& a, const MeshTriangle& b) {
       // The planes meet in a line through the shared corner; if the triangles share more than
       // that corner, their common segment starts there and leaves one of them through its edge
       // opposite the corner, which then meets the other triangle.
-      const K::Segment_3 ea(pa[(ka[0] + 1) % 3], pa[(ka[0] + 2) % 3]);
-      const K::Segment_3 eb(pb[(kb[0] + 1) % 3], pb[(kb[0] + 2) % 3]);
+      const K::Segment_3 ea(pa[std::size_t((ka[0] + 1) % 3)], pa[std::size_t((ka[0] + 2) % 3)]);
+      const K::Segment_3 eb(pb[std::size_t((kb[0] + 1) % 3)], pb[std::size_t((kb[0] + 2) % 3)]);
       return CGAL::do_intersect(ea, tb) || CGAL::do_intersect(eb, ta);
     }
     case 2: {
       // A shared edge u-w: the triangles overlap only when they are coplanar and their third
       // corners lie on the same side of it (folded onto each other).
-      const Point& u = pa[ka[0]];
-      const Point& w = pa[ka[1]];
-      const Point& r = pa[3 - ka[0] - ka[1]];
-      const Point& s = pb[3 - kb[0] - kb[1]];
-      return CGAL::coplanar(u, w, r, s) && CGAL::coplanar_orientation(u, w, r, s) == CGAL::POSITIVE;
+      const Point& u = pa[std::size_t(ka[0])];
+      const Point& w = pa[std::size_t(ka[1])];
+      const Point& r = pa[std::size_t(3 - ka[0] - ka[1])];
+      const Point& t = pb[std::size_t(3 - kb[0] - kb[1])];
+      return CGAL::coplanar(u, w, r, t) && CGAL::coplanar_orientation(u, w, r, t) == CGAL::POSITIVE;
     }
     default:
       return true;  // the same triangle twice

@@ -9,13 +9,14 @@
 
 namespace smr {
 
-/// A triangle of a mesh: its corners and their vertex ids (equal ids: the same vertex).
+/// A triangle of a mesh: its corners and their vertex ids. Corners with equal ids or equal
+/// positions are the same vertex (a mesh may repeat a position under two ids).
 struct MeshTriangle {
   std::array<Vec3, 3> p;
   std::array<std::uint32_t, 3> id;
 };
 
-/// Whether two triangles of a mesh meet anywhere but in what they share by vertex id: a shared
+/// Whether two triangles of a mesh meet anywhere but in the vertices they share: a shared
 /// corner or a shared edge is allowed; crossing, touching elsewhere or folding onto each other
 /// across the shared edge is not. Exact (no tolerance). A degenerate triangle (collinear
 /// corners) is never reported: it has no interior to cross.

@@ -925,8 +925,10 @@ class Builder {
 
   // Whether collapsing from -> to would make a new triangle cross another triangle of the mesh
   // (one that stays, or another new one) anywhere but in the corners and edges they share
-  // (exact_intersection.h). Such a collapse is refused (QemPmOptions::no_self_intersections),
-  // so no level of the simplification crosses itself where the source did not.
+  // (exact_intersection.h), unless a triangle of the old star crossed it already. Such a
+  // collapse is refused (QemPmOptions::no_self_intersections): a source that does not cross
+  // itself gives no level that does, and one that does can still simplify around its crossings
+  // (refusing every collapse near them stalled the repaired pig at 258 base triangles).
   bool crosses_after(std::uint32_t from, std::uint32_t to) {
     if (!options_.no_self_intersections) return false;
     if (!grid_ready_) build_grid();
@@ -972,11 +974,22 @@ class Builder {
       for (std::size_t j = 0; j < near_.size() && !crossed; ++j) {
         if (!overlap(near_[j].second, made_boxes_[i])) continue;
         const Tri& t = tris_[near_[j].first];
-        crossed = triangles_cross(m, {{pos_[t.v[0]], pos_[t.v[1]], pos_[t.v[2]]}, t.v});
+        const MeshTriangle other{{pos_[t.v[0]], pos_[t.v[1]], pos_[t.v[2]]}, t.v};
+        crossed = triangles_cross(m, other) && !crossed_before(from, other);
       }
     }
     if (crossed) ++stats_.rejected_intersection;
     return crossed;
+  }
+
+  // Whether a triangle of from's star (the old star) already crosses `other`: a crossing the
+  // source had (or one that came from it) may be reshaped by a collapse, not made.
+  bool crossed_before(std::uint32_t from, const MeshTriangle& other) const {
+    for (std::uint32_t id : star_[from]) {
+      const Tri& t = tris_[id];
+      if (triangles_cross({{pos_[t.v[0]], pos_[t.v[1]], pos_[t.v[2]]}, t.v}, other)) return true;
+    }
+    return false;
   }
 
   static bool overlap(const Box3& a, const Box3& b) {

@@ -31,6 +31,9 @@ TEST(TrianglesCross, ASharedCornerIsAllowedAnythingMoreIsNot) {
   EXPECT_TRUE(triangles_cross(kA, tri({0, 0, 0}, {2, 1, 0}, {1, 2, 0}, 0, 7, 8)));
   // Coplanar across the edge they share (vertices 0 and 2).
   EXPECT_FALSE(triangles_cross(kA, tri({0, 0, 0}, {0, 2, 0}, {-2, 0, 0}, 0, 2, 9)));
+  // The same corner under another id (a repeated position) is shared too.
+  EXPECT_FALSE(triangles_cross(kA, tri({0, 0, 0}, {0, 2, 1}, {2, 0, 1}, 6, 7, 8)));
+  EXPECT_TRUE(triangles_cross(kA, tri({0, 0, 0}, {1, 0.5, -1}, {1, 0.5, 1}, 6, 7, 8)));
   // Crossing by 1e-30 either side of A's plane: below what double arithmetic can tell, so the
   // exact predicates decide.
   EXPECT_TRUE(triangles_cross(kA, tri({0, 0, 0}, {1, 0.2, 1e-30}, {0.2, 1, -1e-30}, 0, 7, 8)));

@@ -54,16 +54,18 @@ std::vector<std::array<Vec3, 3>> corners_of(const Crmr& crmr, const std::vector<
   return out;
 }
 
-// A collapse whose new triangles would cross any triangle of the mesh is refused
-// (QemPmOptions::no_self_intersections), so each collapse removes crossings and adds none: the
-// base mesh R^0, the last state of the simplification, crosses itself in no more pairs of
-// triangles than the source (CGAL's self_intersections counts them, independently of the
-// builder's own test). Cuts mixing resolutions are reported, not bounded: two triangles from
-// different states of the simplification are never tested against each other.
-std::size_t expect_base_crosses_no_more_than_the_source(const Crmr& crmr, const std::string& name) {
+// A collapse whose new triangles would cross a triangle of the mesh that no triangle of the old
+// star crossed is refused (QemPmOptions::no_self_intersections). So a source that does not
+// cross itself gives a base mesh R^0, the last state of the simplification, that does not
+// either (CGAL's self_intersections counts crossing pairs, independently of the builder's own
+// test); a source that does is only reported. Cuts mixing resolutions are reported, not bounded:
+// two triangles from different states of the simplification are never tested against each other.
+std::size_t expect_simplification_adds_no_crossing(const Crmr& crmr, const std::string& name) {
   const std::size_t source = test::crossing_pairs(corners_of(crmr, level(crmr, true)));
   const std::size_t base = test::crossing_pairs(corners_of(crmr, level(crmr, false)));
-  EXPECT_LE(base, source) << "simplification made the mesh cross itself";
+  if (source == 0) {
+    EXPECT_EQ(base, 0u) << "simplification made the mesh cross itself";
+  }
   std::size_t cuts = 0, crossing_cuts = 0, worst = 0;
   for (const test::NamedSpec& c : test::mesh_rcf_spread(crmr.header)) {
     const Extraction e =
@@ -295,7 +297,7 @@ TEST_P(QemPm, ExtractionsAreManifoldSatisfyTheRcfAndHoldTheErrorBound) {
 }
 
 TEST_P(QemPm, SimplificationMakesNoSelfIntersection) {
-  expect_base_crosses_no_more_than_the_source(built(GetParam()).crmr, GetParam());
+  expect_simplification_adds_no_crossing(built(GetParam()).crmr, GetParam());
 }
 
 // Without the test, simplification of the elephant with holes crosses itself, so the oracle above
@@ -424,7 +426,7 @@ TEST_P(BlockPm, ExtractionsAcrossBlockBordersAreManifoldAndHoldTheRcfAndTheBound
 }
 
 TEST_P(BlockPm, SimplificationMakesNoSelfIntersection) {
-  expect_base_crosses_no_more_than_the_source(block_built(GetParam()).crmr, GetParam());
+  expect_simplification_adds_no_crossing(block_built(GetParam()).crmr, GetParam());
 }
 
 TEST(BlockPmBuild, DeterministicWhateverTheBudgetAndTheThreads) {
