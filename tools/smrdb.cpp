@@ -453,7 +453,17 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
     opt.coalesce_error_ratio = a.coalesce_ratio;
     opt.progress = [&](double f) { progress.update(0.8 * f); };
     t0 = Clock::now();
-    crmr = smr::build_qem_pm(mesh, a.dem, opt);
+    smr::QemPmStats qs;
+    crmr = smr::build_qem_pm(mesh, a.dem, opt, &qs);
+    report["simplification"] = {{"collapses", qs.collapses},
+                                {"spawned_components", qs.spawned_components},
+                                {"base_vertices", qs.base_vertices},
+                                {"base_triangles", qs.base_triangles},
+                                {"bounds_computed", qs.bounds_computed},
+                                {"rejected_link", qs.rejected_link},
+                                {"rejected_flip", qs.rejected_flip},
+                                {"rejected_boundary", qs.rejected_boundary},
+                                {"rejected_intersection", qs.rejected_intersection}};
   } else if (a.effective_builder() == "blocks") {
     return ingest_blocks(a, db_path, progress, verify);
   } else {
@@ -682,6 +692,7 @@ nlohmann::json ingest_mesh_blocks(const IngestArgs& a, const std::string& db_pat
       {"collapses", st.collapses},
       {"base_vertices", st.base_vertices},
       {"base_triangles", st.base_triangles},
+      {"rejected_intersection", st.rejected_intersection},
       {"max_block_triangles", st.max_block_triangles},
       {"max_handed_triangles", st.max_handed_triangles},
       {"triangles_per_second", double(st.triangles) / std::max(1e-9, build_seconds)},

@@ -2036,6 +2036,7 @@ class BlockPmBuilder {
       assembler_->add_removal(std::span(&removed, 1), star, made, col.error);
     }
     stats_.collapses += b.collapses_.size();
+    stats_.rejected_intersection += b.stats_.rejected_intersection;
     BlockState out;
     std::vector<std::uint8_t> used(n, 0);
     for (std::uint32_t t = 0; t < b.tris_.size(); ++t) {

@@ -125,8 +125,9 @@ struct BlockPmStats {
   std::uint64_t leaf_blocks = 0, vertices = 0, triangles = 0;
   std::uint64_t collapses = 0, rounds = 0, dag_height = 0;
   std::uint64_t base_vertices = 0, base_triangles = 0;
-  std::uint64_t max_block_triangles = 0;   // largest block simplified
-  std::uint64_t max_handed_triangles = 0;  // most triangles a block handed its parent
+  std::uint64_t rejected_intersection = 0;  // collapses refused: a new triangle would cross
+  std::uint64_t max_block_triangles = 0;    // largest block simplified
+  std::uint64_t max_handed_triangles = 0;   // most triangles a block handed its parent
   std::uint64_t temp_bytes = 0;
   double seconds_sort = 0, seconds_blocks = 0, seconds_assemble = 0;
 };
