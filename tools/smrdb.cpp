@@ -246,6 +246,7 @@ struct IngestArgs {
   std::uint32_t page_kb = 16;
   bool force = false;
   bool repair = false;
+  bool allow_self_intersections = false;
   std::uint32_t coalesce = 32;
   double coalesce_ratio = 0.7;
   std::string builder;  // empty: blocks with --memory, else greedy
@@ -275,6 +276,9 @@ struct IngestArgs {
                    "Meshes: merge a split only when its error is at least this fraction of the "
                    "op's (1 = only equal errors; lower = fewer, larger ops, less selective)")
         ->capture_default_str();
+    app.add_flag("--allow-self-intersections", allow_self_intersections,
+                 "Meshes: skip the test that keeps simplification from making the surface cross "
+                 "itself (faster; coarse levels may then self-intersect)");
     app.add_flag("--repair", repair,
                  "Meshes: weld equal vertices, drop degenerate and duplicate faces, split "
                  "non-manifold edges and vertices, orient faces consistently");
@@ -331,6 +335,8 @@ struct IngestArgs {
           "to the source mesh (use --base-vertices to choose the coarsest level)");
     }
     if (!is_mesh() && repair) throw_input("--repair applies to meshes (.ply, .obj, .off, .stl)");
+    if (!is_mesh() && allow_self_intersections)
+      throw_input("--allow-self-intersections applies to meshes (.ply, .obj, .off, .stl)");
     if (!(coalesce_ratio >= 0.0 && coalesce_ratio <= 1.0))
       throw_input("--coalesce-ratio must be in [0, 1]");
     if (!builder.empty() && builder != "greedy" && builder != "blocks")
@@ -375,6 +381,7 @@ struct IngestArgs {
            " max-error=" + number(max_error) + " max-vertices=" + std::to_string(max_vertices) +
            " base-vertices=" + std::to_string(base_vertices) + " codec=" + codec +
            " z-quantum=" + number(z_quantum) + " page-kb=" + std::to_string(page_kb) +
+           (is_mesh() && allow_self_intersections ? " self-intersections=allowed" : "") +
            (is_mesh() && effective_builder() == "blocks"
                 ? " builder=blocks" +
                       (memory.empty() ? std::string() : " memory=" + std::to_string(memory_bytes()))
@@ -451,6 +458,7 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
     opt.base_vertices = a.base_vertices;
     opt.max_fragment_triangles = a.coalesce;
     opt.coalesce_error_ratio = a.coalesce_ratio;
+    opt.no_self_intersections = !a.allow_self_intersections;
     opt.progress = [&](double f) { progress.update(0.8 * f); };
     t0 = Clock::now();
     smr::QemPmStats qs;
@@ -668,6 +676,7 @@ nlohmann::json ingest_mesh_blocks(const IngestArgs& a, const std::string& db_pat
   const std::unique_ptr<smr::MeshStream> mesh = smr::open_mesh_stream(a.dem);
   smr::BlockPmOptions opt;
   opt.tmp_dir = a.tmp_dir;
+  opt.no_self_intersections = !a.allow_self_intersections;
   // The sorts take a quarter of the budget; the rest holds the vertices (24 + 8 bytes each), the
   // assembler's 16 bytes a collapse, the blocks and the writer.
   opt.memory_bytes = a.memory_bytes() != 0 ? a.memory_bytes() / 4 : 0;

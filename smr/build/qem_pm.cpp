@@ -1737,6 +1737,7 @@ class BlockPmBuilder {
     budget_ = options.memory_bytes != 0 ? options.memory_bytes : std::uint64_t{256} << 20;
     qem_.max_normal_turn_degrees = options.max_normal_turn_degrees;
     qem_.boundary_weight = options.boundary_weight;
+    qem_.no_self_intersections = options.no_self_intersections;
     qem_.spawn_components = false;
     if (!(qem_.max_normal_turn_degrees > 0.0 && qem_.max_normal_turn_degrees <= 180.0))
       throw_input("block PM: max normal turn must be in (0, 180] degrees");

@@ -110,6 +110,8 @@ struct BlockPmOptions {
   double tolerance_fraction = 1.0 / 1024.0;
   double max_normal_turn_degrees = 75.0;
   double boundary_weight = 100.0;
+  /// QemPmOptions::no_self_intersections, within each block (blocks meet at locked borders).
+  bool no_self_intersections = true;
   /// Budget of the external sorts (triangle order, assembly); 0 = 256 MiB.
   std::uint64_t memory_bytes = 0;
   /// Scratch files' directory (empty = the system's temporary directory).

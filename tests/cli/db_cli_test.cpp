@@ -316,13 +316,19 @@ TEST_F(DbCli, ParallelExtractProcessesWhileIngesting) {
   ASSERT_EQ(smrdb("extract " + good + rcf + "-o " + path("ref.ply")).code, 0);
   const std::string dem2 = path("dem2.npy");
   smr::write_npy(dem2, smr::make_fbm(129, 129, 9, 500.0));
+  // Built by appending: g++ 12's -Wrestrict misfires on "p" + std::to_string(k) here.
+  const auto out_ply = [&](int k) {
+    std::string name = "p";
+    name += std::to_string(k);
+    name += ".ply";
+    return path(name);
+  };
   std::vector<std::future<CliRun>> runs;
   runs.push_back(std::async(std::launch::async, [&] {
     return smrdb("ingest " + dem2 + " --max-error 0 -q -o " + path("second.smrdb"));
   }));
   for (int k = 0; k < 3; ++k) {
-    const std::string args =
-        "extract " + good + rcf + "-o " + path("p" + std::to_string(k)) + ".ply";
+    const std::string args = "extract " + good + rcf + "-o " + out_ply(k);
     runs.push_back(std::async(std::launch::async, [args] {
       CliRun r{0, {}};
       for (int round = 0; round < 3 && r.code == 0; ++round) r = smrdb(args);
@@ -333,8 +339,7 @@ TEST_F(DbCli, ParallelExtractProcessesWhileIngesting) {
     const CliRun r = f.get();
     EXPECT_EQ(r.code, 0) << r.out;
   }
-  for (int k = 0; k < 3; ++k)
-    EXPECT_EQ(read_file(path("p" + std::to_string(k)) + ".ply"), read_file(path("ref.ply")));
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(read_file(out_ply(k)), read_file(path("ref.ply")));
   EXPECT_EQ(smrdb("verify -q " + path("second.smrdb")).code, 0);
 }
 
@@ -546,6 +551,7 @@ TEST_F(DbCli, MeshIngestExtractInfoVerify) {
   CliRun r = smrdb("ingest " + mesh + " -q --json -o " + db);
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_NE(r.out.find("\"kind\": \"mesh\""), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("\"rejected_intersection\""), std::string::npos) << r.out;
   r = smrdb("info " + db);
   EXPECT_EQ(r.code, 0) << r.out;
   EXPECT_NE(r.out.find("3-D mesh"), std::string::npos) << r.out;
@@ -564,6 +570,13 @@ TEST_F(DbCli, MeshIngestExtractInfoVerify) {
   expect_user_error("extract " + db + " --volume 0,0,0,-1,1 -o " + path("b.obj"), "radius");
   expect_user_error("ingest " + mesh + " --max-error 1 -o " + path("x.smrdb"), "--max-error");
   expect_user_error("ingest " + dem_ + " --repair -o " + path("y.smrdb"), "--repair");
+  expect_user_error("ingest " + dem_ + " --allow-self-intersections -o " + path("y.smrdb"),
+                    "--allow-self-intersections");
+  // The database records that its levels were allowed to cross themselves.
+  const std::string loose = path("loose.smrdb");
+  ASSERT_EQ(smrdb("ingest " + mesh + " -q --allow-self-intersections -o " + loose).code, 0);
+  r = smrdb("info --json " + loose);
+  EXPECT_NE(r.out.find("self-intersections=allowed"), std::string::npos) << r.out;
 
   const std::string broken = path("broken.off");
   write_file(broken, "OFF\n3 1 0\n0 0 0\n1 0 0\nnan 1 0\n3 0 1 2\n");
