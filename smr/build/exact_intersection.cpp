@@ -72,8 +72,20 @@ bool triangles_cross(const MeshTriangle& a, const MeshTriangle& b) {
       return false;
     }
   } else if (shared == 2) {
-    // Not coplanar: a shared edge is all they can share.
-    if (side(bu, bw, pa_(3 - ka[0] - ka[1]) - pb_(0)) != 0) return false;
+    // Not coplanar, or third corners clearly on opposite sides of the shared edge (across the
+    // plane of a, whatever the dihedral angle): a shared edge is all they can share.
+    const Vec3& u = pa_(ka[0]);
+    const Vec3 e = pa_(ka[1]) - u, r = pa_(3 - ka[0] - ka[1]) - u, t = pb_(3 - kb[0] - kb[1]) - u;
+    if (side(bu, bw, r + u - pb_(0)) != 0) return false;
+    // The sides of the plane through the edge perpendicular to a: dot(e x (e x x), x') =
+    // (e.r)(e.t) - (e.e)(r.t) for t, which is -|e|^2 |r|^2 sin^2 < 0 for r.
+    const double ee = glm::dot(e, e), er = glm::dot(e, r), et = glm::dot(e, t);
+    const double rr = glm::dot(r, r), tt = glm::dot(t, t), rt = glm::dot(r, t);
+    const double dr = er * er - ee * rr, dt = er * et - ee * rt;
+    if (dr * dr > 1e-24 * ee * ee * rr * rr && dr < 0.0 && dt * dt > 1e-24 * ee * ee * rr * tt &&
+        dt > 0.0) {
+      return false;
+    }
   }
 
   const std::array<Point, 3> pa{point(pa_(0)), point(pa_(1)), point(pa_(2))};
