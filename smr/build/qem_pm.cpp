@@ -1,6 +1,7 @@
 // Quadric edge collapse into a CRMR (see qem_pm.h). Two passes:
 //  1. simplify: half-edge collapses from a lazy priority queue (one best candidate per vertex,
-//     re-validated when popped), recording for each collapse the triangles it removed and made;
+//     re-validated when popped; refused when its new triangles would cross the mesh),
+//     recording for each collapse the triangles it removed and made;
 //  2. emit: order the reversed collapses (vertex splits) topologically, largest error first,
 //     and replay them from the base mesh to assign triangles to ops, find each fragment boundary
 //     edge's closest coarser version (Brown 4.5.1) and the mesh error before each split.
