@@ -465,6 +465,20 @@ class TriangleGrid {
 
 constexpr int kBoundDepth = 3;
 
+// Set membership by stamps, without sorting or clearing: an element is in the current set when
+// its stamp is the value next() last returned.
+struct Marks {
+  std::vector<std::uint32_t> of;
+  std::uint32_t value = 0;
+  std::uint32_t next() {
+    if (++value == 0) {
+      std::fill(of.begin(), of.end(), 0u);
+      value = 1;
+    }
+    return value;
+  }
+};
+
 class Builder {
  public:
   Builder(const TriangleMesh& mesh, const QemPmOptions& options) : options_(options) {
@@ -604,7 +618,7 @@ class Builder {
     removed_.assign(n, 0);
     boundary_.assign(n, 0);
     stamp_.assign(n, 0);
-    mark_.assign(n, 0);
+    marks_.of.assign(n, 0);
     blocked_.assign(n, {});
     tris_.reserve(triangles * 2);
     cos_max_turn_ = std::cos(options_.max_normal_turn_degrees * 3.14159265358979323846 / 180.0);
@@ -707,22 +721,14 @@ class Builder {
   // (cost, from, to), dirty lists are sorted).
   void neighbours(std::uint32_t v, std::vector<std::uint32_t>& out) const {
     out.clear();
-    const std::uint32_t seen = next_mark();
+    const std::uint32_t seen = marks_.next();
     for (std::uint32_t id : star_[v]) {
       for (std::uint32_t w : tris_[id].v) {
-        if (w == v || mark_[w] == seen) continue;
-        mark_[w] = seen;
+        if (w == v || marks_.of[w] == seen) continue;
+        marks_.of[w] = seen;
         out.push_back(w);
       }
     }
-  }
-  // A fresh value for mark_ (set semantics without sorting or clearing).
-  std::uint32_t next_mark() const {
-    if (++mark_value_ == 0) {
-      std::fill(mark_.begin(), mark_.end(), 0u);
-      mark_value_ = 1;
-    }
-    return mark_value_;
   }
 
   // Whether collapsing from -> to keeps the mesh a manifold of the same topology with no
@@ -762,14 +768,14 @@ class Builder {
     if (comp_vertices_[comp] <= (comp_open_[comp] ? 3u : 4u)) return false;
     // Link condition: the common neighbours of from and to are exactly the edge's opposite
     // vertices (with a virtual vertex joined to the boundary, Dey et al.).
-    const std::uint32_t in_nf = next_mark();
-    for (std::uint32_t w : nf) mark_[w] = in_nf;
-    const std::uint32_t counted = next_mark();
+    const std::uint32_t in_nf = marks_.next();
+    for (std::uint32_t w : nf) marks_.of[w] = in_nf;
+    const std::uint32_t counted = marks_.next();
     std::uint32_t common = 0;
     for (std::uint32_t id : star_[to]) {
       for (std::uint32_t w : tris_[id].v) {
-        if (w == to || mark_[w] != in_nf) continue;
-        mark_[w] = counted;
+        if (w == to || marks_.of[w] != in_nf) continue;
+        marks_.of[w] = counted;
         if (w != opposite[0] && w != opposite[1]) {
           ++stats_.rejected_link;
           return false;
@@ -937,20 +943,15 @@ class Builder {
     for (std::uint32_t id : star_[from]) {
       const Tri& t = tris_[id];
       if (has(t, to)) continue;
-      MeshTriangle m{{}, t.v};
-      for (std::uint32_t& w : m.id) {
+      std::array<std::uint32_t, 3> v = t.v;
+      for (std::uint32_t& w : v) {
         if (w == from) w = to;
       }
-      for (int k = 0; k < 3; ++k) m.p[std::size_t(k)] = pos_[m.id[std::size_t(k)]];
-      made_.push_back(m);
+      made_.push_back(mesh_triangle(v));
     }
-    if (tri_mark_.size() < tris_.size()) tri_mark_.resize(tris_.size() + tris_.size() / 2, 0);
-    if (++tri_mark_value_ == 0) {
-      std::fill(tri_mark_.begin(), tri_mark_.end(), 0u);
-      tri_mark_value_ = 1;
-    }
-    const std::uint32_t old_star = tri_mark_value_;
-    for (std::uint32_t id : star_[from]) tri_mark_[id] = old_star;
+    if (tri_marks_.of.size() < tris_.size()) tri_marks_.of.resize(tris_.size() * 3 / 2, 0);
+    const std::uint32_t old_star = tri_marks_.next();
+    for (std::uint32_t id : star_[from]) tri_marks_.of[id] = old_star;
     // The triangles near the new star (one grid query for all of it), then pair by pair.
     Box3 all;
     made_boxes_.clear();
@@ -962,9 +963,9 @@ class Builder {
     }
     near_.clear();
     grid_.visit(all, [&](std::uint32_t id) {
-      if (tri_mark_[id] == old_star) return;
+      if (tri_marks_.of[id] == old_star) return;
       const Box3 tb = box_of(tris_[id].v);
-      if (overlap(tb, all)) near_.push_back({id, tb});
+      if (tb.intersects(all)) near_.push_back({id, tb});
     });
     bool crossed = false;
     for (std::size_t i = 0; i < made_.size() && !crossed; ++i) {
@@ -973,9 +974,8 @@ class Builder {
         crossed = triangles_cross(m, made_[j]);
       }
       for (std::size_t j = 0; j < near_.size() && !crossed; ++j) {
-        if (!overlap(near_[j].second, made_boxes_[i])) continue;
-        const Tri& t = tris_[near_[j].first];
-        const MeshTriangle other{{pos_[t.v[0]], pos_[t.v[1]], pos_[t.v[2]]}, t.v};
+        if (!near_[j].second.intersects(made_boxes_[i])) continue;
+        const MeshTriangle other = mesh_triangle(tris_[near_[j].first].v);
         crossed = triangles_cross(m, other) && !crossed_before(from, other);
       }
     }
@@ -987,15 +987,13 @@ class Builder {
   // source had (or one that came from it) may be reshaped by a collapse, not made.
   bool crossed_before(std::uint32_t from, const MeshTriangle& other) const {
     for (std::uint32_t id : star_[from]) {
-      const Tri& t = tris_[id];
-      if (triangles_cross({{pos_[t.v[0]], pos_[t.v[1]], pos_[t.v[2]]}, t.v}, other)) return true;
+      if (triangles_cross(mesh_triangle(tris_[id].v), other)) return true;
     }
     return false;
   }
 
-  static bool overlap(const Box3& a, const Box3& b) {
-    return a.lo.x <= b.hi.x && a.lo.y <= b.hi.y && a.lo.z <= b.hi.z && b.lo.x <= a.hi.x &&
-           b.lo.y <= a.hi.y && b.lo.z <= a.hi.z;
+  MeshTriangle mesh_triangle(const std::array<std::uint32_t, 3>& v) const {
+    return {{pos_[v[0]], pos_[v[1]], pos_[v[2]]}, v};
   }
 
   // The grid over the live triangles, made at the first test: cells of the mean edge length.
@@ -1678,18 +1676,16 @@ class Builder {
   std::vector<std::pair<double, std::size_t>> order_;
   std::vector<double> new_e_;  // new triangle -> its bound (collapse_error)
   std::vector<std::uint32_t> nf_, cand_, ring_, local_;
-  mutable std::vector<std::uint32_t> mark_;  // per vertex: next_mark()'s values
+  mutable Marks marks_;  // per vertex (neighbours, the link condition)
   // Self-intersections: the live triangles by box, per vertex the targets refused since its
   // neighbourhood last changed, per triangle marks (the old star), the new star under test.
   TriangleGrid grid_;
   bool grid_ready_ = false;
   std::vector<std::vector<std::uint32_t>> blocked_;
-  std::vector<std::uint32_t> tri_mark_;
-  std::uint32_t tri_mark_value_ = 0;
+  Marks tri_marks_;
   std::vector<MeshTriangle> made_;
   std::vector<Box3> made_boxes_;
   std::vector<std::pair<std::uint32_t, Box3>> near_;
-  mutable std::uint32_t mark_value_ = 0;
   std::vector<std::pair<double, std::uint32_t>> ranked_;
   std::unordered_map<std::uint64_t, std::uint32_t> frag_edges_;
   std::vector<std::uint32_t> tri_op_, tri_local_;

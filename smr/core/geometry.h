@@ -38,6 +38,11 @@ struct Box3 {
     return b.empty() || (lo.x <= b.lo.x && lo.y <= b.lo.y && lo.z <= b.lo.z && hi.x >= b.hi.x &&
                          hi.y >= b.hi.y && hi.z >= b.hi.z);
   }
+  /// Closed boxes that share a point (false when either is empty).
+  bool intersects(const Box3& b) const {
+    return lo.x <= b.hi.x && lo.y <= b.hi.y && lo.z <= b.hi.z && b.lo.x <= hi.x && b.lo.y <= hi.y &&
+           b.lo.z <= hi.z;
+  }
   Vec3 center() const { return (lo + hi) * 0.5; }
   friend bool operator==(const Box3&, const Box3&) = default;
 };

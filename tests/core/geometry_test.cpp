@@ -66,6 +66,23 @@ TEST(Geometry, PointTriangleDistanceMatchesTheOracles) {
 
 // Normal cones: the union holds both cones and every direction sampled in them; the stored
 // (canonical) form holds the cone it was made from and encodes exactly.
+TEST(Geometry, BoxesIntersectWhenClosedAndNeverWhenEmpty) {
+  Box3 a, b;
+  a.add(Vec3{0, 0, 0});
+  a.add(Vec3{1, 1, 1});
+  b.add(Vec3{1, 1, 1});  // one shared corner: closed boxes meet
+  b.add(Vec3{2, 2, 2});
+  EXPECT_TRUE(a.intersects(b));
+  EXPECT_TRUE(b.intersects(a));
+  Box3 c;
+  c.add(Vec3{1.5, 0, 0});
+  c.add(Vec3{2, 1, 1});  // apart along x only
+  EXPECT_FALSE(a.intersects(c));
+  EXPECT_FALSE(c.intersects(a));
+  EXPECT_FALSE(a.intersects(Box3{}));
+  EXPECT_FALSE(Box3{}.intersects(a));
+}
+
 TEST(Geometry, ConeUnionAndCanonicalFormHoldTheirCones) {
   std::mt19937_64 rng(7);
   std::normal_distribution<double> g;
