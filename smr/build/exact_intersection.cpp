@@ -15,26 +15,31 @@ Point point(const Vec3& v) {
   return {v.x, v.y, v.z};
 }
 
-// The side of plane (o, o + u, o + w) that p - o lies on: +1 or -1 when certain in double
-// arithmetic (the error of the determinant is far below 1e-12 of the product of the lengths,
-// the differences of exact inputs being correctly rounded), 0 when it may be on the plane.
-int side(const Vec3& u, const Vec3& w, const Vec3& d) {
-  const double det = glm::dot(glm::cross(u, w), d);
-  const double room2 = 1e-24 * glm::dot(u, u) * glm::dot(w, w) * glm::dot(d, d);
-  if (det * det <= room2) return 0;
-  return det > 0.0 ? 1 : -1;
-}
-
-// Whether all of `corners` (minus o) lie strictly on one side of the plane through o spanned
-// by u and w, as far as double arithmetic can tell: then they cannot meet the plane.
-template <class... D>
-bool strictly_one_side(const Vec3& u, const Vec3& w, const D&... d) {
-  const std::array<int, sizeof...(D)> s{side(u, w, d)...};
-  for (int x : s) {
-    if (x == 0 || x != s[0]) return false;
+// The plane through a point o spanned by u and w (its normal computed once); points are given
+// as their offsets d from o.
+struct Plane {
+  Plane(const Vec3& u, const Vec3& w) : n(glm::cross(u, w)), uw2(glm::dot(u, u) * glm::dot(w, w)) {}
+  // +1 or -1 when d's side is certain in double arithmetic (the determinant's error is far
+  // below 1e-12 of the product of the lengths, the differences of exact inputs being correctly
+  // rounded), 0 when d may lie on the plane.
+  int side(const Vec3& d) const {
+    const double det = glm::dot(n, d);
+    if (det * det <= 1e-24 * uw2 * glm::dot(d, d)) return 0;
+    return det > 0.0 ? 1 : -1;
   }
-  return true;
-}
+  // Whether every d lies strictly on one side, as far as double arithmetic can tell: then none
+  // meets the plane.
+  template <class... D>
+  bool strictly_one_side(const D&... d) const {
+    const std::array<int, sizeof...(D)> s{side(d)...};
+    for (int x : s) {
+      if (x == 0 || x != s[0]) return false;
+    }
+    return true;
+  }
+  Vec3 n;
+  double uw2;
+};
 
 }  // namespace
 
@@ -57,18 +62,18 @@ bool triangles_cross(const MeshTriangle& a, const MeshTriangle& b) {
   const auto pb_ = [&](int k) -> const Vec3& { return b.p[std::size_t(k % 3)]; };
   // A quick separation in double before the exact predicates: most pairs the builder tests are
   // neighbours whose other corners lie clearly off each other's plane.
-  const Vec3 au = pa_(1) - pa_(0), aw = pa_(2) - pa_(0), bu = pb_(1) - pb_(0), bw = pb_(2) - pb_(0);
+  const Plane plane_a(pa_(1) - pa_(0), pa_(2) - pa_(0)), plane_b(pb_(1) - pb_(0), pb_(2) - pb_(0));
   if (shared == 0) {
-    if (strictly_one_side(bu, bw, pa_(0) - pb_(0), pa_(1) - pb_(0), pa_(2) - pb_(0)) ||
-        strictly_one_side(au, aw, pb_(0) - pa_(0), pb_(1) - pa_(0), pb_(2) - pa_(0))) {
+    if (plane_b.strictly_one_side(pa_(0) - pb_(0), pa_(1) - pb_(0), pa_(2) - pb_(0)) ||
+        plane_a.strictly_one_side(pb_(0) - pa_(0), pb_(1) - pa_(0), pb_(2) - pa_(0))) {
       return false;
     }
   } else if (shared == 1) {
     // Both other corners of one triangle strictly on one side of the other's plane: it meets
     // that plane only in the shared corner.
     const Vec3& v = pa_(ka[0]);
-    if (strictly_one_side(bu, bw, pa_(ka[0] + 1) - v, pa_(ka[0] + 2) - v) ||
-        strictly_one_side(au, aw, pb_(kb[0] + 1) - v, pb_(kb[0] + 2) - v)) {
+    if (plane_b.strictly_one_side(pa_(ka[0] + 1) - v, pa_(ka[0] + 2) - v) ||
+        plane_a.strictly_one_side(pb_(kb[0] + 1) - v, pb_(kb[0] + 2) - v)) {
       return false;
     }
   } else if (shared == 2) {
@@ -76,7 +81,7 @@ bool triangles_cross(const MeshTriangle& a, const MeshTriangle& b) {
     // plane of a, whatever the dihedral angle): a shared edge is all they can share.
     const Vec3& u = pa_(ka[0]);
     const Vec3 e = pa_(ka[1]) - u, r = pa_(3 - ka[0] - ka[1]) - u, t = pb_(3 - kb[0] - kb[1]) - u;
-    if (side(bu, bw, r + u - pb_(0)) != 0) return false;
+    if (plane_b.side(pa_(3 - ka[0] - ka[1]) - pb_(0)) != 0) return false;
     // The sides of the plane through the edge perpendicular to a: dot(e x (e x x), x') =
     // (e.r)(e.t) - (e.e)(r.t) for t, which is -|e|^2 |r|^2 sin^2 < 0 for r.
     const double ee = glm::dot(e, e), er = glm::dot(e, r), et = glm::dot(e, t);
