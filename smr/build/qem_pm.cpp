@@ -850,8 +850,11 @@ class Builder {
   // depends on (collapse_error's floor), or the largest bound of an old triangle plus the
   // removed vertex's distance to the new star (the removed vertex is a corner of every old
   // triangle, so the cell holding it is charged at least that triangle's bound plus that
-  // distance, free or not: StarDistance::charge).
-  std::pair<double, bool> bound_within(std::uint32_t from, std::uint32_t to, double tolerance) {
+  // distance, free or not: StarDistance::charge). Unless `finish`, a bound found part way to
+  // exceed `tolerance` is not finished either (collapse_error's stop_above): over a third of the
+  // bounds simplify() computes do, and that collapse waits all the same.
+  std::pair<double, bool> bound_within(std::uint32_t from, std::uint32_t to, double tolerance,
+                                       bool finish) {
     // At least the bound of every collapse this one depends on, so that the splits' order
     // (largest error first) keeps their errors monotone: collapse_error's floor.
     double floor = 0.0, own = 0.0;
@@ -866,7 +869,9 @@ class Builder {
       d2 = std::min(d2, t.distance.squared(pos_[from]));
     const double lower = std::max(floor, own + std::sqrt(d2));
     if (lower > tolerance) return {lower, false};
-    return {collapse_error(from, to, floor), true};
+    const double stop = finish ? std::numeric_limits<double>::infinity() : tolerance;
+    const double e = collapse_error(from, to, floor, stop);
+    return {e, e <= stop};
   }
 
   // new_targets_ = the triangles the star of `from` becomes when it collapses onto `to`, and
@@ -886,8 +891,10 @@ class Builder {
     }
   }
 
-  // The collapse's bound, with new_star(from, to) made and `floor` its creators' largest error.
-  double collapse_error(std::uint32_t from, std::uint32_t to, double floor) {
+  // The collapse's bound, with new_star(from, to) made and `floor` its creators' largest error;
+  // or, once that exceeds `stop_above`, a lower bound of it above stop_above (the bound only
+  // rises as the old triangles are charged to the new ones and the new ones to the old).
+  double collapse_error(std::uint32_t from, std::uint32_t to, double floor, double stop_above) {
     ++stats_.bounds_computed;
     old_targets_.clear();
     image_.clear();
@@ -914,6 +921,7 @@ class Builder {
     for (const auto& [estimate, i] : order_) {
       const StarDistance::Target& t = old_targets_[i];
       to_new.charge(t.a, t.b, t.c, t.offset, kBoundDepth, image_[i], new_e_, e);
+      if (e > stop_above) return e;
     }
     // Backward, per new triangle: its points to the old star, plus the old bounds (refined
     // while they could raise its forward bound).
@@ -924,6 +932,7 @@ class Builder {
       new_e_[j] =
           std::max(new_e_[j], to_old.bound(t.a, t.b, t.c, new_e_[j], kBoundDepth, preimage_[j]));
       e = std::max(e, new_e_[j]);
+      if (e > stop_above) return e;
     }
     return e;
   }
@@ -1117,7 +1126,7 @@ class Builder {
       bool known = w.to == top.to && w.stamp == top.stamp;
       if (error <= tolerance) {
         known = true;
-        error = bound_within(top.from, top.to, tolerance).first;
+        error = bound_within(top.from, top.to, tolerance, false).first;
       }
       if (known && options_.max_base_error > 0.0 && error > options_.max_base_error) {
         ++stamp_[top.from];  // retried only when its neighbourhood changes
@@ -1606,7 +1615,7 @@ class Builder {
           continue;
         }
         if (!b.have_error) {
-          const auto [error, exact] = bound_within(v, b.to, tolerance);
+          const auto [error, exact] = bound_within(v, b.to, tolerance, true);
           if (!exact) continue;  // a lower bound is already too large
           b.error = error;
           b.new_e = new_e_;
