@@ -837,6 +837,24 @@ class Builder {
     if (to != kNone) heap_.push({c, from, to, stamp_[from]});
   }
 
+  // The cheapest target of `from` by cost alone: validity, the costly test, waits until the
+  // candidate comes up (simplify() checks it then and, if it fails, pushes the cheapest valid
+  // target instead). Most candidates are replaced before they come up.
+  void push_cheapest(std::uint32_t from) {
+    ++stamp_[from];
+    if (removed_[from] || is_locked(from)) return;
+    neighbours(from, cand_);
+    const std::vector<std::uint32_t>& blocked = blocked_[from];
+    double best = std::numeric_limits<double>::infinity();
+    std::uint32_t best_to = kNone;
+    for (std::uint32_t to : cand_) {
+      if (std::find(blocked.begin(), blocked.end(), to) != blocked.end()) continue;
+      const double c = cost(from, to);
+      if (c < best || (c == best && to < best_to)) best = c, best_to = to;
+    }
+    if (best_to != kNone) heap_.push({best, from, best_to, stamp_[from]});
+  }
+
   // ---- error bound --------------------------------------------------------------------------
 
   // The bound of the collapse that made triangle id (a source triangle's own).
@@ -1073,7 +1091,7 @@ class Builder {
   // rising tolerances do the same).
   void simplify() {
     const std::size_t n = pos_.size();
-    for (std::uint32_t v = 0; v < n; ++v) push_best(v);
+    for (std::uint32_t v = 0; v < n; ++v) push_cheapest(v);
     const std::uint64_t start = alive_vertices();
     std::uint64_t alive = start;
     const std::uint64_t floor_vertices = options_.base_vertices;
@@ -1146,8 +1164,8 @@ class Builder {
       --alive;
       neighbours(top.to, ring_);
       const std::vector<std::uint32_t> ring = ring_;
-      push_best(top.to);
-      for (std::uint32_t r : ring) push_best(r);
+      push_cheapest(top.to);
+      for (std::uint32_t r : ring) push_cheapest(r);
       if (options_.progress && start - alive >= next_report) {
         options_.progress(0.8 * double(start - alive) / double(start));
         next_report += std::max<std::uint64_t>(1, start / 200);
