@@ -1125,10 +1125,17 @@ class Builder {
           break;
         }
         tolerance = options_.bound_band * least;
+        // Those still above it would only come up to wait again.
+        std::size_t kept = 0;
         for (const Waiting& w : waiting) {
-          if (current(w.c)) heap_.push(w.c);
+          if (!current(w.c)) continue;
+          if (w.error > tolerance) {
+            waiting[kept++] = w;
+          } else {
+            heap_.push(w.c);
+          }
         }
-        waiting.clear();
+        waiting.resize(kept);
         continue;
       }
       const Candidate top = heap_.top();
