@@ -274,6 +274,7 @@ int main(int argc, char** argv) {
   CLI::App app{"bench_mesh_build: QEM PM CRMR build vs meshopt_simplify and CGAL edge collapse"};
   std::string path, output, db_path, only_list;
   int repeat = 3, subdivide_levels = 0, extract_repeat = 5;
+  double bound_band = smr::QemPmOptions{}.bound_band;
   bool skip_db = false, repair = false, keep_db = false, list_contenders = false;
   app.add_option("mesh", path, "Mesh file (.ply .obj .off .stl)");
   app.add_option("--repeat", repeat, "Interleaved rounds (median reported)")->capture_default_str();
@@ -284,6 +285,9 @@ int main(int argc, char** argv) {
   app.add_option("--db", db_path, "Database path (default: a temporary file, removed)");
   app.add_flag("--keep-db", keep_db, "Keep the database file");
   app.add_option("--extract-repeat", extract_repeat, "Runs per RCF (median)")
+      ->capture_default_str();
+  app.add_option("--bound-band", bound_band,
+                 "Our builder's bands of the bound (QemPmOptions::bound_band; 0 = none)")
       ->capture_default_str();
   app.add_flag("--repair", repair, "Read with every repair (smrdb ingest --repair)");
   app.add_flag("--list-contenders", list_contenders,
@@ -418,9 +422,11 @@ int main(int argc, char** argv) {
         crmr.reset();
         trim();
         smr::QemPmStats stats;
+        smr::QemPmOptions options;
+        options.bound_band = bound_band;
         const Stopwatch w;
-        smr::Crmr built =
-            smr::build_qem_pm(mesh, std::filesystem::path(path).filename().string(), {}, &stats);
+        smr::Crmr built = smr::build_qem_pm(mesh, std::filesystem::path(path).filename().string(),
+                                            options, &stats);
         ours_times.add(w);
         crmr.emplace(std::move(built));
         ours_stats = stats;

@@ -57,8 +57,9 @@ struct QemPmOptions {
   std::uint32_t max_fragment_triangles = 32;
   double coalesce_error_ratio = 0.7;
   /// Collapses go in bands of their bound: the next band's tolerance is this many times the
-  /// least bound that waited (at least 1). 0 = no bands, cheapest quadric cost first only: about
-  /// 2.7x faster, and 15-30 % more triangles in view-dependent cuts (benchmarks/README.md).
+  /// least bound that waited (at least 1). 0 = no bands, cheapest quadric cost first only: 1.3x
+  /// fewer instructions, and 5-12 % more triangles in a 1 px view of the dragon and the
+  /// armadillo (benchmarks/README.md, stop 23; 2.7x faster before stop 23's cheaper waits).
   double bound_band = 2.0;
   /// Once simplification has run to its end, remove every component but one (the one whose
   /// removal would cost most): refinement then spawns them (Brown Fig. 4.9d), each inside the op
