@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Build time of our QEM progressive-mesh CRMR builder against meshopt_simplify (meshoptimizer 0.18,
+# Build time of our QEM progressive-mesh CRMR builders (in core, and the block builder on every core
+# as "ours-blocks") against meshopt_simplify (meshoptimizer 0.18,
 # Debian libmeshoptimizer-dev) and CGAL 5.5's Surface_mesh_simplification edge collapse
 # (Lindstrom-Turk; Garland-Heckbert plane policies), all on the same mesh in one process
 # (bench_mesh_build, interleaved rounds, medians), on:
@@ -154,14 +155,20 @@ jq -s \
       ours_over_cgal_lt_10: r(.ratios["ours_over_cgal-lt_10pct"]), ours_over_cgal_lt_1: r(.ratios["ours_over_cgal-lt_1pct"]),
       ours_over_cgal_gh_10: r(.ratios["ours_over_cgal-gh_10pct"]), ours_over_cgal_gh_1: r(.ratios["ours_over_cgal-gh_1pct"]),
       cpu_ours_over_meshopt_10: r(.ratios["cpu_ours_over_meshopt_10pct"]), cpu_ours_over_cgal_lt_10: r(.ratios["cpu_ours_over_cgal-lt_10pct"]),
+      ours_blocks_s: r(.results["ours-blocks"].seconds), ours_blocks_cpu_s: r(.results["ours-blocks"].cpu_seconds),
+      ours_blocks_threads: .results["ours-blocks"].threads,
+      ours_blocks_over_cgal_lt_10: r(.ratios["ours-blocks_over_cgal-lt_10pct"]), ours_blocks_over_cgal_lt_1: r(.ratios["ours-blocks_over_cgal-lt_1pct"]),
+      ours_blocks_over_meshopt_10: r(.ratios["ours-blocks_over_meshopt_10pct"]),
+      cpu_ours_blocks_over_cgal_lt_10: r(.ratios["cpu_ours-blocks_over_cgal-lt_10pct"]),
       peak_rss_mb: (.peak_rss_per_contender | with_entries(.value = r(.value.peak_rss_mb))),
       bytes_per_vertex: r(.database.bytes_per_vertex), over_hoppe: r(.database.bytes_per_vertex_over_hoppe),
       ops: .results.ours.ops, pages: .database.pages, dag_depth: .results.ours.dag_depth,
       meets_2x_meshopt: ((.ratios["ours_over_meshopt_10pct"] // 1e9) <= 2 and (.ratios["ours_over_meshopt_1pct"] // 1e9) <= 2),
-      faster_than_cgal: ((.ratios["ours_over_cgal-lt_10pct"] // 1e9) < 1 and (.ratios["ours_over_cgal-lt_1pct"] // 1e9) < 1)
+      faster_than_cgal: ((.ratios["ours_over_cgal-lt_10pct"] // 1e9) < 1 and (.ratios["ours_over_cgal-lt_1pct"] // 1e9) < 1),
+      blocks_faster_than_cgal: ((.ratios["ours-blocks_over_cgal-lt_10pct"] // 1e9) < 1 and (.ratios["ours-blocks_over_cgal-lt_1pct"] // 1e9) < 1)
     } ],
     meshes: .
   }' "${results[@]}" >"$OUT"
 log "wrote $OUT"
-jq -r '.summary[] | [.mesh, .triangles, .ours_s, .meshopt_10_s, .meshopt_1_s, .cgal_lt_10_s, .cgal_lt_1_s,
+jq -r '.summary[] | [.mesh, .triangles, .ours_s, .ours_blocks_s, .meshopt_10_s, .meshopt_1_s, .cgal_lt_10_s, .cgal_lt_1_s,
                      .ours_over_meshopt_10, .ours_over_cgal_lt_10, .bytes_per_vertex, .dag_depth] | @tsv' "$OUT"
