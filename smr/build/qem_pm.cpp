@@ -815,17 +815,26 @@ class Builder {
     return std::max(0.0, q.eval(pos_[to]));
   }
 
+  // ranked_ = (cost, target) for the neighbours of `from` (cand_) that the self-intersection test
+  // has not refused since its neighbourhood last changed; false when `from` cannot collapse.
+  bool rank_targets(std::uint32_t from) {
+    if (removed_[from] || is_locked(from)) return false;
+    neighbours(from, cand_);
+    ranked_.clear();
+    const std::vector<std::uint32_t>& blocked = blocked_[from];
+    for (std::uint32_t to : cand_) {
+      if (std::find(blocked.begin(), blocked.end(), to) == blocked.end())
+        ranked_.push_back({cost(from, to), to});
+    }
+    return true;
+  }
+
   // The cheapest valid target of `from` and its cost (ties: the smaller id; kNone if none):
   // validity, the costly test, is checked in order of cost until one passes.
   std::pair<double, std::uint32_t> cheapest_valid(std::uint32_t from) {
-    if (removed_[from] || is_locked(from)) return {0.0, kNone};
-    neighbours(from, cand_);
-    ranked_.clear();
-    for (std::uint32_t to : cand_) ranked_.push_back({cost(from, to), to});
+    if (!rank_targets(from)) return {0.0, kNone};
     std::sort(ranked_.begin(), ranked_.end());
-    const std::vector<std::uint32_t>& blocked = blocked_[from];
     for (const auto& [c, to] : ranked_) {
-      if (std::find(blocked.begin(), blocked.end(), to) != blocked.end()) continue;
       if (valid(from, to, cand_)) return {c, to};
     }
     return {0.0, kNone};
@@ -842,17 +851,9 @@ class Builder {
   // target instead). Most candidates are replaced before they come up.
   void push_cheapest(std::uint32_t from) {
     ++stamp_[from];
-    if (removed_[from] || is_locked(from)) return;
-    neighbours(from, cand_);
-    const std::vector<std::uint32_t>& blocked = blocked_[from];
-    double best = std::numeric_limits<double>::infinity();
-    std::uint32_t best_to = kNone;
-    for (std::uint32_t to : cand_) {
-      if (std::find(blocked.begin(), blocked.end(), to) != blocked.end()) continue;
-      const double c = cost(from, to);
-      if (c < best || (c == best && to < best_to)) best = c, best_to = to;
-    }
-    if (best_to != kNone) heap_.push({best, from, best_to, stamp_[from]});
+    if (!rank_targets(from) || ranked_.empty()) return;
+    const auto [c, to] = *std::min_element(ranked_.begin(), ranked_.end());
+    heap_.push({c, from, to, stamp_[from]});
   }
 
   // ---- error bound --------------------------------------------------------------------------
