@@ -24,6 +24,7 @@
 #include "smr/build/exact_intersection.h"
 #include "smr/build/op_assembly.h"
 #include "smr/core/geometry.h"
+#include "smr/core/id_map.h"
 #include "smr/core/parallel.h"
 #include "storage/error.h"
 #include "storage/external_sort.h"
@@ -192,7 +193,7 @@ class StarDistance {
     // The cells that would raise a charge, and whether one would raise the ceiling (the
     // largest charge so far): only then is the piece split, as in bound().
     raised_.clear();
-    if (!crossed(a, b, c)) {
+    if (!crossed(a, b, c)) {  // one cell
       const std::array<Vec3, 3> corners{a, b, c};
       const auto [v, k] = nearest(corners, offset, first, charges, ceiling);
       if (k != kFree) raised_.push_back({v, k});
@@ -299,23 +300,26 @@ class StarDistance {
     return {corners_.data() + cells_[i].first, cells_[i].second};
   }
 
-  // cells_ = the triangle (a, b, c) cut by every spoke plane. A plane that does not cross the
-  // triangle crosses none of its cells.
+  // cells_ = the triangle (a, b, c) cut by every spoke plane that crosses it (crossed(a, b, c)
+  // found them). A plane that does not cross the triangle crosses none of its cells.
   void cut(const Vec3& a, const Vec3& b, const Vec3& c) const {
     corners_.assign({a, b, c});
     cells_.assign(1, {0, 3});
-    for (const Vec3& m : planes_) {
-      if (!crosses(a, b, c, m)) continue;
+    for (const std::size_t k : crossing_) {
       const std::size_t n = cells_.size();
-      for (std::size_t i = 0; i < n; ++i) split(i, m);
+      for (std::size_t i = 0; i < n; ++i) split(i, planes_[k]);
     }
   }
 
   // Whether some spoke plane has corners of the piece strictly on both sides (checked before
-  // any cell is made: most pieces of the branch and bound lie within one wedge).
+  // any cell is made: most pieces of the branch and bound lie within one wedge); crossing_ =
+  // those planes, for cut().
   bool crossed(const Vec3& a, const Vec3& b, const Vec3& c) const {
-    return std::any_of(planes_.begin(), planes_.end(),
-                       [&](const Vec3& m) { return crosses(a, b, c, m); });
+    crossing_.clear();
+    for (std::size_t k = 0; k < planes_.size(); ++k) {
+      if (crosses(a, b, c, planes_[k])) crossing_.push_back(k);
+    }
+    return !crossing_.empty();
   }
   bool crosses(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& m) const {
     const double sa = glm::dot(a - hub_, m), sb = glm::dot(b - hub_, m), sc = glm::dot(c - hub_, m);
@@ -364,14 +368,17 @@ class StarDistance {
   mutable std::vector<std::pair<std::size_t, std::size_t>> cells_;
   mutable std::vector<Vec3> corners_, high_;
   mutable std::vector<double> side_;
+  mutable std::vector<std::size_t> crossing_;  // the planes crossing the last piece (crossed())
   mutable std::vector<std::pair<double, std::size_t>> raised_;
 };
 
 // Live triangles by their bounding boxes, for the self-intersection test: a hierarchy of uniform
-// grids (cell sizes cell * 2^level), each triangle in the one cell of the level whose cells are
-// at least its box's extent that holds its box's centre. At a level of cell size s, a box then
-// meets only triangles of the cells holding its own box grown by s / 2; where that range has more
-// cells than the level holds, the level's cells are scanned instead.
+// grids (cell sizes cell * 2^level, cells in open-addressing tables: std::unordered_map's node
+// chains made the lookups most of the test's time on large meshes), each triangle in the one
+// cell of the level whose cells are at least its box's extent that holds its box's centre. At a
+// level of cell size s, a box then meets only triangles of the cells holding its own box grown
+// by s / 2; where that range has more cells than the level holds, the level's cells are scanned
+// instead.
 class TriangleGrid {
  public:
   void reset(const Vec3& origin, double cell) {
@@ -386,19 +393,27 @@ class TriangleGrid {
     int level = 0;
     double size = cell_;
     while (size < extent && level + 1 < kLevels) size *= 2.0, ++level;
+    Level& l = levels_[std::size_t(level)];
     const std::uint64_t key = key_of(index_of(0.5 * (b.lo + b.hi), size));
-    levels_[level][key].push_back(id);
+    std::uint32_t& slot = l.index[key];  // the cell's index + 1; 0: a new cell
+    if (slot == 0) {
+      l.keys.push_back(key);
+      l.ids.emplace_back();
+      slot = static_cast<std::uint32_t>(l.keys.size());
+    }
+    const std::uint32_t cell = slot - 1;
+    if (l.ids[cell].empty()) ++l.occupied;
+    l.ids[cell].push_back(id);
     if (where_.size() <= id) where_.resize(std::size_t(id) + 1, {kNoLevel, 0});
-    where_[id] = {level, key};
+    where_[id] = {level, cell};
   }
   void erase(std::uint32_t id) {
     if (id >= where_.size() || where_[id].first == kNoLevel) return;
-    auto& cells = levels_[std::size_t(where_[id].first)];
-    auto it = cells.find(where_[id].second);
-    auto& ids = it->second;
+    Level& l = levels_[std::size_t(where_[id].first)];
+    std::vector<std::uint32_t>& ids = l.ids[where_[id].second];
     *std::find(ids.begin(), ids.end(), id) = ids.back();
     ids.pop_back();
-    if (ids.empty()) cells.erase(it);
+    if (ids.empty()) --l.occupied;
     where_[id].first = kNoLevel;
   }
   // f(id) for every triangle whose box may meet b (and some that do not).
@@ -406,8 +421,8 @@ class TriangleGrid {
   void visit(const Box3& b, F&& f) const {
     double size = cell_;
     for (int level = 0; level < kLevels; ++level, size *= 2.0) {
-      const auto& cells = levels_[std::size_t(level)];
-      if (cells.empty()) continue;
+      const Level& l = levels_[std::size_t(level)];
+      if (l.occupied == 0) continue;
       const Vec3 half(0.5 * size);
       const std::array<std::int64_t, 3> lo = index_of(b.lo - half, size),
                                         hi = index_of(b.hi + half, size);
@@ -420,19 +435,19 @@ class TriangleGrid {
         }
         return true;
       };
-      if (range > double(cells.size())) {
-        for (const auto& [key, ids] : cells) {
-          if (!inside(key)) continue;
-          for (std::uint32_t id : ids) f(id);
+      if (range > double(l.keys.size())) {  // fewer cells than the range: all of them
+        for (std::size_t c = 0; c < l.keys.size(); ++c) {
+          if (l.ids[c].empty() || !inside(l.keys[c])) continue;
+          for (std::uint32_t id : l.ids[c]) f(id);
         }
         continue;
       }
       for (std::int64_t x = lo[0]; x <= hi[0]; ++x) {
         for (std::int64_t y = lo[1]; y <= hi[1]; ++y) {
           for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
-            auto it = cells.find(key_of({x, y, z}));
-            if (it == cells.end()) continue;
-            for (std::uint32_t id : it->second) f(id);
+            const std::uint32_t* slot = l.index.find(key_of({x, y, z}));
+            if (slot == nullptr) continue;
+            for (std::uint32_t id : l.ids[*slot - 1]) f(id);
           }
         }
       }
@@ -444,6 +459,13 @@ class TriangleGrid {
   static constexpr int kNoLevel = -1;
   static constexpr std::int64_t kOffset = std::int64_t{1} << 20;
   static constexpr std::uint64_t kMask = (std::uint64_t{1} << 21) - 1;
+  // One grid: its cells in a flat hash table (cells emptied stay, to be filled again).
+  struct Level {
+    IdMap<std::uint32_t> index;                   // cell key -> its index + 1
+    std::vector<std::uint64_t> keys;              // per cell
+    std::vector<std::vector<std::uint32_t>> ids;  // per cell: its triangles
+    std::size_t occupied = 0;                     // cells holding a triangle
+  };
   std::array<std::int64_t, 3> index_of(const Vec3& p, double size) const {
     std::array<std::int64_t, 3> i{};
     for (int k = 0; k < 3; ++k) {
@@ -452,6 +474,7 @@ class TriangleGrid {
     }
     return i;
   }
+  // 3 x 21 bits: never IdMap's empty key.
   static std::uint64_t key_of(const std::array<std::int64_t, 3>& i) {
     std::uint64_t key = 0;
     for (int k = 0; k < 3; ++k) key |= std::uint64_t(i[std::size_t(k)] + kOffset) << (21 * k);
@@ -459,8 +482,8 @@ class TriangleGrid {
   }
   Vec3 origin_{0.0};
   double cell_ = 1.0;
-  std::vector<std::unordered_map<std::uint64_t, std::vector<std::uint32_t>>> levels_;
-  std::vector<std::pair<int, std::uint64_t>> where_;  // triangle -> (level, cell); kNoLevel: none
+  std::vector<Level> levels_;
+  std::vector<std::pair<int, std::uint32_t>> where_;  // triangle -> (level, cell); kNoLevel: none
 };
 
 constexpr int kBoundDepth = 3;
@@ -1388,19 +1411,25 @@ class Builder {
       return static_cast<std::uint32_t>(std::lower_bound(first, local_.end(), v) - local_.begin());
     };
     op.fragment.assign(frag.size(), FragmentTriangle{});
+    // Neighbours across directed edges: (edge, triangle) sorted by edge, the first holder of an
+    // edge being the one found.
     frag_edges_.clear();
     for (std::uint32_t i = 0; i < frag.size(); ++i) {
       const Tri& t = tris_[frag[i]];
       for (int k = 0; k < 3; ++k) {
         op.fragment[i].v[k] = index_of(t.v[k]);
-        frag_edges_.emplace(edge_key(t.v[k], t.v[(k + 1) % 3]), i);
+        frag_edges_.push_back({edge_key(t.v[k], t.v[(k + 1) % 3]), i});
       }
     }
+    std::sort(frag_edges_.begin(), frag_edges_.end());
     for (std::uint32_t i = 0; i < frag.size(); ++i) {
       const Tri& t = tris_[frag[i]];
       for (int k = 0; k < 3; ++k) {
-        auto it = frag_edges_.find(edge_key(t.v[(k + 1) % 3], t.v[k]));
-        if (it != frag_edges_.end()) op.fragment[i].nbr[k] = static_cast<std::int32_t>(it->second);
+        const std::uint64_t key = edge_key(t.v[(k + 1) % 3], t.v[k]);
+        const auto it =
+            std::lower_bound(frag_edges_.begin(), frag_edges_.end(), std::pair{key, 0u});
+        if (it != frag_edges_.end() && it->first == key)
+          op.fragment[i].nbr[k] = static_cast<std::int32_t>(it->second);
       }
     }
   }
@@ -1455,7 +1484,7 @@ class Builder {
     r0.id = kBaseOp;
     fill_fragment(r0, base, base_vertices);
 
-    std::unordered_map<std::uint64_t, std::uint32_t> edges;  // directed edge -> current triangle
+    IdMap<std::uint32_t> edges;  // directed edge -> current triangle
     edges.reserve(nt);
     using Err = std::pair<double, std::uint32_t>;
     std::priority_queue<Err> errors;  // lazy max of e over the current mesh
@@ -1552,14 +1581,14 @@ class Builder {
         for (std::uint8_t e = 0; e < 3; ++e) {
           if (op.fragment[k].nbr[e] != FragmentTriangle::kNoNeighbour) continue;
           const std::uint32_t a = t.v[e], b = t.v[(e + 1) % 3];
-          auto out = edges.find(edge_key(b, a));
-          if (out == edges.end()) continue;  // model boundary
-          auto in = edges.find(edge_key(a, b));
-          if (in == edges.end() ||
-              std::find(group.begin(), group.end(), tris_[in->second].creator) == group.end()) {
+          const std::uint32_t* out = edges.find(edge_key(b, a));
+          if (out == nullptr) continue;  // model boundary
+          const std::uint32_t* in = edges.find(edge_key(a, b));
+          if (in == nullptr ||
+              std::find(group.begin(), group.end(), tris_[*in].creator) == group.end()) {
             throw_internal("QEM PM: a fragment boundary edge has no replaced triangle");
           }
-          const std::uint32_t inside = in->second, outside = out->second;
+          const std::uint32_t inside = *in, outside = *out;
           const bool outer = tri_op_[outside] > tri_op_[inside];
           const std::uint32_t tri = outer ? outside : inside;
           const std::uint8_t edge =
@@ -1722,7 +1751,7 @@ class Builder {
   std::vector<Box3> made_boxes_;
   std::vector<std::pair<std::uint32_t, Box3>> near_;
   std::vector<std::pair<double, std::uint32_t>> ranked_;
-  std::unordered_map<std::uint64_t, std::uint32_t> frag_edges_;
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> frag_edges_;  // fill_fragment's
   std::vector<std::uint32_t> tri_op_, tri_local_;
 };
 
