@@ -1,7 +1,11 @@
 #include "smr/build/exact_intersection.h"
 
+#include <algorithm>
+#include <array>
+
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/intersections.h>
+#include <glm/common.hpp>
 #include <glm/geometric.hpp>
 
 namespace smr {
@@ -41,6 +45,54 @@ struct Plane {
   double uw2;
 };
 
+// Whether the projections of a and b on the coordinate plane most nearly parallel to a are
+// certainly apart, as far as double arithmetic can tell: a line through an edge of either has
+// the other's corners strictly on its far side, the corners at `shared` (the corner both have,
+// or none) excepted, which must lie on that line. Then a and b share at most that corner in
+// space too: a point of both projects into both projections, where only the shared corner lies,
+// and the projection is one-to-one on a. Decides the coplanar pairs of flat regions, whose
+// exact predicates otherwise fall back to multiprecision arithmetic.
+bool projections_apart(const MeshTriangle& a, const MeshTriangle& b, const Vec3* shared) {
+  const Vec3 n = glm::cross(a.p[1] - a.p[0], a.p[2] - a.p[0]);
+  const Vec3 m = glm::abs(n);
+  if (!(std::max({m.x, m.y, m.z}) > 0.0)) return false;
+  const int drop = m.x >= m.y && m.x >= m.z ? 0 : (m.y >= m.z ? 1 : 2);
+  const auto flat = [&](const Vec3& v) {
+    return drop == 0 ? Vec2(v.y, v.z) : drop == 1 ? Vec2(v.z, v.x) : Vec2(v.x, v.y);
+  };
+  // The side of x from the line p -> q: +1 or -1 when certain, 0 when x may lie on it.
+  const auto side = [](const Vec2& p, const Vec2& q, const Vec2& x) {
+    const Vec2 e = q - p, d = x - p;
+    const double det = e.x * d.y - e.y * d.x;
+    if (det * det <= 1e-24 * glm::dot(e, e) * glm::dot(d, d)) return 0;
+    return det > 0.0 ? 1 : -1;
+  };
+  const std::array<const MeshTriangle*, 2> t{&a, &b};
+  for (int s = 0; s < 2; ++s) {
+    const MeshTriangle& own = *t[std::size_t(s)];
+    const MeshTriangle& other = *t[std::size_t(1 - s)];
+    for (int k = 0; k < 3; ++k) {
+      const Vec3& p3 = own.p[std::size_t(k)];
+      const Vec3& q3 = own.p[std::size_t((k + 1) % 3)];
+      const bool through = shared != nullptr && (p3 == *shared || q3 == *shared);
+      if (shared != nullptr && !through) continue;  // the shared corner is on both sides' closure
+      const Vec2 p = flat(p3), q = flat(q3);
+      const int inner = side(p, q, flat(own.p[std::size_t((k + 2) % 3)]));
+      if (inner == 0) continue;
+      bool apart = true;
+      for (const Vec3& x : other.p) {
+        if (shared != nullptr && x == *shared) continue;
+        if (side(p, q, flat(x)) != -inner) {
+          apart = false;
+          break;
+        }
+      }
+      if (apart) return true;
+    }
+  }
+  return false;
+}
+
 }  // namespace
 
 bool triangles_cross(const MeshTriangle& a, const MeshTriangle& b) {
@@ -65,7 +117,8 @@ bool triangles_cross(const MeshTriangle& a, const MeshTriangle& b) {
   const Plane plane_a(pa_(1) - pa_(0), pa_(2) - pa_(0)), plane_b(pb_(1) - pb_(0), pb_(2) - pb_(0));
   if (shared == 0) {
     if (plane_b.strictly_one_side(pa_(0) - pb_(0), pa_(1) - pb_(0), pa_(2) - pb_(0)) ||
-        plane_a.strictly_one_side(pb_(0) - pa_(0), pb_(1) - pa_(0), pb_(2) - pa_(0))) {
+        plane_a.strictly_one_side(pb_(0) - pa_(0), pb_(1) - pa_(0), pb_(2) - pa_(0)) ||
+        projections_apart(a, b, nullptr)) {
       return false;
     }
   } else if (shared == 1) {
@@ -73,7 +126,8 @@ bool triangles_cross(const MeshTriangle& a, const MeshTriangle& b) {
     // that plane only in the shared corner.
     const Vec3& v = pa_(ka[0]);
     if (plane_b.strictly_one_side(pa_(ka[0] + 1) - v, pa_(ka[0] + 2) - v) ||
-        plane_a.strictly_one_side(pb_(kb[0] + 1) - v, pb_(kb[0] + 2) - v)) {
+        plane_a.strictly_one_side(pb_(kb[0] + 1) - v, pb_(kb[0] + 2) - v) ||
+        projections_apart(a, b, &v)) {
       return false;
     }
   } else if (shared == 2) {

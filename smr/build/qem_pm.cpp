@@ -547,17 +547,19 @@ class Builder {
       renumbered[codes[i].second] = i;
       pos_[i] = mesh.positions[codes[i].second];
     }
-    std::vector<std::array<std::uint32_t, 3>> tris;
-    tris.reserve(mesh.triangles.size());
-    for (const auto& t : mesh.triangles) {
-      tris.push_back({renumbered[t[0]], renumbered[t[1]], renumbered[t[2]]});
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> first;  // (first corner, triangle)
+    first.reserve(mesh.triangles.size());
+    for (std::uint32_t i = 0; i < mesh.triangles.size(); ++i) {
+      const auto& t = mesh.triangles[i];
+      first.push_back({std::min({renumbered[t[0]], renumbered[t[1]], renumbered[t[2]]}), i});
     }
-    std::stable_sort(tris.begin(), tris.end(), [](const auto& x, const auto& y) {
-      return *std::min_element(x.begin(), x.end()) < *std::min_element(y.begin(), y.end());
-    });
+    std::sort(first.begin(), first.end());
     quad_.resize(n);
-    init_arrays(tris.size());
-    for (const auto& t : tris) add_triangle(Tri{t, 0.0, kNone, kNone});
+    init_arrays(first.size());
+    for (const auto& [corner, i] : first) {
+      const auto& t = mesh.triangles[i];
+      add_triangle(Tri{{renumbered[t[0]], renumbered[t[1]], renumbered[t[2]]}, 0.0, kNone, kNone});
+    }
     init_quadrics_and_boundary();
     init_components();
   }
