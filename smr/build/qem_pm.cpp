@@ -75,6 +75,16 @@ std::uint64_t spread3(std::uint64_t x) {
   return x;
 }
 
+// The Morton code of p in the box lo + [0, extent] (21 bits per axis; a flat axis is 0).
+std::uint64_t morton_code(const Vec3& p, const Vec3& lo, const Vec3& extent) {
+  std::uint64_t code = 0;
+  for (int a = 0; a < 3; ++a) {
+    const double u = extent[a] > 0.0 ? (p[a] - lo[a]) / extent[a] : 0.0;
+    code |= spread3(static_cast<std::uint64_t>(std::clamp(u, 0.0, 1.0) * 2097151.0)) << a;
+  }
+  return code;
+}
+
 struct Tri {
   std::array<std::uint32_t, 3> v{};
   double e = 0.0;                   // two-sided Hausdorff bound to the source (qem_pm.h)
@@ -530,13 +540,7 @@ class Builder {
     for (const Vec3& p : mesh.positions) box.add(p);
     std::vector<std::pair<std::uint64_t, std::uint32_t>> codes(n);
     for (std::uint32_t v = 0; v < n; ++v) {
-      std::uint64_t code = 0;
-      for (int a = 0; a < 3; ++a) {
-        const double extent = box.hi[a] - box.lo[a];
-        const double u = extent > 0.0 ? (mesh.positions[v][a] - box.lo[a]) / extent : 0.0;
-        code |= spread3(static_cast<std::uint64_t>(std::clamp(u, 0.0, 1.0) * 2097151.0)) << a;
-      }
-      codes[v] = {code, v};
+      codes[v] = {morton_code(mesh.positions[v], box.lo, box.hi - box.lo), v};
     }
     std::sort(codes.begin(), codes.end());
     std::vector<std::uint32_t> renumbered(n);
@@ -2052,11 +2056,17 @@ class BlockPmBuilder {
     std::vector<std::uint8_t> locked(n), constrain(n);
     std::unordered_map<std::uint32_t, std::uint32_t> local;
     local.reserve(n * 2);
+    // Local vertices in Morton order (as the in-core builder's): neighbours close in memory.
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> order(n);
     for (std::uint32_t i = 0; i < n; ++i) {
-      const std::uint32_t v = in.quads[i].first;
+      order[i] = {morton_code(pos_[in.quads[i].first], box_.lo, Vec3(side_)), i};
+    }
+    std::sort(order.begin(), order.end());
+    for (std::uint32_t i = 0; i < n; ++i) {
+      const auto& [v, q] = in.quads[order[i].second];
       gid[i] = v;
       pos[i] = pos_[v];
-      quad[i] = in.quads[i].second;
+      quad[i] = q;
       locked[i] = locked_at(v, level) ? 1 : 0;
       constrain[i] = level == 0 || locked_at(v, level - 1) ? 1 : 0;
       local.emplace(v, i);
