@@ -45,47 +45,46 @@ struct Plane {
   double uw2;
 };
 
-// Whether the projections of a and b on the coordinate plane most nearly parallel to a are
-// certainly apart, as far as double arithmetic can tell: a line through an edge of either has
-// the other's corners strictly on its far side, the corners at `shared` (the corner both have,
-// or none) excepted, which must lie on that line. Then a and b share at most that corner in
-// space too: a point of both projects into both projections, where only the shared corner lies,
-// and the projection is one-to-one on a. Decides the coplanar pairs of flat regions, whose
-// exact predicates otherwise fall back to multiprecision arithmetic.
-bool projections_apart(const MeshTriangle& a, const MeshTriangle& b, const Vec3* shared) {
-  const Vec3 n = glm::cross(a.p[1] - a.p[0], a.p[2] - a.p[0]);
-  const Vec3 m = glm::abs(n);
+// Whether the projections of a and b on the coordinate plane most nearly parallel to a (whose
+// normal is n_a) are certainly apart, as far as double arithmetic can tell: a line through an
+// edge of either has the other's corners strictly on its far side, the corners at `shared` (the
+// corner both have, or none) excepted, which must lie on that line. Then a and b share at most
+// that corner in space too: a point of both projects into both projections, where only the
+// shared corner lies, and the projection is one-to-one on a. Decides the coplanar pairs of flat
+// regions, whose exact predicates otherwise fall back to multiprecision arithmetic.
+bool projections_apart(const MeshTriangle& a, const MeshTriangle& b, const Vec3& n_a,
+                       const Vec3* shared) {
+  const Vec3 m = glm::abs(n_a);
   if (!(std::max({m.x, m.y, m.z}) > 0.0)) return false;
   const int drop = m.x >= m.y && m.x >= m.z ? 0 : (m.y >= m.z ? 1 : 2);
-  const auto flat = [&](const Vec3& v) {
-    return drop == 0 ? Vec2(v.y, v.z) : drop == 1 ? Vec2(v.z, v.x) : Vec2(v.x, v.y);
-  };
+  // Both triangles' corners projected once: [0][k] a's, [1][k] b's; is_shared likewise.
+  std::array<std::array<Vec2, 3>, 2> flat{};
+  std::array<std::array<bool, 3>, 2> is_shared{};
+  const std::array<const MeshTriangle*, 2> t{&a, &b};
+  for (std::size_t s = 0; s < 2; ++s) {
+    for (std::size_t k = 0; k < 3; ++k) {
+      const Vec3& v = t[s]->p[k];
+      flat[s][k] = drop == 0 ? Vec2(v.y, v.z) : drop == 1 ? Vec2(v.z, v.x) : Vec2(v.x, v.y);
+      is_shared[s][k] = shared != nullptr && v == *shared;
+    }
+  }
   // The side of x from the line p -> q: +1 or -1 when certain, 0 when x may lie on it.
   const auto side = [](const Vec2& p, const Vec2& q, const Vec2& x) {
-    const Vec2 e = q - p, d = x - p;
-    const double det = e.x * d.y - e.y * d.x;
-    if (det * det <= 1e-24 * glm::dot(e, e) * glm::dot(d, d)) return 0;
+    const double det = orient2d(p, q, x);
+    if (det * det <= 1e-24 * glm::dot(q - p, q - p) * glm::dot(x - p, x - p)) return 0;
     return det > 0.0 ? 1 : -1;
   };
-  const std::array<const MeshTriangle*, 2> t{&a, &b};
-  for (int s = 0; s < 2; ++s) {
-    const MeshTriangle& own = *t[std::size_t(s)];
-    const MeshTriangle& other = *t[std::size_t(1 - s)];
-    for (int k = 0; k < 3; ++k) {
-      const Vec3& p3 = own.p[std::size_t(k)];
-      const Vec3& q3 = own.p[std::size_t((k + 1) % 3)];
-      const bool through = shared != nullptr && (p3 == *shared || q3 == *shared);
-      if (shared != nullptr && !through) continue;  // the shared corner is on both sides' closure
-      const Vec2 p = flat(p3), q = flat(q3);
-      const int inner = side(p, q, flat(own.p[std::size_t((k + 2) % 3)]));
+  for (std::size_t s = 0; s < 2; ++s) {
+    const std::array<Vec2, 3>& own = flat[s];
+    for (std::size_t k = 0; k < 3; ++k) {
+      const std::size_t j = (k + 1) % 3;
+      // With a shared corner, only a line through it can separate.
+      if (shared != nullptr && !is_shared[s][k] && !is_shared[s][j]) continue;
+      const int inner = side(own[k], own[j], own[(k + 2) % 3]);
       if (inner == 0) continue;
       bool apart = true;
-      for (const Vec3& x : other.p) {
-        if (shared != nullptr && x == *shared) continue;
-        if (side(p, q, flat(x)) != -inner) {
-          apart = false;
-          break;
-        }
+      for (std::size_t x = 0; x < 3 && apart; ++x) {
+        apart = is_shared[1 - s][x] || side(own[k], own[j], flat[1 - s][x]) == -inner;
       }
       if (apart) return true;
     }
@@ -118,7 +117,7 @@ bool triangles_cross(const MeshTriangle& a, const MeshTriangle& b) {
   if (shared == 0) {
     if (plane_b.strictly_one_side(pa_(0) - pb_(0), pa_(1) - pb_(0), pa_(2) - pb_(0)) ||
         plane_a.strictly_one_side(pb_(0) - pa_(0), pb_(1) - pa_(0), pb_(2) - pa_(0)) ||
-        projections_apart(a, b, nullptr)) {
+        projections_apart(a, b, plane_a.n, nullptr)) {
       return false;
     }
   } else if (shared == 1) {
@@ -127,7 +126,7 @@ bool triangles_cross(const MeshTriangle& a, const MeshTriangle& b) {
     const Vec3& v = pa_(ka[0]);
     if (plane_b.strictly_one_side(pa_(ka[0] + 1) - v, pa_(ka[0] + 2) - v) ||
         plane_a.strictly_one_side(pb_(kb[0] + 1) - v, pb_(kb[0] + 2) - v) ||
-        projections_apart(a, b, &v)) {
+        projections_apart(a, b, plane_a.n, &v)) {
       return false;
     }
   } else if (shared == 2) {
