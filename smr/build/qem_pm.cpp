@@ -1700,29 +1700,38 @@ class Builder {
       cands.clear();
       for (std::uint32_t v = 0; v < n; ++v) {
         const Best& b = best_[v];
-        if (b.to == kNone || removed_[v] || (b.have_error && b.error > tolerance)) continue;
+        if (b.to == kNone || removed_[v] || (b.have_error ? b.error : b.lower) > tolerance)
+          continue;
         cands.push_back({b.cost, v});
       }
       std::sort(cands.begin(), cands.end());
       ++taken_stamp_;
       std::uint64_t made = 0;
       auto taken = [&](std::uint32_t w) { return taken_[w] == taken_stamp_; };
+      // Whether a vertex of x's star (x and its ring) is taken, without listing the ring: most
+      // candidates late in a round are next to one.
+      auto near_taken = [&](std::uint32_t x) {
+        for (std::uint32_t id : star_[x]) {
+          for (std::uint32_t w : tris_[id].v) {
+            if (taken(w)) return true;
+          }
+        }
+        return taken(x);
+      };
       for (const auto& [c, v] : cands) {
         Best& b = best_[v];
-        if (removed_[v] || taken(v) || taken(b.to)) continue;
+        if (removed_[v] || near_taken(v) || near_taken(b.to)) continue;
         neighbours(v, ring_);
-        neighbours(b.to, local_);
-        bool free = true;
-        for (std::uint32_t w : ring_) free = free && !taken(w);
-        for (std::uint32_t w : local_) free = free && !taken(w);
-        if (!free) continue;
         if (!valid(v, b.to, ring_)) {  // its 2-ring changed since it was chosen
           dirty_list_.push_back(v);
           continue;
         }
         if (!b.have_error) {
           const auto [error, exact] = bound_within(v, b.to, tolerance, true);
-          if (!exact) continue;  // a lower bound is already too large
+          if (!exact) {  // a lower bound is already too large: it waits while its star stays
+            b.lower = error;
+            continue;
+          }
           b.error = error;
           b.new_e = new_e_;
           b.have_error = true;
@@ -1734,6 +1743,7 @@ class Builder {
           continue;
         }
         const std::uint32_t to = b.to;
+        neighbours(to, local_);
         taken_[v] = taken_[to] = taken_stamp_;
         for (std::uint32_t w : ring_) taken_[w] = taken_stamp_;
         for (std::uint32_t w : local_) taken_[w] = taken_stamp_;
@@ -1753,6 +1763,7 @@ class Builder {
 
   struct Best {
     double cost = 0.0, error = 0.0;
+    double lower = 0.0;         // a lower bound of the error once one exceeded the tolerance
     std::vector<double> new_e;  // collapse_error's bounds of the new triangles
     std::uint32_t to = kNone;
     bool have_error = false;
