@@ -709,7 +709,9 @@ nlohmann::json ingest_mesh_blocks(const IngestArgs& a, const std::string& db_pat
       {"seconds",
        {{"sort", st.seconds_sort},
         {"blocks", st.seconds_blocks},
-        {"assemble", st.seconds_assemble}}}};
+        {"assemble", st.seconds_assemble},
+        {"assembly_join", st.seconds_join},
+        {"assembly_emit", st.seconds_emit}}}};
   report_streamed(report, tap, w, a, db_path, build_seconds, phase_rss ? finish_rss : -1.0, verify);
   return report;
 }

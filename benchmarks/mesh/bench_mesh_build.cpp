@@ -462,6 +462,8 @@ int main(int argc, char** argv) {
                        {"seconds_sort", st.seconds_sort},
                        {"seconds_blocks", st.seconds_blocks},
                        {"seconds_assemble", st.seconds_assemble},
+                       {"seconds_join", st.seconds_join},
+                       {"seconds_emit", st.seconds_emit},
                        {"builder", built.header.builder}};
         return;
       }

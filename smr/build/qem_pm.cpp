@@ -2200,6 +2200,8 @@ class BlockPmBuilder {
     assembler_->finish(
         info, base, [this](std::uint32_t v) { return pos_[v]; }, sink);
     stats_.dag_height = assembler_->stats().dag_height;
+    stats_.seconds_join = assembler_->stats().seconds_join;
+    stats_.seconds_emit = assembler_->stats().seconds_emit;
     stats_.temp_bytes += assembler_->stats().scratch_bytes;
     report(1.0);
   }

@@ -133,6 +133,7 @@ struct BlockPmStats {
   std::uint64_t max_handed_triangles = 0;   // most triangles a block handed its parent
   std::uint64_t temp_bytes = 0;
   double seconds_sort = 0, seconds_blocks = 0, seconds_assemble = 0;
+  double seconds_join = 0, seconds_emit = 0;  // the assembly's parts (AssemblyStats)
 };
 
 /// Builds the CRMR of `mesh` block by block into `sink` (ops in id order). Throws smr::Error on
