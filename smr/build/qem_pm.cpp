@@ -424,20 +424,20 @@ class TriangleGrid {
     }
     const std::uint32_t cell = slot - 1;
     if (l.ids[cell].empty()) ++l.occupied;
-    l.ids[cell].push_back(id);
+    l.ids[cell].push_back(Entry::of(id, b));
     if (where_.size() <= id) where_.resize(std::size_t(id) + 1, {kNoLevel, 0});
     where_[id] = {level, cell};
   }
   void erase(std::uint32_t id) {
     if (id >= where_.size() || where_[id].first == kNoLevel) return;
     Level& l = levels_[std::size_t(where_[id].first)];
-    std::vector<std::uint32_t>& ids = l.ids[where_[id].second];
-    *std::find(ids.begin(), ids.end(), id) = ids.back();
+    std::vector<Entry>& ids = l.ids[where_[id].second];
+    *std::find_if(ids.begin(), ids.end(), [&](const Entry& e) { return e.id == id; }) = ids.back();
     ids.pop_back();
     if (ids.empty()) --l.occupied;
     where_[id].first = kNoLevel;
   }
-  // f(id) for every triangle whose box may meet b (and some that do not).
+  // f(id, box) for every triangle whose box meets b (box: its box, rounded outwards to floats).
   template <class F>
   void visit(const Box3& b, F&& f) const {
     double size = cell_;
@@ -459,7 +459,7 @@ class TriangleGrid {
       if (range > double(l.keys.size())) {  // fewer cells than the range: all of them
         for (std::size_t c = 0; c < l.keys.size(); ++c) {
           if (l.ids[c].empty() || !inside(l.keys[c])) continue;
-          for (std::uint32_t id : l.ids[c]) f(id);
+          for (const Entry& e : l.ids[c]) e.visit(b, f);
         }
         continue;
       }
@@ -468,7 +468,7 @@ class TriangleGrid {
           for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
             const std::uint32_t* slot = l.index.find(key_of({x, y, z}));
             if (slot == nullptr) continue;
-            for (std::uint32_t id : l.ids[*slot - 1]) f(id);
+            for (const Entry& e : l.ids[*slot - 1]) e.visit(b, f);
           }
         }
       }
@@ -480,12 +480,44 @@ class TriangleGrid {
   static constexpr int kNoLevel = -1;
   static constexpr std::int64_t kOffset = std::int64_t{1} << 20;
   static constexpr std::uint64_t kMask = (std::uint64_t{1} << 21) - 1;
+  // A triangle and its box in floats, rounded outwards: the box test runs on the cell's own
+  // memory (looking up each triangle's corners missed the cache on most visits).
+  struct Entry {
+    std::uint32_t id;
+    std::array<float, 3> lo, hi;
+    static Entry of(std::uint32_t id, const Box3& b) {
+      Entry e{id, {}, {}};
+      for (int k = 0; k < 3; ++k) {
+        e.lo[std::size_t(k)] = below(b.lo[k]);
+        e.hi[std::size_t(k)] = above(b.hi[k]);
+      }
+      return e;
+    }
+    static float below(double x) {
+      const auto f = static_cast<float>(x);
+      return double(f) <= x ? f : std::nextafter(f, -std::numeric_limits<float>::infinity());
+    }
+    static float above(double x) {
+      const auto f = static_cast<float>(x);
+      return double(f) >= x ? f : std::nextafter(f, std::numeric_limits<float>::infinity());
+    }
+    template <class F>
+    void visit(const Box3& b, F& f) const {
+      for (int k = 0; k < 3; ++k) {
+        if (double(lo[std::size_t(k)]) > b.hi[k] || double(hi[std::size_t(k)]) < b.lo[k]) return;
+      }
+      Box3 box;
+      box.lo = Vec3(lo[0], lo[1], lo[2]);
+      box.hi = Vec3(hi[0], hi[1], hi[2]);
+      f(id, box);
+    }
+  };
   // One grid: its cells in a flat hash table (cells emptied stay, to be filled again).
   struct Level {
-    IdMap<std::uint32_t> index;                   // cell key -> its index + 1
-    std::vector<std::uint64_t> keys;              // per cell
-    std::vector<std::vector<std::uint32_t>> ids;  // per cell: its triangles
-    std::size_t occupied = 0;                     // cells holding a triangle
+    IdMap<std::uint32_t> index;           // cell key -> its index + 1
+    std::vector<std::uint64_t> keys;      // per cell
+    std::vector<std::vector<Entry>> ids;  // per cell: its triangles
+    std::size_t occupied = 0;             // cells holding a triangle
   };
   std::array<std::int64_t, 3> index_of(const Vec3& p, double size) const {
     std::array<std::int64_t, 3> i{};
@@ -1062,10 +1094,8 @@ class Builder {
       all.add(b);
     }
     near_.clear();
-    grid_.visit(all, [&](std::uint32_t id) {
-      if (tri_marks_.of[id] == old_star) return;
-      const Box3 tb = box_of(tris_[id].v);
-      if (tb.intersects(all)) near_.push_back({id, tb});
+    grid_.visit(all, [&](std::uint32_t id, const Box3& tb) {
+      if (tri_marks_.of[id] != old_star) near_.push_back({id, tb});
     });
     bool crossed = false;
     for (std::size_t i = 0; i < made_.size() && !crossed; ++i) {
