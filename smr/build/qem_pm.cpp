@@ -182,25 +182,15 @@ class StarDistance {
 
   // `first`: the target likeliest to be nearest (the piece's image under the collapse), tried
   // before the others so that most pieces stop at their first target.
-  // `known`: this piece's depth-0 bound when the caller already has it.
   double bound(const Vec3& a, const Vec3& b, const Vec3& c, double floor, int depth,
-               std::size_t first, double known = std::numeric_limits<double>::infinity()) const {
-    double ub = known;
-    if (ub <= floor) return ub;
-    if (known == std::numeric_limits<double>::infinity()) {
-      const std::array<Vec3, 3> corners{a, b, c};
-      ub = convex_bound(corners, ub, floor, first);
-      if (ub <= floor) return ub;
-    }
-    ub = std::min(ub, cells_bound(a, b, c, ub, first));
-    if (ub <= floor || depth == 0) return ub;
-    const Vec3 ab = 0.5 * (a + b), bc = 0.5 * (b + c), ca = 0.5 * (c + a);
-    double m = floor;
-    m = std::max(m, bound(a, ab, ca, m, depth - 1, first));
-    m = std::max(m, bound(ab, b, bc, m, depth - 1, first));
-    m = std::max(m, bound(ca, bc, c, m, depth - 1, first));
-    m = std::max(m, bound(ab, bc, ca, m, depth - 1, first));
-    return std::min(m, ub);
+               std::size_t first) const {
+    // The corners' squared distances to the targets, computed once each: a corner of the
+    // subdivision is shared by up to six pieces. Three per level of the recursion, NaN until
+    // computed.
+    const std::size_t n = targets_->size();
+    cache_.assign(3 * n * std::size_t(depth + 1), std::numeric_limits<double>::quiet_NaN());
+    return bound({a, b, c}, {cache_.data(), cache_.data() + n, cache_.data() + 2 * n},
+                 cache_.data() + 3 * n, floor, depth, first);
   }
 
   // The forward bound per target. Source points lie within `offset` of the piece (a, b, c); the
@@ -243,6 +233,55 @@ class StarDistance {
 
  private:
   static constexpr std::size_t kFree = std::numeric_limits<std::size_t>::max();
+
+  // bound() over the piece p with its corners' cached distances d2; `free` is where cache_'s
+  // unused arrays begin (three per remaining depth).
+  double bound(const std::array<Vec3, 3>& p, const std::array<double*, 3>& d2, double* free,
+               double floor, int depth, std::size_t first) const {
+    double ub = cached_convex_bound(p, d2, floor, first);
+    if (ub <= floor) return ub;
+    ub = std::min(ub, cells_bound(p[0], p[1], p[2], ub, first));
+    if (ub <= floor || depth == 0) return ub;
+    const std::array<Vec3, 3> mid{0.5 * (p[0] + p[1]), 0.5 * (p[1] + p[2]), 0.5 * (p[2] + p[0])};
+    const std::size_t n = targets_->size();
+    const std::array<double*, 3> dm{free, free + n, free + 2 * n};
+    std::fill(free, free + 3 * n, std::numeric_limits<double>::quiet_NaN());
+    double* rest = free + 3 * n;
+    double m = floor;
+    m = std::max(m,
+                 bound({p[0], mid[0], mid[2]}, {d2[0], dm[0], dm[2]}, rest, m, depth - 1, first));
+    m = std::max(m,
+                 bound({mid[0], p[1], mid[1]}, {dm[0], d2[1], dm[1]}, rest, m, depth - 1, first));
+    m = std::max(m,
+                 bound({mid[2], mid[1], p[2]}, {dm[2], dm[1], d2[2]}, rest, m, depth - 1, first));
+    m = std::max(m, bound({mid[0], mid[1], mid[2]}, dm, rest, m, depth - 1, first));
+    return std::min(m, ub);
+  }
+
+  // convex_bound of a triangle piece with its corners' distances cached in d2 (NaN: not yet).
+  double cached_convex_bound(const std::array<Vec3, 3>& p, const std::array<double*, 3>& d2,
+                             double floor, std::size_t first) const {
+    double ub = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < targets_->size(); ++i) {
+      const std::size_t k = i == 0 ? first : (i == first ? 0 : i);
+      const Target& t = (*targets_)[k];
+      const double room = ub - t.offset;
+      if (room <= 0.0) continue;
+      const double room2 = room < std::numeric_limits<double>::infinity()
+                               ? room * room
+                               : std::numeric_limits<double>::infinity();
+      double worst = 0.0;
+      for (int j = 0; j < 3 && worst <= room2; ++j) {
+        double& v = d2[std::size_t(j)][k];
+        if (std::isnan(v)) v = t.distance.squared(p[std::size_t(j)]);
+        worst = std::max(worst, v);
+      }
+      if (!(worst < room * room)) continue;
+      ub = std::min(ub, t.offset + std::sqrt(worst));
+      if (ub <= floor) return ub;
+    }
+    return ub;
+  }
 
   // The target nearest the convex polygon by the corner bound (target offset + its largest
   // corner distance), or kFree as soon as a target holds it within its charge.
@@ -391,6 +430,7 @@ class StarDistance {
   mutable std::vector<double> side_;
   mutable std::vector<std::size_t> crossing_;  // the planes crossing the last piece (crossed())
   mutable std::vector<std::pair<double, std::size_t>> raised_;
+  mutable std::vector<double> cache_;  // bound()'s corner distances
 };
 
 // Live triangles by their bounding boxes, for the self-intersection test: a hierarchy of uniform
