@@ -439,7 +439,8 @@ class StarDistance {
 // cell of the level whose cells are at least its box's extent that holds its box's centre. At a
 // level of cell size s, a box then meets only triangles of the cells holding its own box grown
 // by s / 2; where that range has more cells than the level holds, the level's cells are scanned
-// instead.
+// instead. A cell keeps its triangles' boxes, so the boxes that miss the query are dropped
+// without touching the mesh.
 class TriangleGrid {
  public:
   void reset(const Vec3& origin, double cell) {
