@@ -238,7 +238,13 @@ class StarDistance {
   // unused arrays begin (three per remaining depth).
   double bound(const std::array<Vec3, 3>& p, const std::array<double*, 3>& d2, double* free,
                double floor, int depth, std::size_t first) const {
-    double ub = cached_convex_bound(p, d2, floor, first);
+    // The corners' distances: cached, NaN until computed.
+    double ub = convex_bound(3, std::numeric_limits<double>::infinity(), floor, first,
+                             [&](std::size_t k, std::size_t j) {
+                               double& v = d2[j][k];
+                               if (std::isnan(v)) v = (*targets_)[k].distance.squared(p[j]);
+                               return v;
+                             });
     if (ub <= floor) return ub;
     ub = std::min(ub, cells_bound(p[0], p[1], p[2], ub, first));
     if (ub <= floor || depth == 0) return ub;
@@ -258,31 +264,6 @@ class StarDistance {
     return std::min(m, ub);
   }
 
-  // convex_bound of a triangle piece with its corners' distances cached in d2 (NaN: not yet).
-  double cached_convex_bound(const std::array<Vec3, 3>& p, const std::array<double*, 3>& d2,
-                             double floor, std::size_t first) const {
-    double ub = std::numeric_limits<double>::infinity();
-    for (std::size_t i = 0; i < targets_->size(); ++i) {
-      const std::size_t k = i == 0 ? first : (i == first ? 0 : i);
-      const Target& t = (*targets_)[k];
-      const double room = ub - t.offset;
-      if (room <= 0.0) continue;
-      const double room2 = room < std::numeric_limits<double>::infinity()
-                               ? room * room
-                               : std::numeric_limits<double>::infinity();
-      double worst = 0.0;
-      for (int j = 0; j < 3 && worst <= room2; ++j) {
-        double& v = d2[std::size_t(j)][k];
-        if (std::isnan(v)) v = t.distance.squared(p[std::size_t(j)]);
-        worst = std::max(worst, v);
-      }
-      if (!(worst < room * room)) continue;
-      ub = std::min(ub, t.offset + std::sqrt(worst));
-      if (ub <= floor) return ub;
-    }
-    return ub;
-  }
-
   // The target nearest the convex polygon by the corner bound (target offset + its largest
   // corner distance), or kFree as soon as a target holds it within its charge.
   template <class Corners>
@@ -296,7 +277,8 @@ class StarDistance {
       const double free_room = charges[k] - offset - t.offset;   // within it: free
       const double room = std::max(free_room, best - t.offset);  // beyond it: no use
       if (!(room >= 0.0)) continue;
-      const double d2 = corner_distance2(t, corners, room);
+      const double d2 = corner_distance2(
+          corners.size(), room, [&](std::size_t j) { return t.distance.squared(corners[j]); });
       if (d2 == std::numeric_limits<double>::infinity()) continue;
       if (free_room >= 0.0 && d2 <= free_room * free_room) return {0.0, kFree};
       const double v = t.offset + std::sqrt(d2);
@@ -309,33 +291,36 @@ class StarDistance {
     return {best, at};
   }
 
-  // The largest squared distance from a corner to target t, or infinity once it exceeds room
-  // (the corners' distances are not all needed then).
-  template <class Corners>
-  static double corner_distance2(const Target& t, const Corners& corners, double room) {
+  // The largest of d2(j) over the corners j < corners, or infinity once it exceeds room^2 (the
+  // corners' distances are not all needed then).
+  template <class Distance2>
+  static double corner_distance2(std::size_t corners, double room, Distance2&& d2) {
     const double room2 = room < std::numeric_limits<double>::infinity()
                              ? room * room
                              : std::numeric_limits<double>::infinity();
-    double d2 = 0.0;
-    for (const Vec3& q : corners) {
-      d2 = std::max(d2, t.distance.squared(q));
-      if (d2 > room2) return std::numeric_limits<double>::infinity();
+    double worst = 0.0;
+    for (std::size_t j = 0; j < corners; ++j) {
+      worst = std::max(worst, d2(j));
+      if (worst > room2) return std::numeric_limits<double>::infinity();
     }
-    return d2;
+    return worst;
   }
 
-  // min over targets of (offset + the largest distance from a corner of the convex polygon):
-  // at most `ub`; stops once at most `floor`.
-  template <class Corners>
-  double convex_bound(const Corners& corners, double ub, double floor, std::size_t first) const {
-    for (std::size_t k = 0; k < targets_->size(); ++k) {
-      const Target& t = (*targets_)[k == 0 ? first : (k == first ? 0 : k)];
+  // min over targets k of (offset + the largest distance from a corner of a convex polygon),
+  // d2(k, j) being corner j's squared distance to target k: at most `ub`; stops once at most
+  // `floor`.
+  template <class Distance2>
+  double convex_bound(std::size_t corners, double ub, double floor, std::size_t first,
+                      Distance2&& d2) const {
+    for (std::size_t i = 0; i < targets_->size(); ++i) {
+      const std::size_t k = i == 0 ? first : (i == first ? 0 : i);
+      const Target& t = (*targets_)[k];
       // Squared distances to the corners; stop once no better than a target already seen.
       const double room = ub - t.offset;
       if (room <= 0.0) continue;
-      const double d2 = corner_distance2(t, corners, room);
-      if (!(d2 < room * room)) continue;
-      ub = std::min(ub, t.offset + std::sqrt(d2));
+      const double d = corner_distance2(corners, room, [&](std::size_t j) { return d2(k, j); });
+      if (!(d < room * room)) continue;
+      ub = std::min(ub, t.offset + std::sqrt(d));
       if (ub <= floor) return ub;
     }
     return ub;
@@ -349,7 +334,11 @@ class StarDistance {
     cut(a, b, c);
     double worst = 0.0;
     for (std::size_t i = 0; i < cells_.size(); ++i) {
-      worst = std::max(worst, convex_bound(cell(i), ub, worst, first));
+      const std::span<const Vec3> poly = cell(i);
+      worst = std::max(
+          worst, convex_bound(poly.size(), ub, worst, first, [&](std::size_t k, std::size_t j) {
+            return (*targets_)[k].distance.squared(poly[j]);
+          }));
       if (worst >= ub) return ub;
     }
     return worst;
