@@ -185,10 +185,11 @@ class StarDistance {
   double bound(const Vec3& a, const Vec3& b, const Vec3& c, double floor, int depth,
                std::size_t first) const {
     // The corners' squared distances to the targets, computed once each: a corner of the
-    // subdivision is shared by up to six pieces. Three per level of the recursion, NaN until
-    // computed.
+    // subdivision is shared by up to six pieces. Three arrays per level of the recursion, NaN
+    // until computed (each level clears its own when it splits).
     const std::size_t n = targets_->size();
-    cache_.assign(3 * n * std::size_t(depth + 1), std::numeric_limits<double>::quiet_NaN());
+    cache_.resize(3 * n * std::size_t(depth + 1));
+    std::fill_n(cache_.begin(), 3 * n, std::numeric_limits<double>::quiet_NaN());
     return bound({a, b, c}, {cache_.data(), cache_.data() + n, cache_.data() + 2 * n},
                  cache_.data() + 3 * n, floor, depth, first);
   }
