@@ -308,8 +308,9 @@ struct IngestArgs {
                    "(default: the system's temporary directory)");
     app.add_option(
            "--threads", threads,
-           "--builder blocks (and --memory): threads reading, building and writing blocks (0 = one "
-           "per core; the database is the same whatever the number)")
+           "--builder blocks (and --memory): threads reading, building and writing blocks; meshes "
+           "built in memory: threads computing error bounds ahead (0 = one per core; the database "
+           "is the same whatever the number)")
         ->capture_default_str();
     app.add_option("--codec", codec, "Geometry codec of the pages: draco, zstd or raw")
         ->capture_default_str();
@@ -364,7 +365,8 @@ struct IngestArgs {
           "builder refines to --max-error and decimates down to the corners");
     }
     if (!tmp_dir.empty() && chosen != "blocks") throw_input("--tmp applies to --builder blocks");
-    if (threads != 0 && chosen != "blocks") throw_input("--threads applies to --builder blocks");
+    if (threads != 0 && chosen != "blocks" && !is_mesh())
+      throw_input("--threads applies to --builder blocks and to meshes");
     if (block_cells < 8 || (block_cells & (block_cells - 1)) != 0)
       throw_input("--block-cells must be a power of two, at least 8, got " +
                   std::to_string(block_cells));
@@ -459,6 +461,7 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
     opt.max_fragment_triangles = a.coalesce;
     opt.coalesce_error_ratio = a.coalesce_ratio;
     opt.no_self_intersections = !a.allow_self_intersections;
+    opt.threads = a.threads;
     opt.progress = [&](double f) { progress.update(0.8 * f); };
     t0 = Clock::now();
     smr::QemPmStats qs;
@@ -468,6 +471,8 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
                                 {"base_vertices", qs.base_vertices},
                                 {"base_triangles", qs.base_triangles},
                                 {"bounds_computed", qs.bounds_computed},
+                                {"bounds_ahead", qs.bounds_ahead},
+                                {"bounds_ahead_used", qs.bounds_ahead_used},
                                 {"rejected_link", qs.rejected_link},
                                 {"rejected_flip", qs.rejected_flip},
                                 {"rejected_boundary", qs.rejected_boundary},
@@ -709,6 +714,7 @@ nlohmann::json ingest_mesh_blocks(const IngestArgs& a, const std::string& db_pat
       {"seconds",
        {{"sort", st.seconds_sort},
         {"blocks", st.seconds_blocks},
+        {"blocks_tail", st.seconds_tail},
         {"assemble", st.seconds_assemble},
         {"assembly_join", st.seconds_join},
         {"assembly_emit", st.seconds_emit}}}};
@@ -979,7 +985,7 @@ int main(int argc, char** argv) {
   // extraction of 1.2 M triangles peaked at 264 MiB, 232 MiB with the threshold fixed.
   mallopt(M_MMAP_THRESHOLD, 128 * 1024);
 #endif
-  CLI::App app{"smrdb: selective mesh refinement database for terrains"};
+  CLI::App app{"smrdb: selective mesh refinement database for terrains and 3-D meshes"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "smrdb 0.1.0");
 
@@ -990,7 +996,7 @@ int main(int argc, char** argv) {
   std::string db_path;
 
   CLI::App* ingest_cmd = app.add_subcommand(
-      "ingest", "Build a CRMR from a DEM and store it as an on-disk LOD database");
+      "ingest", "Build a CRMR from a DEM or a 3-D mesh and store it as an on-disk LOD database");
   ingest_args.add_to(*ingest_cmd);
   ingest_cmd->add_option("-o,--output", db_path, "Database file to create")->required();
   ingest_cmd->add_flag("--json", json, "Print statistics as JSON on stdout");
@@ -1018,8 +1024,9 @@ int main(int argc, char** argv) {
   verify_cmd->add_flag("--json", json, "Print the result as JSON");
   verify_cmd->add_flag("-q,--quiet", quiet, "No progress or summary on stderr");
 
-  CLI::App* build = app.add_subcommand(
-      "build", "Ingest a DEM and extract a mesh from the database in one go (ingest + extract)");
+  CLI::App* build = app.add_subcommand("build",
+                                       "Ingest a DEM or a 3-D mesh and extract a mesh from the "
+                                       "database in one go (ingest + extract)");
   ingest_args.add_to(*build);
   extract_args.add_to(*build, false);
   build->add_option("--db", db_path, "Keep the database at this path (default: a scratch file)");

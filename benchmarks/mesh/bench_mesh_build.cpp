@@ -461,6 +461,7 @@ int main(int argc, char** argv) {
                        {"max_block_triangles", st.max_block_triangles},
                        {"seconds_sort", st.seconds_sort},
                        {"seconds_blocks", st.seconds_blocks},
+                       {"seconds_blocks_tail", st.seconds_tail},
                        {"seconds_assemble", st.seconds_assemble},
                        {"seconds_join", st.seconds_join},
                        {"seconds_emit", st.seconds_emit},

@@ -748,6 +748,7 @@ int main(int argc, char** argv) {
   double fov = 60.0;
   double match_max_factor = 16.0;
   bool match = true;
+  smr::QemPmOptions build_options;
   app.add_option("--mesh", mesh_path, "source mesh (.off/.ply/.obj/.stl)")->required();
   app.add_option("--spm", spm_path, "OpenMesh-Analyzer output for the same mesh")->required();
   app.add_option("--taus", taus_arg, "screen-space tolerances in pixels, comma-separated");
@@ -760,6 +761,8 @@ int main(int argc, char** argv) {
   app.add_option("--match-max-factor", match_max_factor,
                  "equal-error search: largest tau multiple tried for ours");
   app.add_flag("!--no-match", match, "skip the equal-error search");
+  app.add_option("--max-fragment-triangles", build_options.max_fragment_triangles,
+                 "our builder's coalescing bound (QemPmOptions; 0 = one op per split)");
   CLI11_PARSE(app, argc, argv);
 
   try {
@@ -775,7 +778,7 @@ int main(int argc, char** argv) {
     const double read_seconds = seconds_since(t0);
     t0 = now_ns();
     smr::QemPmStats qstats;
-    const smr::Crmr crmr = smr::build_qem_pm(source, mesh_path, {}, &qstats);
+    const smr::Crmr crmr = smr::build_qem_pm(source, mesh_path, build_options, &qstats);
     const double build_seconds = seconds_since(t0);
     const std::vector<Triangle3> source_tris = triangles_of(source);
     const SoupDistance source_distance(source_tris);

@@ -9,13 +9,19 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
+#include <deque>
+#include <exception>
 #include <functional>
 #include <limits>
+#include <mutex>
 #include <numeric>
 #include <queue>
 #include <span>
+#include <thread>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -599,6 +605,32 @@ struct Marks {
 };
 
 class Builder {
+  // What a collapse's bound depends on, copied out of the mesh so that it can be computed on
+  // another thread while the mesh changes: the old star (the removed vertex's triangles), each
+  // with its corners, which of them is the removed vertex, its bound, the bound of the collapse
+  // that made it and whether it has the kept vertex; the two vertices' positions.
+  struct StarSnapshot {
+    struct OldTriangle {
+      std::array<Vec3, 3> p;
+      std::array<bool, 3> is_from{};
+      double e = 0.0, creator_error = 0.0;
+      bool has_to = false;
+    };
+    std::vector<OldTriangle> star;
+    Vec3 from{0.0}, to{0.0};
+  };
+  // A collapse's bound's snapshot and buffers (star_bound): one per thread computing bounds.
+  struct BoundScratch {
+    StarSnapshot snap;
+    std::vector<StarDistance::Target> old_targets, new_targets;
+    StarDistance to_new, to_old;          // the forward and backward bounds
+    std::vector<std::uint32_t> image;     // old star index -> its new triangle
+    std::vector<std::uint32_t> preimage;  // new triangle -> its old star index
+    std::vector<std::pair<double, std::size_t>> order;
+    std::vector<double> new_e;   // new triangle -> its bound
+    std::uint64_t computed = 0;  // bounds computed (QemPmStats::bounds_computed)
+  };
+
  public:
   // The vertices are renumbered in Morton order of their positions and the triangles sorted by
   // their first corner, so that neighbours lie close in every per-vertex and per-triangle array
@@ -694,6 +726,7 @@ class Builder {
     Crmr crmr = emit(name);
     if (stats != nullptr) {
       stats_.collapses = collapses_.size() - stats_.spawned_components;
+      stats_.bounds_computed = scratch_.computed;
       stats_.base_triangles = crmr.ops[0].fragment.size();
       stats_.base_vertices = crmr.ops[0].vertices.size();
       *stats = stats_;
@@ -1011,93 +1044,117 @@ class Builder {
     return t.creator == kNone ? t.e : collapses_[t.creator].error;
   }
 
-  // The collapse's bound (exact = true; new_e_ then holds its new triangles'), or a lower bound
-  // of it once one exceeds `tolerance`, found without computing it: the bound of a collapse it
-  // depends on (collapse_error's floor), or the largest bound of an old triangle plus the
-  // removed vertex's distance to the new star (the removed vertex is a corner of every old
-  // triangle, so the cell holding it is charged at least that triangle's bound plus that
-  // distance, free or not: StarDistance::charge). Unless `finish`, a bound found part way to
-  // exceed `tolerance` is not finished either (collapse_error's stop_above): over a third of the
-  // bounds simplify() computes do, and that collapse waits all the same.
+  // The collapse's bound (exact = true; s.new_e then holds its new triangles'), or a lower bound
+  // of it once one exceeds `tolerance` (star_bound).
   std::pair<double, bool> bound_within(std::uint32_t from, std::uint32_t to, double tolerance,
-                                       bool finish) {
+                                       bool finish, BoundScratch& s) const {
+    snapshot(from, to, s.snap);
+    return star_bound(tolerance, finish, s);
+  }
+
+  // What the bound of collapsing `from` onto `to` depends on, copied out of the mesh.
+  void snapshot(std::uint32_t from, std::uint32_t to, StarSnapshot& snap) const {
+    snap.from = pos_[from];
+    snap.to = pos_[to];
+    snap.star.clear();
+    for (std::uint32_t id : star_[from]) {
+      const Tri& t = tris_[id];
+      StarSnapshot::OldTriangle& o = snap.star.emplace_back();
+      for (int k = 0; k < 3; ++k) {
+        o.p[k] = pos_[t.v[k]];
+        o.is_from[k] = t.v[k] == from;
+      }
+      o.e = t.e;
+      o.creator_error = creator_error(id);
+      o.has_to = has(t, to);
+    }
+  }
+
+  // The bound of s.snap's collapse, or a lower bound of it once one exceeds `tolerance`, found
+  // without computing it: the bound of a collapse it depends on (collapse_error's floor), or the
+  // largest bound of an old triangle plus the removed vertex's distance to the new star (the
+  // removed vertex is a corner of every old triangle, so the cell holding it is charged at least
+  // that triangle's bound plus that distance, free or not: StarDistance::charge). Unless
+  // `finish`, a bound found part way to exceed `tolerance` is not finished either
+  // (collapse_error's stop_above): over a third of the bounds simplify() computes do, and that
+  // collapse waits all the same. Reads nothing but `s`, so it runs on any thread.
+  static std::pair<double, bool> star_bound(double tolerance, bool finish, BoundScratch& s) {
     // At least the bound of every collapse this one depends on, so that the splits' order
     // (largest error first) keeps their errors monotone: collapse_error's floor.
     double floor = 0.0, own = 0.0;
-    for (std::uint32_t id : star_[from]) {
-      floor = std::max(floor, creator_error(id));
-      own = std::max(own, tris_[id].e);
+    for (const StarSnapshot::OldTriangle& t : s.snap.star) {
+      floor = std::max(floor, t.creator_error);
+      own = std::max(own, t.e);
     }
     if (floor > tolerance) return {floor, false};
-    new_star(from, to);
+    new_star(s);
     double d2 = std::numeric_limits<double>::infinity();
-    for (const StarDistance::Target& t : new_targets_)
-      d2 = std::min(d2, t.distance.squared(pos_[from]));
+    for (const StarDistance::Target& t : s.new_targets)
+      d2 = std::min(d2, t.distance.squared(s.snap.from));
     const double lower = std::max(floor, own + std::sqrt(d2));
     if (lower > tolerance) return {lower, false};
     const double stop = finish ? std::numeric_limits<double>::infinity() : tolerance;
-    const double e = collapse_error(from, to, floor, stop);
+    const double e = collapse_error(floor, stop, s);
     return {e, e <= stop};
   }
 
-  // new_targets_ = the triangles the star of `from` becomes when it collapses onto `to`, and
-  // preimage_ = the old star's index of each.
-  void new_star(std::uint32_t from, std::uint32_t to) {
-    new_targets_.clear();
-    preimage_.clear();
-    for (std::uint32_t i = 0; i < star_[from].size(); ++i) {
-      const Tri& t = tris_[star_[from][i]];
-      if (has(t, to)) continue;
-      preimage_.push_back(i);
-      std::array<std::uint32_t, 3> nv = t.v;
-      for (std::uint32_t& w : nv) {
-        if (w == from) w = to;
+  // s.new_targets = the triangles the old star becomes when `from` collapses onto `to`, and
+  // s.preimage = the old star's index of each.
+  static void new_star(BoundScratch& s) {
+    s.new_targets.clear();
+    s.preimage.clear();
+    for (std::uint32_t i = 0; i < s.snap.star.size(); ++i) {
+      const StarSnapshot::OldTriangle& t = s.snap.star[i];
+      if (t.has_to) continue;
+      s.preimage.push_back(i);
+      std::array<Vec3, 3> p = t.p;
+      for (int k = 0; k < 3; ++k) {
+        if (t.is_from[k]) p[k] = s.snap.to;
       }
-      new_targets_.push_back({pos_[nv[0]], pos_[nv[1]], pos_[nv[2]], 0.0});
+      s.new_targets.push_back({p[0], p[1], p[2], 0.0});
     }
   }
 
-  // The collapse's bound, with new_star(from, to) made and `floor` its creators' largest error;
-  // or, once that exceeds `stop_above`, a lower bound of it above stop_above (the bound only
-  // rises as the old triangles are charged to the new ones and the new ones to the old).
-  double collapse_error(std::uint32_t from, std::uint32_t to, double floor, double stop_above) {
-    ++stats_.bounds_computed;
-    old_targets_.clear();
-    image_.clear();
+  // The collapse's bound, with new_star() made and `floor` its creators' largest error; or, once
+  // that exceeds `stop_above`, a lower bound of it above stop_above (the bound only rises as the
+  // old triangles are charged to the new ones and the new ones to the old).
+  static double collapse_error(double floor, double stop_above, BoundScratch& s) {
+    ++s.computed;
+    s.old_targets.clear();
+    s.image.clear();
     std::uint32_t made = 0;
-    for (std::uint32_t id : star_[from]) {
-      const Tri& t = tris_[id];
-      old_targets_.push_back({pos_[t.v[0]], pos_[t.v[1]], pos_[t.v[2]], t.e});
+    for (const StarSnapshot::OldTriangle& t : s.snap.star) {
+      s.old_targets.push_back({t.p[0], t.p[1], t.p[2], t.e});
       // The two triangles on the edge vanish; their nearest new one is a guess (the first).
-      image_.push_back(has(t, to) ? 0u : made++);
+      s.image.push_back(t.has_to ? 0u : made++);
     }
     // Forward: the source points assigned to each old triangle (within its e) go to their
     // nearest new triangles, whose bounds rise to hold them (StarDistance::charge). The largest
     // old bounds first, so the new ones rise early and more cells are free. (Ordering by a
     // depth-0 bound of each old triangle instead did that work twice and gave larger bounds.)
-    to_new_.reset(new_targets_, pos_[to]);
-    const StarDistance& to_new = to_new_;
-    order_.clear();
-    for (std::size_t i = 0; i < old_targets_.size(); ++i) {
-      order_.push_back({old_targets_[i].offset, i});
+    s.to_new.reset(s.new_targets, s.snap.to);
+    const StarDistance& to_new = s.to_new;
+    s.order.clear();
+    for (std::size_t i = 0; i < s.old_targets.size(); ++i) {
+      s.order.push_back({s.old_targets[i].offset, i});
     }
-    std::sort(order_.begin(), order_.end(), std::greater<>());
-    new_e_.assign(new_targets_.size(), 0.0);
+    std::sort(s.order.begin(), s.order.end(), std::greater<>());
+    s.new_e.assign(s.new_targets.size(), 0.0);
     double e = floor;  // every old triangle's points are charged at least its own bound
-    for (const auto& [estimate, i] : order_) {
-      const StarDistance::Target& t = old_targets_[i];
-      to_new.charge(t.a, t.b, t.c, t.offset, kBoundDepth, image_[i], new_e_, e);
+    for (const auto& [estimate, i] : s.order) {
+      const StarDistance::Target& t = s.old_targets[i];
+      to_new.charge(t.a, t.b, t.c, t.offset, kBoundDepth, s.image[i], s.new_e, e);
       if (e > stop_above) return e;
     }
     // Backward, per new triangle: its points to the old star, plus the old bounds (refined
     // while they could raise its forward bound).
-    to_old_.reset(old_targets_, pos_[from]);
-    const StarDistance& to_old = to_old_;
-    for (std::size_t j = 0; j < new_targets_.size(); ++j) {
-      const StarDistance::Target& t = new_targets_[j];
-      new_e_[j] =
-          std::max(new_e_[j], to_old.bound(t.a, t.b, t.c, new_e_[j], kBoundDepth, preimage_[j]));
-      e = std::max(e, new_e_[j]);
+    s.to_old.reset(s.old_targets, s.snap.from);
+    const StarDistance& to_old = s.to_old;
+    for (std::size_t j = 0; j < s.new_targets.size(); ++j) {
+      const StarDistance::Target& t = s.new_targets[j];
+      s.new_e[j] =
+          std::max(s.new_e[j], to_old.bound(t.a, t.b, t.c, s.new_e[j], kBoundDepth, s.preimage[j]));
+      e = std::max(e, s.new_e[j]);
       if (e > stop_above) return e;
     }
     return e;
@@ -1192,7 +1249,7 @@ class Builder {
 
   // ---- simplification -----------------------------------------------------------------------
 
-  // `new_e`: the bounds of the new triangles, in star order (collapse_error's new_e_).
+  // `new_e`: the bounds of the new triangles, in star order (collapse_error's BoundScratch::new_e).
   void apply(std::uint32_t from, std::uint32_t to, double error, const std::vector<double>& new_e) {
     const auto c = static_cast<std::uint32_t>(collapses_.size());
     Collapse col;
@@ -1236,6 +1293,213 @@ class Builder {
   // bound is at least those of the collapses it depends on, so one early large bound would
   // raise every later one in its region; in bands, small bounds go first (the block builder's
   // rising tolerances do the same).
+  // Per vertex, the bound its candidate last waited with: exact while its star and target are
+  // unchanged (stamp, to); after a change, a prediction that keeps it waiting without a new bound
+  // until the band reaches it (bounds only grow as a region coarsens; a wrong guess only delays
+  // the collapse, whose bound is computed before it is made).
+  struct Waited {
+    std::uint32_t stamp = 0, to = kNone;
+    double error = 0.0;
+  };
+
+  // Bounds computed ahead (QemPmOptions::threads > 1). A collapse's bound depends only on the
+  // star of its removed vertex, the positions and the bounds of the collapses that made that
+  // star (StarSnapshot), none of which changes while the vertex's stamp stays. So the calling
+  // thread hands the helper threads snapshots of the candidates that come next in the queue
+  // (those whose bound it would compute when they come up: current, valid, not waiting), a batch
+  // at a time, and goes on simplifying; a result is used if its candidate comes up with the same
+  // stamp and band, and the calling thread computes a bound itself only when none was handed
+  // over. The simplification, and so the database, is the same whatever the number of threads.
+  class AheadThreads {
+   public:
+    // A candidate's bound: its snapshot, filled by the calling thread, and its result.
+    struct Job {
+      Candidate c{};
+      double tolerance = 0.0;
+      StarSnapshot snap;
+      double error = 0.0;
+      bool counted = false;  // collapse_error ran (BoundScratch::computed)
+      std::vector<double> new_e;
+      enum State : int { kQueued, kRunning, kDone };
+      std::atomic<int> state{kQueued};
+    };
+
+    explicit AheadThreads(unsigned helpers) {
+      for (unsigned t = 0; t < helpers; ++t) threads_.emplace_back([this] { serve(); });
+    }
+    ~AheadThreads() {
+      {
+        std::lock_guard lock(mu_);
+        quit_ = true;
+      }
+      work_cv_.notify_all();
+      for (std::thread& t : threads_) t.join();
+    }
+    AheadThreads(const AheadThreads&) = delete;
+    AheadThreads& operator=(const AheadThreads&) = delete;
+
+    // The calling thread's: a job to fill (from the free ones), queueing it, and giving it back
+    // once done with it (not while a helper may hold it: wait() first).
+    Job& make() {
+      if (free_.empty()) {
+        free_.push_back(&pool_.emplace_back());
+      }
+      Job& job = *free_.back();
+      free_.pop_back();
+      job.state.store(Job::kQueued, std::memory_order_relaxed);
+      return job;
+    }
+    void post(std::span<Job* const> jobs) {
+      {
+        std::lock_guard lock(mu_);
+        todo_.insert(todo_.end(), jobs.begin(), jobs.end());
+        queued_.store(todo_.size(), std::memory_order_relaxed);
+      }
+      work_cv_.notify_all();
+    }
+    void release(Job& job) { free_.push_back(&job); }
+    std::size_t queued() const { return queued_.load(std::memory_order_relaxed); }
+    // Makes sure the job is done: run here if no helper has started it, else waited for.
+    void wait(Job& job, BoundScratch& s) {
+      {
+        std::unique_lock lock(mu_);
+        if (job.state.load(std::memory_order_relaxed) == Job::kQueued) {
+          todo_.erase(std::find(todo_.begin(), todo_.end(), &job));
+          queued_.store(todo_.size(), std::memory_order_relaxed);
+          job.state.store(Job::kRunning, std::memory_order_relaxed);
+        } else {
+          waiting_ = true;
+          done_cv_.wait(lock, [&] { return job.state.load() == Job::kDone || error_; });
+          waiting_ = false;
+          if (error_) std::rethrow_exception(error_);
+          return;
+        }
+      }
+      run(job, s);
+      job.state.store(Job::kDone);
+    }
+    bool done(const Job& job) const { return job.state.load() == Job::kDone; }
+
+   private:
+    static void run(Job& job, BoundScratch& s) {
+      std::swap(s.snap, job.snap);
+      const std::uint64_t computed = s.computed;
+      job.error = star_bound(job.tolerance, false, s).first;
+      job.counted = s.computed != computed;
+      s.computed = computed;  // counted when used (bound_ahead)
+      job.new_e.assign(s.new_e.begin(), s.new_e.end());
+      std::swap(s.snap, job.snap);
+    }
+    void serve() {
+      BoundScratch s;
+      for (;;) {
+        Job* job = nullptr;
+        // A short spin first: sleeping and being woken for every few jobs cost more than them.
+        for (int spin = 0; spin < 4000 && queued_.load(std::memory_order_relaxed) == 0; ++spin) {
+          std::this_thread::yield();
+        }
+        {
+          std::unique_lock lock(mu_);
+          work_cv_.wait(lock, [&] { return quit_ || !todo_.empty(); });
+          if (quit_) return;
+          job = todo_.front();
+          todo_.pop_front();
+          queued_.store(todo_.size(), std::memory_order_relaxed);
+          job->state.store(Job::kRunning, std::memory_order_relaxed);
+        }
+        std::exception_ptr error;
+        try {
+          run(*job, s);
+        } catch (...) {
+          error = std::current_exception();
+        }
+        std::lock_guard lock(mu_);
+        job->state.store(Job::kDone);
+        if (error && !error_) error_ = error;
+        if (waiting_) done_cv_.notify_all();
+      }
+    }
+
+    std::vector<std::thread> threads_;
+    std::mutex mu_;
+    std::condition_variable work_cv_, done_cv_;
+    std::deque<Job*> todo_;
+    std::exception_ptr error_;
+    bool quit_ = false;
+    bool waiting_ = false;                // the calling thread waits for a job (wait())
+    std::atomic<std::size_t> queued_{0};  // todo_.size(), read without the lock
+    std::deque<Job> pool_;                // the calling thread's (stable addresses)
+    std::vector<Job*> free_;              // the calling thread's
+  };
+  static constexpr std::size_t kAhead = 32;  // candidates handed over at a time
+
+  // bound_within(top, tolerance, finish = false).first, with BoundScratch::new_e in scratch_.
+  double bound_ahead(const Candidate& top, double tolerance, const std::vector<Waited>& waited) {
+    AheadThreads::Job* job = ahead_[top.from];
+    if (job == nullptr || job->c.to != top.to || job->c.stamp != top.stamp ||
+        job->tolerance != tolerance) {
+      post_ahead(tolerance, waited, top.from);  // the helpers start meanwhile
+      return bound_within(top.from, top.to, tolerance, false, scratch_).first;
+    }
+    if (!ahead_threads_->done(*job)) ahead_threads_->wait(*job, scratch_);
+    if (job->counted) ++scratch_.computed;
+    scratch_.new_e.assign(job->new_e.begin(), job->new_e.end());
+    ++stats_.bounds_ahead_used;
+    post_ahead(tolerance, waited, top.from);
+    return job->error;
+  }
+
+  // Hands the helpers candidates that come up soon (not `skip`, nor those looked at already):
+  // from the front of the queue's heap order (not sorted: any order is right, this one is
+  // cheap), when fewer than kAhead / 2 wait for them.
+  void post_ahead(double tolerance, const std::vector<Waited>& waited, std::uint32_t skip) {
+    if (ahead_threads_->queued() >= kAhead / 2) return;
+    // Jobs whose candidates changed are given back now and then: when twice as many are held
+    // as after the last time.
+    if (ahead_held_.size() > std::max<std::size_t>(16 * kAhead, 2 * ahead_kept_)) {
+      std::erase_if(ahead_held_, [&](std::uint32_t v) {
+        AheadThreads::Job* job = ahead_[v];
+        if (!ahead_threads_->done(*job)) return false;
+        if (!removed_[v] && job->c.stamp == stamp_[v]) return false;
+        ahead_threads_->release(*job);
+        ahead_[v] = nullptr;
+        return true;
+      });
+      ahead_kept_ = ahead_held_.size();
+    }
+    posting_.clear();
+    // valid() counts the rejections it sees: those of candidates looked at ahead do not count.
+    const QemPmStats counted = stats_;
+    const std::vector<Candidate>& items = heap_.items();
+    for (std::size_t i = 0; i < items.size() && i < 8 * kAhead && posting_.size() < kAhead; ++i) {
+      const Candidate& c = items[i];
+      if (c.from == skip || removed_[c.from] || c.stamp != stamp_[c.from] || removed_[c.to])
+        continue;
+      if (waited[c.from].error > tolerance) continue;
+      AheadThreads::Job*& held = ahead_[c.from];
+      if (ahead_seen_[c.from] == c.stamp + 1 &&
+          (held == nullptr || held->c.stamp != c.stamp || held->tolerance == tolerance))
+        continue;  // invalid, or handed over in this band
+      if (held != nullptr && !ahead_threads_->done(*held)) continue;  // a helper holds it
+      ahead_seen_[c.from] = c.stamp + 1;
+      if (!valid(c.from, c.to)) continue;
+      if (held == nullptr) {
+        ahead_held_.push_back(c.from);
+      } else {
+        ahead_threads_->release(*held);
+      }
+      AheadThreads::Job& job = ahead_threads_->make();
+      job.c = c;
+      job.tolerance = tolerance;
+      snapshot(c.from, c.to, job.snap);
+      held = &job;
+      posting_.push_back(&job);
+    }
+    stats_ = counted;
+    ahead_threads_->post(posting_);
+    stats_.bounds_ahead += posting_.size();
+  }
+
   void simplify() {
     const std::size_t n = pos_.size();
     for (std::uint32_t v = 0; v < n; ++v) push_cheapest(v);
@@ -1249,15 +1513,12 @@ class Builder {
       double error;
     };
     std::vector<Waiting> waiting;
-    // Per vertex, the bound its candidate last waited with: exact while its star and target
-    // are unchanged (stamp, to); after a change, a prediction that keeps it waiting without a
-    // new bound until the band reaches it (bounds only grow as a region coarsens; a wrong guess
-    // only delays the collapse, whose bound is computed before it is made).
-    struct Waited {
-      std::uint32_t stamp = 0, to = kNone;
-      double error = 0.0;
-    };
     std::vector<Waited> waited(n);
+    if (thread_count(options_.threads) > 1 && n > kAhead) {
+      ahead_threads_ = std::make_unique<AheadThreads>(thread_count(options_.threads) - 1);
+      ahead_.assign(n, nullptr);
+      ahead_seen_.assign(n, 0);
+    }
     const auto current = [&](const Candidate& c) {
       return !removed_[c.from] && c.stamp == stamp_[c.from];
     };
@@ -1298,7 +1559,8 @@ class Builder {
       bool known = w.to == top.to && w.stamp == top.stamp;
       if (error <= tolerance) {
         known = true;
-        error = bound_within(top.from, top.to, tolerance, false).first;
+        error = ahead_threads_ ? bound_ahead(top, tolerance, waited)
+                               : bound_within(top.from, top.to, tolerance, false, scratch_).first;
       }
       if (known && options_.max_base_error > 0.0 && error > options_.max_base_error) {
         ++stamp_[top.from];  // retried only when its neighbourhood changes
@@ -1314,7 +1576,7 @@ class Builder {
         push_best(top.from);
         continue;
       }
-      apply(top.from, top.to, error, new_e_);
+      apply(top.from, top.to, error, scratch_.new_e);
       --alive;
       neighbours(top.to, ring_);
       const std::vector<std::uint32_t> ring = ring_;
@@ -1326,6 +1588,10 @@ class Builder {
       }
     }
     exhausted_ = heap_.empty() && waiting.empty() && options_.max_base_error == 0.0;
+    ahead_threads_.reset();
+    std::vector<AheadThreads::Job*>().swap(ahead_);
+    std::vector<std::uint32_t>().swap(ahead_seen_);
+    std::vector<std::uint32_t>().swap(ahead_held_);
   }
 
   // ---- spawned components -------------------------------------------------------------------
@@ -1801,13 +2067,13 @@ class Builder {
           continue;
         }
         if (!b.have_error) {
-          const auto [error, exact] = bound_within(v, b.to, tolerance, true);
+          const auto [error, exact] = bound_within(v, b.to, tolerance, true, scratch_);
           if (!exact) {  // a lower bound is already too large: it waits while its star stays
             b.lower = error;
             continue;
           }
           b.error = error;
-          b.new_e = new_e_;
+          b.new_e = scratch_.new_e;
           b.have_error = true;
         }
         if (b.error > tolerance) continue;
@@ -1867,15 +2133,21 @@ class Builder {
   std::vector<std::uint8_t> locked_;  // block builder: vertices that stay (empty: none)
   std::vector<std::uint32_t> stamp_, comp_, comp_vertices_;
   std::vector<std::uint8_t> comp_open_;
-  std::priority_queue<Candidate> heap_;
+  // The queue; its items in heap order (those in front come up soon) for post_ahead().
+  struct CandidateHeap : std::priority_queue<Candidate> {
+    const std::vector<Candidate>& items() const { return c; }
+  };
+  CandidateHeap heap_;
   std::vector<Collapse> collapses_;
   std::vector<std::uint32_t> old_tris_, new_tris_;
-  std::vector<StarDistance::Target> old_targets_, new_targets_;
-  StarDistance to_new_, to_old_;         // collapse_error's forward and backward bounds
-  std::vector<std::uint32_t> image_;     // old star index -> its new triangle (collapse_error)
-  std::vector<std::uint32_t> preimage_;  // new triangle -> its old star index
-  std::vector<std::pair<double, std::size_t>> order_;
-  std::vector<double> new_e_;  // new triangle -> its bound (collapse_error)
+  BoundScratch scratch_;  // the calling thread's
+  // Bounds computed ahead (simplify(); none: one thread), by removed vertex.
+  std::unique_ptr<AheadThreads> ahead_threads_;
+  std::vector<AheadThreads::Job*> ahead_;  // per vertex: its job, if it holds one
+  std::vector<std::uint32_t> ahead_seen_;  // per vertex: 1 + the stamp post_ahead() last saw
+  std::vector<std::uint32_t> ahead_held_;  // the vertices that hold a job
+  std::size_t ahead_kept_ = 0;             // their number after post_ahead() last gave jobs back
+  std::vector<AheadThreads::Job*> posting_;
   std::vector<std::uint32_t> nf_, cand_, ring_, local_;
   mutable Marks marks_;  // per vertex (neighbours, the link condition)
   // Self-intersections: the live triangles by box, per vertex the targets refused since its
@@ -1926,6 +2198,7 @@ class BlockPmBuilder {
     qem_.boundary_weight = options.boundary_weight;
     qem_.no_self_intersections = options.no_self_intersections;
     qem_.spawn_components = false;
+    qem_.threads = 1;  // leaves run on several threads, each block on one
     if (!(qem_.max_normal_turn_degrees > 0.0 && qem_.max_normal_turn_degrees <= 180.0))
       throw_input("block PM: max normal turn must be in (0, 180] degrees");
   }
@@ -1982,7 +2255,9 @@ class BlockPmBuilder {
     std::unordered_set<std::uint32_t>().swap(leaf_cells_);
     stats_.temp_bytes += faces->spilled_bytes();
     faces.reset();
+    const auto t_tail = Clock::now();
     for (int l = 0; l < levels_; ++l) flush(l);
+    stats_.seconds_tail = since(t_tail);
     // The octree spans are done with (the root locks nothing): the assembly may use the room.
     std::vector<std::uint32_t>().swap(vmin_);
     std::vector<std::uint32_t>().swap(vmax_);

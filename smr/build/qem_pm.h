@@ -68,6 +68,9 @@ struct QemPmOptions {
   /// Refuse a collapse that would make a new triangle cross another triangle (exactly, anywhere
   /// but in shared corners and edges), so that simplification introduces no self-intersection.
   bool no_self_intersections = true;
+  /// Threads computing the bounds of the candidates that come next (0 = one per core). The
+  /// result does not depend on it.
+  unsigned threads = 0;
   /// Progress in [0, 1]; called at most a few hundred times.
   std::function<void(double)> progress;
 };
@@ -78,7 +81,10 @@ struct QemPmStats {
   std::uint64_t base_vertices = 0, base_triangles = 0;
   std::uint64_t rejected_link = 0, rejected_flip = 0, rejected_boundary = 0;
   std::uint64_t rejected_intersection = 0;  // collapses refused: a new triangle would cross another
-  std::uint64_t bounds_computed = 0;        // guaranteed bounds of candidate collapses computed
+  std::uint64_t bounds_computed = 0;        // guaranteed bounds of candidate collapses it needed
+  // QemPmOptions::threads > 1: bound computations handed to the helper threads ahead of time,
+  // and those whose result was used (the rest: their candidates changed first).
+  std::uint64_t bounds_ahead = 0, bounds_ahead_used = 0;
 };
 
 // Out of core (DESIGN.md section 4; Hoppe 1998's block construction, in 3-D): the triangles are
@@ -133,6 +139,8 @@ struct BlockPmStats {
   std::uint64_t max_handed_triangles = 0;   // most triangles a block handed its parent
   std::uint64_t temp_bytes = 0;
   double seconds_sort = 0, seconds_blocks = 0, seconds_assemble = 0;
+  // Of seconds_blocks: the blocks simplified after the last leaf (serial, on one thread).
+  double seconds_tail = 0;
   double seconds_join = 0, seconds_emit = 0;  // the assembly's parts (AssemblyStats)
 };
 

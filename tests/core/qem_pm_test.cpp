@@ -335,6 +335,36 @@ TEST(QemPmOptions, OneOpPerSplitWithoutCoalescing) {
   EXPECT_THROW((void)build_qem_pm(mesh, "x", o), Error);
 }
 
+// Bounds computed ahead on helper threads (QemPmOptions::threads) are used only for the
+// candidate and band they were computed for, so the CRMR is the same op for op whatever the
+// number of threads, more helpers than cores included, and so is the count of bounds the
+// simplification needed; with helpers, most of those come from them.
+TEST(QemPmOptions, TheSameCrmrWhateverTheThreads) {
+  const char* name = test::kSanitized ? "mech-holes-shark.off" : "ChineseDragon-10kv.off";
+  const TriangleMesh& mesh = built(name).source;
+  QemPmOptions one;
+  one.threads = 1;
+  QemPmStats one_stats;
+  const Crmr a = build_qem_pm(mesh, name, one, &one_stats);
+  EXPECT_EQ(one_stats.bounds_ahead, 0u);
+  for (unsigned threads : {2u, 4u}) {
+    QemPmOptions o;
+    o.threads = threads;
+    QemPmStats stats;
+    const Crmr b = build_qem_pm(mesh, name, o, &stats);
+    EXPECT_TRUE(a.header == b.header);
+    ASSERT_EQ(a.ops.size(), b.ops.size());
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < a.ops.size(); ++i) differ += a.ops[i] == b.ops[i] ? 0 : 1;
+    EXPECT_EQ(differ, 0u) << threads << " threads";
+    EXPECT_EQ(stats.bounds_computed, one_stats.bounds_computed);
+    EXPECT_EQ(stats.rejected_flip, one_stats.rejected_flip);
+    EXPECT_EQ(stats.rejected_link, one_stats.rejected_link);
+    EXPECT_GT(stats.bounds_ahead_used, stats.bounds_ahead / 2) << threads << " threads";
+    EXPECT_LE(stats.bounds_ahead_used, stats.bounds_ahead);
+  }
+}
+
 // Bands of the bound (the default) against none: both CRMRs are valid and hold their bounds in
 // every extraction, and the bands' cuts at the same uniform resolutions use fewer triangles (an
 // early large bound no longer raises every later collapse in its region). Factors below 1 could
