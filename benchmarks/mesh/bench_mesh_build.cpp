@@ -147,7 +147,8 @@ json ours_json(const smr::Crmr& crmr, const smr::QemPmStats& stats) {
     for (const auto& t : op.fragment) finest += !t.killer.valid() && !t.is_void();
   }
   const auto [depth, mean_depth] = dag_depth(crmr);
-  return {{"vertices", crmr.header.vertex_count},
+  return {{"threads", smr::thread_count(0)},  // QemPmOptions::threads = 0: one per core
+          {"vertices", crmr.header.vertex_count},
           {"ops", crmr.ops.size()},
           {"fragment_triangles", crmr.triangle_count()},
           {"max_fragment_triangles", max_fragment},
@@ -156,6 +157,8 @@ json ours_json(const smr::Crmr& crmr, const smr::QemPmStats& stats) {
           {"base_triangles", stats.base_triangles},
           {"collapses", stats.collapses},
           {"bounds_computed", stats.bounds_computed},
+          {"bounds_ahead", stats.bounds_ahead},
+          {"bounds_ahead_used", stats.bounds_ahead_used},
           {"rejected_link", stats.rejected_link},
           {"rejected_flip", stats.rejected_flip},
           {"rejected_intersection", stats.rejected_intersection},
