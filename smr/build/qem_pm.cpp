@@ -1317,9 +1317,10 @@ class Builder {
       Candidate c{};
       double tolerance = 0.0;
       StarSnapshot snap;
-      double error = 0.0;
+      double error_bound = 0.0;
       bool counted = false;  // collapse_error ran (BoundScratch::computed)
       std::vector<double> new_e;
+      std::exception_ptr error;  // what the computation threw, if it did
       enum State : int { kQueued, kRunning, kDone };
       std::atomic<int> state{kQueued};
     };
@@ -1369,9 +1370,8 @@ class Builder {
           job.state.store(Job::kRunning, std::memory_order_relaxed);
         } else {
           waiting_ = true;
-          done_cv_.wait(lock, [&] { return job.state.load() == Job::kDone || error_; });
+          done_cv_.wait(lock, [&] { return job.state.load() == Job::kDone; });
           waiting_ = false;
-          if (error_) std::rethrow_exception(error_);
           return;
         }
       }
@@ -1384,7 +1384,7 @@ class Builder {
     static void run(Job& job, BoundScratch& s) {
       std::swap(s.snap, job.snap);
       const std::uint64_t computed = s.computed;
-      job.error = star_bound(job.tolerance, false, s).first;
+      job.error_bound = star_bound(job.tolerance, false, s).first;
       job.counted = s.computed != computed;
       s.computed = computed;  // counted when used (bound_ahead)
       job.new_e.assign(s.new_e.begin(), s.new_e.end());
@@ -1407,15 +1407,13 @@ class Builder {
           queued_.store(todo_.size(), std::memory_order_relaxed);
           job->state.store(Job::kRunning, std::memory_order_relaxed);
         }
-        std::exception_ptr error;
         try {
           run(*job, s);
         } catch (...) {
-          error = std::current_exception();
+          job->error = std::current_exception();
         }
         std::lock_guard lock(mu_);
         job->state.store(Job::kDone);
-        if (error && !error_) error_ = error;
         if (waiting_) done_cv_.notify_all();
       }
     }
@@ -1424,14 +1422,14 @@ class Builder {
     std::mutex mu_;
     std::condition_variable work_cv_, done_cv_;
     std::deque<Job*> todo_;
-    std::exception_ptr error_;
     bool quit_ = false;
     bool waiting_ = false;                // the calling thread waits for a job (wait())
     std::atomic<std::size_t> queued_{0};  // todo_.size(), read without the lock
     std::deque<Job> pool_;                // the calling thread's (stable addresses)
     std::vector<Job*> free_;              // the calling thread's
   };
-  static constexpr std::size_t kAhead = 32;  // candidates handed over at a time
+  static constexpr std::size_t kAhead = 16;  // candidates handed over at a time
+  static constexpr std::size_t kAheadHeld = std::size_t{1} << 14;  // jobs kept, about
 
   // bound_within(top, tolerance, finish = false).first, with BoundScratch::new_e in scratch_.
   double bound_ahead(const Candidate& top, double tolerance, const std::vector<Waited>& waited) {
@@ -1442,11 +1440,18 @@ class Builder {
       return bound_within(top.from, top.to, tolerance, false, scratch_).first;
     }
     if (!ahead_threads_->done(*job)) ahead_threads_->wait(*job, scratch_);
+    if (job->error) std::rethrow_exception(job->error);
     if (job->counted) ++scratch_.computed;
     scratch_.new_e.assign(job->new_e.begin(), job->new_e.end());
+    const double error = job->error_bound;
+    // Used: given back (the candidate is out of the queue; if it comes back, in a later band,
+    // it may be handed over again).
+    ahead_threads_->release(*job);
+    ahead_[top.from] = nullptr;
+    ahead_seen_[top.from] = 0;
     ++stats_.bounds_ahead_used;
     post_ahead(tolerance, waited, top.from);
-    return job->error;
+    return error;
   }
 
   // Hands the helpers candidates that come up soon (not `skip`, nor those looked at already):
@@ -1455,14 +1460,18 @@ class Builder {
   void post_ahead(double tolerance, const std::vector<Waited>& waited, std::uint32_t skip) {
     if (ahead_threads_->queued() >= kAhead / 2) return;
     // Jobs whose candidates changed are given back now and then: when twice as many are held
-    // as after the last time.
+    // as after the last time; past kAheadHeld, those finished are given back whatever their
+    // candidates (a result dropped is only computed again), so the jobs' memory stays small.
     if (ahead_held_.size() > std::max<std::size_t>(16 * kAhead, 2 * ahead_kept_)) {
+      const bool all = ahead_held_.size() > kAheadHeld;
       std::erase_if(ahead_held_, [&](std::uint32_t v) {
         AheadThreads::Job* job = ahead_[v];
+        if (job == nullptr) return true;  // used (bound_ahead)
         if (!ahead_threads_->done(*job)) return false;
-        if (!removed_[v] && job->c.stamp == stamp_[v]) return false;
+        if (!all && !removed_[v] && job->c.stamp == stamp_[v]) return false;
         ahead_threads_->release(*job);
         ahead_[v] = nullptr;
+        ahead_seen_[v] = 0;
         return true;
       });
       ahead_kept_ = ahead_held_.size();
@@ -1489,6 +1498,7 @@ class Builder {
         ahead_threads_->release(*held);
       }
       AheadThreads::Job& job = ahead_threads_->make();
+      job.error = nullptr;
       job.c = c;
       job.tolerance = tolerance;
       snapshot(c.from, c.to, job.snap);
