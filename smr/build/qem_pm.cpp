@@ -1288,11 +1288,6 @@ class Builder {
     quad_[to] += qf;
   }
 
-  // Cheapest quadric cost first, in bands of the bound: a collapse whose bound exceeds the
-  // band's tolerance waits for the next band (twice the least bound that waited). A collapse's
-  // bound is at least those of the collapses it depends on, so one early large bound would
-  // raise every later one in its region; in bands, small bounds go first (the block builder's
-  // rising tolerances do the same).
   // Per vertex, the bound its candidate last waited with: exact while its star and target are
   // unchanged (stamp, to); after a change, a prediction that keeps it waiting without a new bound
   // until the band reaches it (bounds only grow as a region coarsens; a wrong guess only delays
@@ -1305,11 +1300,12 @@ class Builder {
   // Bounds computed ahead (QemPmOptions::threads > 1). A collapse's bound depends only on the
   // star of its removed vertex, the positions and the bounds of the collapses that made that
   // star (StarSnapshot), none of which changes while the vertex's stamp stays. So the calling
-  // thread hands the helper threads snapshots of the candidates that come next in the queue
-  // (those whose bound it would compute when they come up: current, valid, not waiting), a batch
-  // at a time, and goes on simplifying; a result is used if its candidate comes up with the same
-  // stamp and band, and the calling thread computes a bound itself only when none was handed
-  // over. The simplification, and so the database, is the same whatever the number of threads.
+  // thread hands the helper threads snapshots of candidates that come up soon (those whose bound
+  // it would compute when they come up: current, valid, not waiting), kAhead at a time whenever
+  // fewer than kAhead / 2 wait, and goes on simplifying; a result is used if its candidate comes
+  // up with the same stamp and band; a bound not handed over, the calling thread computes itself,
+  // and one handed over but not started yet too. The simplification, and so the database, is the
+  // same whatever the number of threads.
   class AheadThreads {
    public:
     // A candidate's bound: its snapshot, filled by the calling thread, and its result.
@@ -1510,6 +1506,11 @@ class Builder {
     stats_.bounds_ahead += posting_.size();
   }
 
+  // Cheapest quadric cost first, in bands of the bound: a collapse whose bound exceeds the
+  // band's tolerance waits for the next band (twice the least bound that waited). A collapse's
+  // bound is at least those of the collapses it depends on, so one early large bound would
+  // raise every later one in its region; in bands, small bounds go first (the block builder's
+  // rising tolerances do the same).
   void simplify() {
     const std::size_t n = pos_.size();
     for (std::uint32_t v = 0; v < n; ++v) push_cheapest(v);
