@@ -1322,16 +1322,14 @@ class Builder {
     };
 
     explicit AheadThreads(unsigned helpers) {
-      for (unsigned t = 0; t < helpers; ++t) threads_.emplace_back([this] { serve(); });
-    }
-    ~AheadThreads() {
-      {
-        std::lock_guard lock(mu_);
-        quit_ = true;
+      try {
+        for (unsigned t = 0; t < helpers; ++t) threads_.emplace_back([this] { serve(); });
+      } catch (...) {
+        stop();  // the threads started so far
+        throw;
       }
-      work_cv_.notify_all();
-      for (std::thread& t : threads_) t.join();
     }
+    ~AheadThreads() { stop(); }
     AheadThreads(const AheadThreads&) = delete;
     AheadThreads& operator=(const AheadThreads&) = delete;
 
@@ -1371,12 +1369,24 @@ class Builder {
           return;
         }
       }
-      run(job, s);
+      try {
+        run(job, s);
+      } catch (...) {
+        job.error = std::current_exception();  // rethrown by its user, as a helper's
+      }
       job.state.store(Job::kDone);
     }
     bool done(const Job& job) const { return job.state.load() == Job::kDone; }
 
    private:
+    void stop() {
+      {
+        std::lock_guard lock(mu_);
+        quit_ = true;
+      }
+      work_cv_.notify_all();
+      for (std::thread& t : threads_) t.join();
+    }
     static void run(Job& job, BoundScratch& s) {
       std::swap(s.snap, job.snap);
       const std::uint64_t computed = s.computed;
@@ -1462,12 +1472,16 @@ class Builder {
       const bool all = ahead_held_.size() > kAheadHeld;
       std::erase_if(ahead_held_, [&](std::uint32_t v) {
         AheadThreads::Job* job = ahead_[v];
-        if (job == nullptr) return true;  // used (bound_ahead)
+        if (job == nullptr) {  // used (bound_ahead)
+          ahead_listed_[v] = 0;
+          return true;
+        }
         if (!ahead_threads_->done(*job)) return false;
         if (!all && !removed_[v] && job->c.stamp == stamp_[v]) return false;
         ahead_threads_->release(*job);
         ahead_[v] = nullptr;
         ahead_seen_[v] = 0;
+        ahead_listed_[v] = 0;
         return true;
       });
       ahead_kept_ = ahead_held_.size();
@@ -1488,10 +1502,10 @@ class Builder {
       if (held != nullptr && !ahead_threads_->done(*held)) continue;  // a helper holds it
       ahead_seen_[c.from] = c.stamp + 1;
       if (!valid(c.from, c.to)) continue;
-      if (held == nullptr) {
+      if (held != nullptr) ahead_threads_->release(*held);
+      if (!ahead_listed_[c.from]) {
+        ahead_listed_[c.from] = 1;
         ahead_held_.push_back(c.from);
-      } else {
-        ahead_threads_->release(*held);
       }
       AheadThreads::Job& job = ahead_threads_->make();
       job.error = nullptr;
@@ -1529,6 +1543,7 @@ class Builder {
       ahead_threads_ = std::make_unique<AheadThreads>(thread_count(options_.threads) - 1);
       ahead_.assign(n, nullptr);
       ahead_seen_.assign(n, 0);
+      ahead_listed_.assign(n, 0);
     }
     const auto current = [&](const Candidate& c) {
       return !removed_[c.from] && c.stamp == stamp_[c.from];
@@ -1603,6 +1618,7 @@ class Builder {
     std::vector<AheadThreads::Job*>().swap(ahead_);
     std::vector<std::uint32_t>().swap(ahead_seen_);
     std::vector<std::uint32_t>().swap(ahead_held_);
+    std::vector<std::uint8_t>().swap(ahead_listed_);
   }
 
   // ---- spawned components -------------------------------------------------------------------
@@ -2154,10 +2170,11 @@ class Builder {
   BoundScratch scratch_;  // the calling thread's
   // Bounds computed ahead (simplify(); none: one thread), by removed vertex.
   std::unique_ptr<AheadThreads> ahead_threads_;
-  std::vector<AheadThreads::Job*> ahead_;  // per vertex: its job, if it holds one
-  std::vector<std::uint32_t> ahead_seen_;  // per vertex: 1 + the stamp post_ahead() last saw
-  std::vector<std::uint32_t> ahead_held_;  // the vertices that hold a job
-  std::size_t ahead_kept_ = 0;             // their number after post_ahead() last gave jobs back
+  std::vector<AheadThreads::Job*> ahead_;   // per vertex: its job, if it holds one
+  std::vector<std::uint32_t> ahead_seen_;   // per vertex: 1 + the stamp post_ahead() last saw
+  std::vector<std::uint32_t> ahead_held_;   // the vertices that hold a job (or held one, used)
+  std::vector<std::uint8_t> ahead_listed_;  // per vertex: in ahead_held_
+  std::size_t ahead_kept_ = 0;              // their number after post_ahead() last gave jobs back
   std::vector<AheadThreads::Job*> posting_;
   std::vector<std::uint32_t> nf_, cand_, ring_, local_;
   mutable Marks marks_;  // per vertex (neighbours, the link condition)

@@ -82,8 +82,9 @@ struct QemPmStats {
   std::uint64_t rejected_link = 0, rejected_flip = 0, rejected_boundary = 0;
   std::uint64_t rejected_intersection = 0;  // collapses refused: a new triangle would cross another
   std::uint64_t bounds_computed = 0;        // guaranteed bounds of candidate collapses it needed
-  // QemPmOptions::threads > 1: bound computations handed to the helper threads ahead of time,
-  // and those whose result was used (the rest: their candidates changed first).
+  // QemPmOptions::threads > 1: bound computations handed over ahead of time, and those whose
+  // result was used (computed by a helper, or by the calling thread when the candidate came up
+  // before a helper had started it; the rest: their candidates changed first).
   std::uint64_t bounds_ahead = 0, bounds_ahead_used = 0;
 };
 

@@ -559,7 +559,12 @@ TEST_F(DbCli, MeshIngestExtractInfoVerify) {
   // Bounds are computed ahead on helper threads: the same bytes with one thread or three.
   for (const char* threads : {"1", "3"}) {
     const std::string other = path(std::string("threads") + threads + ".smrdb");
-    ASSERT_EQ(smrdb("ingest " + mesh + " -q --threads " + threads + " -o " + other).code, 0);
+    r = smrdb("ingest " + mesh + " -q --json --threads " + threads + " -o " + other);
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_EQ(
+        nlohmann::json::parse(r.out)["simplification"]["bounds_ahead"].get<std::uint64_t>() > 0,
+        std::string(threads) != "1")
+        << r.out;
     EXPECT_TRUE(smr::test::read_file(db) == smr::test::read_file(other))
         << "--threads " << threads << " changed the database";
   }
