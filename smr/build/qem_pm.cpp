@@ -1347,8 +1347,8 @@ class Builder {
     void post(std::span<Job* const> jobs) {
       {
         std::lock_guard lock(mu_);
-        todo_.insert(todo_.end(), jobs.begin(), jobs.end());
-        queued_.store(todo_.size(), std::memory_order_relaxed);
+        queue_.insert(queue_.end(), jobs.begin(), jobs.end());
+        queued_.store(queue_.size(), std::memory_order_relaxed);
       }
       work_cv_.notify_all();
     }
@@ -1359,8 +1359,8 @@ class Builder {
       {
         std::unique_lock lock(mu_);
         if (job.state.load(std::memory_order_relaxed) == Job::kQueued) {
-          todo_.erase(std::find(todo_.begin(), todo_.end(), &job));
-          queued_.store(todo_.size(), std::memory_order_relaxed);
+          queue_.erase(std::find(queue_.begin(), queue_.end(), &job));
+          queued_.store(queue_.size(), std::memory_order_relaxed);
           job.state.store(Job::kRunning, std::memory_order_relaxed);
         } else {
           waiting_ = true;
@@ -1406,11 +1406,11 @@ class Builder {
         }
         {
           std::unique_lock lock(mu_);
-          work_cv_.wait(lock, [&] { return quit_ || !todo_.empty(); });
+          work_cv_.wait(lock, [&] { return quit_ || !queue_.empty(); });
           if (quit_) return;
-          job = todo_.front();
-          todo_.pop_front();
-          queued_.store(todo_.size(), std::memory_order_relaxed);
+          job = queue_.front();
+          queue_.pop_front();
+          queued_.store(queue_.size(), std::memory_order_relaxed);
           job->state.store(Job::kRunning, std::memory_order_relaxed);
         }
         try {
@@ -1427,10 +1427,10 @@ class Builder {
     std::vector<std::thread> threads_;
     std::mutex mu_;
     std::condition_variable work_cv_, done_cv_;
-    std::deque<Job*> todo_;
+    std::deque<Job*> queue_;  // jobs posted, not started
     bool quit_ = false;
     bool waiting_ = false;                // the calling thread waits for a job (wait())
-    std::atomic<std::size_t> queued_{0};  // todo_.size(), read without the lock
+    std::atomic<std::size_t> queued_{0};  // queue_.size(), read without the lock
     std::deque<Job> pool_;                // the calling thread's (stable addresses)
     std::vector<Job*> free_;              // the calling thread's
   };
