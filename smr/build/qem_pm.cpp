@@ -271,8 +271,6 @@ class TriangleGrid {
   std::vector<std::pair<int, std::uint32_t>> where_;  // triangle -> (level, cell); kNoLevel: none
 };
 
-constexpr int kBoundDepth = 3;
-
 // Set membership by stamps, without sorting or clearing: an element is in the current set when
 // its stamp is the value next() last returned.
 struct Marks {
@@ -826,7 +824,7 @@ class Builder {
     double e = floor;  // every old triangle's points are charged at least its own bound
     for (const auto& [estimate, i] : s.order) {
       const StarDistance::Target& t = s.old_targets[i];
-      to_new.charge(t.a, t.b, t.c, t.offset, kBoundDepth, s.image[i], s.new_e, e);
+      to_new.charge(t.a, t.b, t.c, t.offset, kStarBoundDepth, s.image[i], s.new_e, e);
       if (e > stop_above) return e;
     }
     // Backward, per new triangle: its points to the old star, plus the old bounds (refined
@@ -835,8 +833,8 @@ class Builder {
     const StarDistance& to_old = s.to_old;
     for (std::size_t j = 0; j < s.new_targets.size(); ++j) {
       const StarDistance::Target& t = s.new_targets[j];
-      s.new_e[j] =
-          std::max(s.new_e[j], to_old.bound(t.a, t.b, t.c, s.new_e[j], kBoundDepth, s.preimage[j]));
+      s.new_e[j] = std::max(
+          s.new_e[j], to_old.bound(t.a, t.b, t.c, s.new_e[j], kStarBoundDepth, s.preimage[j]));
       e = std::max(e, s.new_e[j]);
       if (e > stop_above) return e;
     }

@@ -18,6 +18,9 @@
 
 namespace smr {
 
+// The depth of the builder's branch and bound: pieces down to 1/8 of a triangle's side.
+inline constexpr int kStarBoundDepth = 3;
+
 // Upper bound of max over q in triangle (a, b, c) of min over targets k of
 // (dist(q, target k) + offset k): the distance to one triangle is convex, so over a convex piece
 // it is at most its largest value at the piece's corners, and the piece's bound is the least of

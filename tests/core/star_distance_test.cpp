@@ -22,7 +22,6 @@
 namespace smr {
 namespace {
 
-constexpr int kDepth = 3;  // the builder's (qem_pm.cpp kBoundDepth)
 constexpr int kSamples = 48;
 
 struct Star {
@@ -100,7 +99,7 @@ TEST(StarDistance, BoundsHoldAgainstDenseSamplesAndAreTight) {
     // Backward: every point of a new triangle to the old star.
     for (std::size_t k = 0; k < new_targets.size(); ++k) {
       const StarDistance::Target& t = new_targets[k];
-      const double bound = to_old.bound(t.a, t.b, t.c, 0.0, kDepth, preimage[k]);
+      const double bound = to_old.bound(t.a, t.b, t.c, 0.0, kStarBoundDepth, preimage[k]);
       double sampled = 0.0;
       for (const Vec3& q : samples(t.a, t.b, t.c))
         sampled = std::max(sampled, nearest(old_targets, q));
@@ -121,7 +120,7 @@ TEST(StarDistance, BoundsHoldAgainstDenseSamplesAndAreTight) {
       std::array<Vec3, 3> p;
       for (Vec3& c : p) c = {u(rng), u(rng), 0.3 * u(rng)};
       const StarDistance::Target t(p[0], p[1], p[2], 0.0);
-      const double bound = to_old.bound(t.a, t.b, t.c, 0.0, kDepth, 0);
+      const double bound = to_old.bound(t.a, t.b, t.c, 0.0, kStarBoundDepth, 0);
       double sampled = 0.0;
       for (const Vec3& q : samples(t.a, t.b, t.c))
         sampled = std::max(sampled, nearest(old_targets, q));
@@ -139,7 +138,7 @@ TEST(StarDistance, BoundsHoldAgainstDenseSamplesAndAreTight) {
     double ceiling = 0.0;
     for (std::size_t i = 0; i < n; ++i) {
       const StarDistance::Target& t = old_targets[i];
-      to_new.charge(t.a, t.b, t.c, t.offset, kDepth, image[i], charges, ceiling);
+      to_new.charge(t.a, t.b, t.c, t.offset, kStarBoundDepth, image[i], charges, ceiling);
     }
     for (std::size_t i = 0; i < n; ++i) {
       const StarDistance::Target& t = old_targets[i];
