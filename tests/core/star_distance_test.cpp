@@ -96,39 +96,34 @@ TEST(StarDistance, BoundsHoldAgainstDenseSamplesAndAreTight) {
     to_old.reset(old_targets, s.hub);
     to_new.reset(new_targets, s.ring[to]);
 
-    // Backward: every point of a new triangle to the old star.
-    for (std::size_t k = 0; k < new_targets.size(); ++k) {
-      const StarDistance::Target& t = new_targets[k];
-      const double bound = to_old.bound(t.a, t.b, t.c, 0.0, kStarBoundDepth, preimage[k]);
+    // Backward: the bound over triangle t to the old star against its samples; returns the
+    // excess over their maximum as a fraction of t's diameter.
+    auto backward = [&](const StarDistance::Target& t, std::size_t first, const char* what, int k) {
+      const double bound = to_old.bound(t.a, t.b, t.c, 0.0, kStarBoundDepth, first);
       double sampled = 0.0;
       for (const Vec3& q : samples(t.a, t.b, t.c))
         sampled = std::max(sampled, nearest(old_targets, q));
       const double d = diameter(t);
-      EXPECT_GE(bound, sampled - 1e-12) << "trial " << trial << " new triangle " << k;
+      EXPECT_GE(bound, sampled - 1e-12) << "trial " << trial << " " << what << " " << k;
       // The brute force misses the true maximum by at most the sample spacing (the function is
       // 1-Lipschitz); depth 3 leaves pieces of an eighth of the triangle.
-      EXPECT_LE(bound, sampled + d / 16.0 + d / kSamples) << "trial " << trial << " new " << k;
+      EXPECT_LE(bound, sampled + d / 16.0 + d / kSamples)
+          << "trial " << trial << " " << what << " " << k;
       worst_excess = std::max(worst_excess, (bound - sampled) / d);
       slack_used += bound > sampled + 1e-9;
       ++checked;
-    }
-
+      return (bound - sampled) / d;
+    };
+    // Every new triangle.
+    for (std::size_t k = 0; k < new_targets.size(); ++k)
+      backward(new_targets[k], preimage[k], "new triangle", int(k));
     // Any triangle near the star (its pieces' cells then straddle the targets' Voronoi regions,
     // where only splitting tightens the bound).
     std::uniform_real_distribution<double> u(-1.0, 1.0);
     for (int k = 0; k < 3; ++k) {
       std::array<Vec3, 3> p;
       for (Vec3& c : p) c = {u(rng), u(rng), 0.3 * u(rng)};
-      const StarDistance::Target t(p[0], p[1], p[2], 0.0);
-      const double bound = to_old.bound(t.a, t.b, t.c, 0.0, kStarBoundDepth, 0);
-      double sampled = 0.0;
-      for (const Vec3& q : samples(t.a, t.b, t.c))
-        sampled = std::max(sampled, nearest(old_targets, q));
-      const double d = diameter(t);
-      EXPECT_GE(bound, sampled - 1e-12) << "trial " << trial << " random triangle " << k;
-      EXPECT_LE(bound, sampled + d / 16.0 + d / kSamples) << "trial " << trial << " random " << k;
-      worst_excess = std::max(worst_excess, (bound - sampled) / d);
-      random_excess += (bound - sampled) / d;
+      random_excess += backward({p[0], p[1], p[2], 0.0}, 0, "random triangle", k);
       ++random_checked;
     }
 
