@@ -144,14 +144,10 @@ class StarDistance {
   double bound(const std::array<Vec3, 3>& p, const std::array<double*, 3>& d2, double* free,
                double floor, int depth, std::size_t first) const {
     // The corners' distances: cached, NaN until computed.
-    double ub = convex_bound(std::numeric_limits<double>::infinity(), floor, first,
-                             [&](std::size_t k, double room) {
-                               return corner_distance2(3, room, [&](std::size_t j) {
-                                 double& v = d2[j][k];
-                                 if (std::isnan(v)) v = (*targets_)[k].distance.squared(p[j]);
-                                 return v;
-                               });
-                             });
+    double ub = convex_bound(
+        std::numeric_limits<double>::infinity(), floor, first, [&](std::size_t k, double room) {
+          return corner_distance2(3, room, [&](std::size_t j) { return cached(p, d2, j, k); });
+        });
     if (ub <= floor) return ub;
     ub = std::min(ub, cells_bound(p[0], p[1], p[2], ub, first));
     if (ub <= floor || depth == 0 || attained(p, d2, ub, first)) return ub;
@@ -181,12 +177,7 @@ class StarDistance {
   bool attained(const std::array<Vec3, 3>& p, const std::array<double*, 3>& d2, double ub,
                 std::size_t first) const {
     for (std::size_t j = 0; j < 3; ++j) {
-      if (reaches(ub, first, [&](std::size_t k) {
-            double& v = d2[j][k];
-            if (std::isnan(v)) v = (*targets_)[k].distance.squared(p[j]);
-            return v;
-          }))
-        return true;
+      if (reaches(ub, first, [&](std::size_t k) { return cached(p, d2, j, k); })) return true;
     }
     if (worst_cell_ == kFree) return false;
     for (const Vec3& q : cell(worst_cell_)) {
@@ -195,12 +186,23 @@ class StarDistance {
     }
     return false;
   }
+  // Corner j of piece p: its squared distance to target k, computed once (NaN until then).
+  double cached(const std::array<Vec3, 3>& p, const std::array<double*, 3>& d2, std::size_t j,
+                std::size_t k) const {
+    double& v = d2[j][k];
+    if (std::isnan(v)) v = (*targets_)[k].distance.squared(p[j]);
+    return v;
+  }
+  // The i-th target tried: `first`, then the others in order.
+  static std::size_t nth(std::size_t i, std::size_t first) {
+    return i == 0 ? first : (i == first ? 0 : i);
+  }
   // Whether a point, d2(k) being its squared distance to target k, is at least ub from every
   // target (offset included).
   template <class Distance2>
   bool reaches(double ub, std::size_t first, Distance2&& d2) const {
     for (std::size_t i = 0; i < targets_->size(); ++i) {
-      const std::size_t k = i == 0 ? first : (i == first ? 0 : i);
+      const std::size_t k = nth(i, first);
       const double offset = (*targets_)[k].offset;
       if (offset < ub && offset + std::sqrt(d2(k)) < ub) return false;
     }
@@ -215,7 +217,7 @@ class StarDistance {
     double best = std::numeric_limits<double>::infinity();
     std::size_t at = kFree;
     for (std::size_t i = 0; i < targets_->size(); ++i) {
-      const std::size_t k = i == 0 ? first : (i == first ? 0 : i);
+      const std::size_t k = nth(i, first);
       const Target& t = (*targets_)[k];
       const double free_room = charges[k] - offset - t.offset;   // within it: free
       const double room = std::max(free_room, best - t.offset);  // beyond it: no use
@@ -267,7 +269,7 @@ class StarDistance {
   template <class Distance2>
   double convex_bound(double ub, double floor, std::size_t first, Distance2&& d2) const {
     for (std::size_t i = 0; i < targets_->size(); ++i) {
-      const std::size_t k = i == 0 ? first : (i == first ? 0 : i);
+      const std::size_t k = nth(i, first);
       const Target& t = (*targets_)[k];
       // Squared distances to the corners; stop once no better than a target already seen.
       const double room = ub - t.offset;
@@ -288,13 +290,14 @@ class StarDistance {
     if (!crossed(a, b, c)) return ub;  // one cell: the one-target bound already computed
     cut(a, b, c);
     double worst = 0.0;
+    worst_cell_ = 0;
     for (std::size_t i = 0; i < cells_.size(); ++i) {
       const std::span<const Vec3> poly = cell(i);
       const double v = convex_bound(ub, worst, first, [&](std::size_t k, double room) {
         return corner_distance2((*targets_)[k], poly, room);
       });
-      if (i == 0 || v > worst) {
-        worst = std::max(worst, v);
+      if (v > worst) {
+        worst = v;
         worst_cell_ = i;
       }
       if (worst >= ub) return ub;
