@@ -7,6 +7,8 @@
 //    most that plus a sixteenth of the triangle's diameter; on average over the random
 //    triangles, within 0.0004 of it (the prune that stops splitting where a point already
 //    reaches the upper bound must not stop it early);
+//  - with a floor, bound() is still at least the sampled max, and the larger of it and the floor
+//    is the same as without one (the builder passes the collapse's bound so far as the floor);
 //  - forward, charge() of every old triangle leaves each of its samples within some new triangle's
 //    charge, less the old triangle's offset.
 #include "smr/build/star_distance.h"
@@ -72,6 +74,7 @@ double diameter(const StarDistance::Target& t) {
 TEST(StarDistance, BoundsHoldAgainstDenseSamplesAndAreTight) {
   std::mt19937_64 rng(20261204);
   int checked = 0, slack_used = 0;
+  int floors_coarser = 0;      // bounds with a floor above the ones without (pieces left whole)
   double worst_excess = 0.0;   // (bound - sampled max) / diameter
   double random_excess = 0.0;  // its sum over the random triangles
   int random_checked = 0;
@@ -109,6 +112,15 @@ TEST(StarDistance, BoundsHoldAgainstDenseSamplesAndAreTight) {
       // 1-Lipschitz); depth 3 leaves pieces of an eighth of the triangle.
       EXPECT_LE(bound, sampled + d / 16.0 + d / kSamples)
           << "trial " << trial << " " << what << " " << k;
+      // With a floor (the builder passes the collapse's bound so far), pieces below it are not
+      // refined: the result is still an upper bound, and above the floor it is the same.
+      for (const double f : {0.5 * bound, 0.97 * bound, 1.5 * bound}) {
+        const double floored = to_old.bound(t.a, t.b, t.c, f, kStarBoundDepth, first);
+        EXPECT_GE(floored, sampled - 1e-12) << "trial " << trial << " " << what << " floor " << f;
+        EXPECT_NEAR(std::max(floored, f), std::max(bound, f), 1e-12 * d)
+            << "trial " << trial << " " << what << " floor " << f;
+        floors_coarser += floored > bound + 1e-9;
+      }
       worst_excess = std::max(worst_excess, (bound - sampled) / d);
       slack_used += bound > sampled + 1e-9;
       ++checked;
@@ -150,9 +162,11 @@ TEST(StarDistance, BoundsHoldAgainstDenseSamplesAndAreTight) {
   }
   std::printf(
       "%d backward bounds: %d above the sampled maximum, at most by %.4f of the diameter; "
-      "random triangles: %.5f on average\n",
-      checked, slack_used, worst_excess, random_excess / random_checked);
+      "random triangles: %.5f on average; %d of %d with a floor coarser\n",
+      checked, slack_used, worst_excess, random_excess / random_checked, floors_coarser,
+      3 * checked);
   EXPECT_GT(checked, 300);
+  EXPECT_GT(floors_coarser, 0);  // the floors above were not all idle
   // Splitting tightens the bounds of triangles that straddle the targets' regions: 0.00022 of
   // the diameter on average here, 0.00055 when no piece is split (the prune in bound() must not
   // stop splitting where a split still lowers the bound).
