@@ -250,13 +250,8 @@ class StarDistance {
   // The same for the corners of a polygon and target t.
   template <class Corners>
   static double corner_distance2(const Target& t, const Corners& corners, double room) {
-    const double room2 = square_room(room);
-    double worst = 0.0;
-    for (const Vec3& q : corners) {
-      worst = std::max(worst, t.distance.squared(q));
-      if (worst > room2) return std::numeric_limits<double>::infinity();
-    }
-    return worst;
+    return corner_distance2(corners.size(), room,
+                            [&](std::size_t j) { return t.distance.squared(corners[j]); });
   }
   static double square_room(double room) {
     return room < std::numeric_limits<double>::infinity() ? room * room
