@@ -1771,17 +1771,11 @@ class Builder {
       std::sort(cands.begin(), cands.end());
       ++taken_stamp_;
       std::uint64_t made = 0, reranked = 0;
-      auto taken = [&](std::uint32_t w) { return taken_[w] == taken_stamp_; };
-      // Whether a vertex of x's star (x and its ring) is taken, without listing the ring: most
-      // candidates late in a round are next to one.
-      auto near_taken = [&](std::uint32_t x) {
-        for (std::uint32_t id : star_[x]) {
-          for (std::uint32_t w : tris_[id].v) {
-            if (taken(w)) return true;
-          }
-        }
-        return taken(x);
-      };
+      // A collapse v -> to takes v, to and their rings (the new ring of `to`); a candidate may not
+      // touch a taken vertex's star, so it is refused when it or its target is in the new 2-ring
+      // of a collapse made in this round. That set is marked once per collapse (stars of taken
+      // vertices do not change in the round: no later collapse is beside one).
+      auto near_taken = [&](std::uint32_t x) { return taken_[x] == taken_stamp_; };
       for (const auto& [c, v] : cands) {
         Best& b = best_[v];
         if (removed_[v] || near_taken(v) || near_taken(b.to)) continue;
@@ -1814,15 +1808,17 @@ class Builder {
           continue;
         }
         const std::uint32_t to = b.to;
-        neighbours(to, local_);
-        taken_[v] = taken_[to] = taken_stamp_;
-        for (std::uint32_t w : ring_) taken_[w] = taken_stamp_;
-        for (std::uint32_t w : local_) taken_[w] = taken_stamp_;
         apply(v, to, b.error, b.new_e);
         b = Best{};
         dirty_list_.push_back(to);
         neighbours(to, ring_);
         dirty_list_.insert(dirty_list_.end(), ring_.begin(), ring_.end());
+        taken_[v] = taken_[to] = taken_stamp_;
+        for (std::uint32_t w : ring_) {
+          for (std::uint32_t id : star_[w]) {
+            for (std::uint32_t u : tris_[id].v) taken_[u] = taken_stamp_;
+          }
+        }
         ++made;
       }
       std::sort(dirty_list_.begin(), dirty_list_.end());
