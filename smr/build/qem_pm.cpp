@@ -1759,7 +1759,9 @@ class Builder {
     std::uint64_t rounds = 0;
     std::vector<std::pair<double, std::uint32_t>> cands;
     for (;;) {
-      for (std::uint32_t v : dirty_list_) refresh_best(v);
+      for (const Moved& m : moved_) update_best(m);
+      moved_.clear();
+      for (std::uint32_t v : dirty_list_) refresh_best(v);  // after update_best: it may undo one
       dirty_list_.clear();
       cands.clear();
       for (std::uint32_t v = 0; v < n; ++v) {
@@ -1808,11 +1810,14 @@ class Builder {
           continue;
         }
         const std::uint32_t to = b.to;
+        for (std::uint32_t w : ring_) {  // apply() gives them back the targets refused them
+          if (!blocked_[w].empty()) dirty_list_.push_back(w);
+        }
         apply(v, to, b.error, b.new_e);
         b = Best{};
         dirty_list_.push_back(to);
         neighbours(to, ring_);
-        dirty_list_.insert(dirty_list_.end(), ring_.begin(), ring_.end());
+        for (std::uint32_t w : ring_) moved_.push_back({w, v, to});
         taken_[v] = taken_[to] = taken_stamp_;
         for (std::uint32_t w : ring_) {
           for (std::uint32_t id : star_[w]) {
@@ -1836,6 +1841,11 @@ class Builder {
     std::array<std::uint32_t, 2> versions{};  // star_version_ of v and `to` when chosen
     bool have_error = false;
     bool validated = false;  // valid() passed for `to` (at `versions`)
+    bool by_cost = false;    // `to` is the cheapest target by cost (refresh_best's)
+  };
+  // A vertex of the ring around `kept` after the collapse removed -> kept.
+  struct Moved {
+    std::uint32_t w, removed, kept;
   };
   // v's cheapest target by cost (ties: the smaller id), not tested yet; locked targets never pass.
   void refresh_best(std::uint32_t v) {
@@ -1846,6 +1856,24 @@ class Builder {
       if (!is_locked(r.second) && (first.second == kNone || r < first)) first = r;
     }
     set_best(v, first.first, first.second, false);
+    best_[v].by_cost = true;
+  }
+  // refresh_best(m.w) after the collapse m: m.w's targets are those it had less `removed`, with
+  // `kept`, and only the cost to `kept` changed (its quadric grew). So a cheapest target that is
+  // neither of the two stays cheapest unless `kept` is now cheaper (same ties); otherwise, or if
+  // the collapse gave m.w back refused targets (it is then also in dirty_list_), in full.
+  void update_best(const Moved& m) {
+    const Best& b = best_[m.w];
+    const std::vector<std::uint32_t>& refused = blocked_[m.w];
+    if (!b.by_cost || b.to == kNone || b.to == m.removed || b.to == m.kept ||
+        std::find(refused.begin(), refused.end(), m.kept) != refused.end()) {
+      refresh_best(m.w);
+      return;
+    }
+    const std::pair<double, std::uint32_t> kept{cost(m.w, m.kept), m.kept};
+    const std::pair<double, std::uint32_t> first = std::min(kept, {b.cost, b.to});
+    set_best(m.w, first.first, first.second, false);
+    best_[m.w].by_cost = true;
   }
   void set_best(std::uint32_t v, double c, std::uint32_t to, bool validated) {
     Best& b = best_[v];
@@ -1871,6 +1899,7 @@ class Builder {
 
   std::vector<Best> best_;
   std::vector<std::uint32_t> dirty_list_, taken_;
+  std::vector<Moved> moved_;
   std::uint32_t taken_stamp_ = 0;
 
   friend class BlockPmBuilder;
