@@ -42,6 +42,14 @@ namespace {
 
 constexpr std::uint32_t kNone = ~std::uint32_t{0};
 
+// Incremental bookkeeping recomputed in full and compared (CMake SMRDB_SELF_CHECKS: the
+// sanitizer preset's tests).
+#ifdef SMRDB_SELF_CHECKS
+constexpr bool kSelfChecks = true;
+#else
+constexpr bool kSelfChecks = false;
+#endif
+
 // Garland & Heckbert's fundamental error quadric: the sum of w (n.p + d)^2 over planes.
 struct Quadric {
   std::array<double, 10> q{};  // aa ab ac ad bb bc bd cc cd dd
@@ -752,7 +760,14 @@ class Builder {
         std::find(refused.begin(), refused.end(), kept) != refused.end()) {
       return cheapest_target(w);
     }
-    return last = std::min(last, {cost(w, kept), kept});
+    last = std::min(last, {cost(w, kept), kept});
+    if (kSelfChecks) {
+      const std::pair<double, std::uint32_t> found = last;
+      if (cheapest_target(w) != found)
+        throw_internal("QEM PM: vertex " + std::to_string(w) +
+                       "'s cheapest target after a collapse beside it is not the one in full");
+    }
+    return last;
   }
 
   // ---- error bound --------------------------------------------------------------------------
