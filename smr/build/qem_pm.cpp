@@ -706,18 +706,20 @@ class Builder {
 
   // The cheapest valid target of `from` and its cost (ties: the smaller id; kNone if none):
   // validity, the costly test, is checked in order of cost until one passes.
-  std::pair<double, std::uint32_t> cheapest_valid(std::uint32_t from) {
+  // `failed`: a target just found not valid, not tested again.
+  std::pair<double, std::uint32_t> cheapest_valid(std::uint32_t from,
+                                                  std::uint32_t failed = kNone) {
     if (!rank_targets(from)) return {0.0, kNone};
     std::sort(ranked_.begin(), ranked_.end());
     for (const auto& [c, to] : ranked_) {
-      if (valid(from, to, cand_)) return {c, to};
+      if (to != failed && valid(from, to, cand_)) return {c, to};
     }
     return {0.0, kNone};
   }
 
-  void push_best(std::uint32_t from) {
+  void push_best(std::uint32_t from, std::uint32_t failed = kNone) {
     ++stamp_[from];
-    const auto [c, to] = cheapest_valid(from);
+    const auto [c, to] = cheapest_valid(from, failed);
     if (to != kNone) heap_.push({c, from, to, stamp_[from]});
   }
 
@@ -1321,7 +1323,7 @@ class Builder {
       heap_.pop();
       if (!current(top)) continue;
       if (removed_[top.to] || !valid(top.from, top.to)) {
-        push_best(top.from);
+        push_best(top.from, top.to);
         continue;
       }
       // The bound, or a lower bound of it when that already exceeds the band (bound_within).
@@ -1839,7 +1841,7 @@ class Builder {
           if (b.validated) {
             dirty_list_.push_back(v);
           } else {  // its cheapest target fails: its cheapest valid one, from the next round
-            const auto [cheapest, to] = cheapest_valid(v);
+            const auto [cheapest, to] = cheapest_valid(v, b.to);
             set_best(v, cheapest, to, true);
             ++reranked;
           }
@@ -1916,10 +1918,11 @@ class Builder {
   // Whether b's collapse of v is known valid without testing it again: valid() read the stars of
   // v and its target (positions, locks and boundary flags do not change), neither has changed
   // since it passed, and v's component still has more vertices than the test's limit. A vertex
-  // whose star changes is made dirty and refreshed before the next round, so the test is repeated
-  // only where the target's star changed (a collapse beside the target, not beside v: that cannot
-  // break v's link condition, and on the subdivided dragon the 12 564 repeats all pass). The
-  // rounds' choices are the same as with the test (databases byte-identical); 2 % less CPU.
+  // whose star changes gets a new target before the next round (refresh_best, update_best), so
+  // the test is repeated only where the target's star changed (a collapse beside the target, not
+  // beside v: that cannot break v's link condition, and on the subdivided dragon the 12 564
+  // repeats all pass). The rounds' choices are the same as with the test (databases
+  // byte-identical); 2 % less CPU.
   bool still_valid(std::uint32_t v, const Best& b) const {
     const std::uint32_t comp = comp_[v];
     return b.validated && b.versions[0] == star_version_[v] &&
