@@ -1335,7 +1335,7 @@ class Builder {
       const Candidate top = heap_.top();
       heap_.pop();
       if (!current(top)) continue;
-      if (removed_[top.to] || !valid(top.from, top.to)) {
+      if (removed_[top.to]) {
         push_best(top.from, top.to);
         continue;
       }
@@ -1348,13 +1348,25 @@ class Builder {
         error = ahead_threads_ ? bound_ahead(top, tolerance, waited)
                                : bound_within(top.from, top.to, tolerance, false, scratch_).first;
       }
-      if (known && options_.max_base_error > 0.0 && error > options_.max_base_error) {
-        ++stamp_[top.from];  // retried only when its neighbourhood changes
+      // Validity is tested only once the collapse is to be made or `from` given up: 80 % of the
+      // candidates that come up wait here for a later band instead (the bunny: 163 k of 206 k),
+      // and their stars change meanwhile. An infinite bound (no new star) is never valid.
+      const bool never = error == std::numeric_limits<double>::infinity();
+      if (never || (known && options_.max_base_error > 0.0 && error > options_.max_base_error)) {
+        if (never || !valid(top.from, top.to)) {
+          push_best(top.from, top.to);
+        } else {
+          ++stamp_[top.from];  // given up; retried only when its neighbourhood changes
+        }
         continue;
       }
       if (error > tolerance) {
         if (known) w = {top.stamp, top.to, error};
         waiting.push_back({top, error});
+        continue;
+      }
+      if (!valid(top.from, top.to)) {
+        push_best(top.from, top.to);
         continue;
       }
       if (crosses_after(top.from, top.to)) {
