@@ -403,7 +403,7 @@ class Builder {
     for (const Tri& t : tris_) {
       for (int k = 0; k < 3; ++k) {
         const std::uint32_t a = t.v[k], b = t.v[(k + 1) % 3];
-        if (directed.count(edge_key(b, a)) != 0) continue;
+        if (directed.contains(edge_key(b, a))) continue;
         boundary_[a] = boundary_[b] = 1;  // exact for unlocked vertices (all their faces are here)
         if ((locked_[a] && locked_[b]) || !(constrain[a] && constrain[b])) continue;
         add_constraint(t, k);
@@ -503,17 +503,14 @@ class Builder {
   }
 
   static constexpr std::uint64_t kNoEdge = ~std::uint64_t{0};
-  // Directed edge -> a triangle having it; `twice`, if given, gets an edge two triangles have.
-  std::unordered_map<std::uint64_t, std::uint32_t> directed_edges(std::uint64_t* twice) const {
-    std::unordered_map<std::uint64_t, std::uint32_t> directed;
+  // The triangles' directed edges; `twice`, if given, gets an edge two triangles have.
+  IdMap<std::uint8_t> directed_edges(std::uint64_t* twice) const {
+    IdMap<std::uint8_t> directed;
     directed.reserve(tris_.size() * 3);
-    for (std::uint32_t id = 0; id < tris_.size(); ++id) {
-      const Tri& t = tris_[id];
+    for (const Tri& t : tris_) {
       for (int k = 0; k < 3; ++k) {
         const std::uint64_t key = edge_key(t.v[k], t.v[(k + 1) % 3]);
-        if (!directed.emplace(key, id).second && twice != nullptr && *twice == kNoEdge) {
-          *twice = key;
-        }
+        if (!directed.insert(key) && twice != nullptr && *twice == kNoEdge) *twice = key;
       }
     }
     return directed;
@@ -529,7 +526,7 @@ class Builder {
       for (std::uint32_t v : t.v) quad_[v] += q;
       for (int k = 0; k < 3; ++k) {
         const std::uint32_t a = t.v[k], b = t.v[(k + 1) % 3];
-        if (directed.count(edge_key(b, a)) != 0) continue;
+        if (directed.contains(edge_key(b, a))) continue;
         boundary_[a] = boundary_[b] = 1;
         add_constraint(t, k);
       }
