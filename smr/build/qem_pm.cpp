@@ -1627,18 +1627,20 @@ class Builder {
     }
   }
 
+  // Whether collapse c (kNone: none) is a member of the group (a few splits: a linear search).
+  static bool in_group(const std::vector<std::uint32_t>& group, std::uint32_t c) {
+    return c != kNone && std::find(group.begin(), group.end(), c) != group.end();
+  }
   // A group's op, less its links to the mesh before it (emit): its own bound (its members',
   // and spawned components'), its fragment F (the members' stars) and vertices; its PreF (the
   // members' replacements) appended to chunk.pre. F and PreF leave out the triangles one member
   // makes and another removes (inside the group they never appear). Reads the mesh only: runs
   // on any thread.
   template <class Chunk>
-  void make_op(const std::vector<std::uint32_t>& group, Op& op, Chunk& chunk) const {
+  void make_op(const std::vector<std::uint32_t>& group, OpId id, Op& op, Chunk& chunk) const {
     std::vector<std::uint32_t>& removed = chunk.removed;
-    const auto member = [&](std::uint32_t c) {
-      return c != kNone && std::find(group.begin(), group.end(), c) != group.end();
-    };
     removed.clear();
+    op.id = id;
     op.error = 0.0;
     const std::size_t first = chunk.frag.size();
     for (std::uint32_t c : group) {
@@ -1650,10 +1652,10 @@ class Builder {
       }
       op.error = std::max(op.error, col.error);
       for (std::uint32_t k = col.old_begin; k < col.old_end; ++k) {
-        if (!member(tris_[old_tris_[k]].creator)) chunk.frag.push_back(old_tris_[k]);
+        if (!in_group(group, tris_[old_tris_[k]].creator)) chunk.frag.push_back(old_tris_[k]);
       }
       for (std::uint32_t k = col.new_begin; k < col.new_end; ++k) {
-        if (!member(tris_[new_tris_[k]].destroyer)) chunk.pre.push_back(new_tris_[k]);
+        if (!in_group(group, tris_[new_tris_[k]].destroyer)) chunk.pre.push_back(new_tris_[k]);
       }
     }
     std::sort(chunk.frag.begin() + std::ptrdiff_t(first), chunk.frag.end());
@@ -1760,8 +1762,7 @@ class Builder {
         },
         [&](Chunk& chunk) {
           for (std::size_t i = chunk.first; i < chunk.end; ++i) {
-            make_op(groups[i], crmr.ops[i + 1], chunk);
-            crmr.ops[i + 1].id = OpId(static_cast<std::uint32_t>(i + 1));
+            make_op(groups[i], OpId(static_cast<std::uint32_t>(i + 1)), crmr.ops[i + 1], chunk);
           }
         },
         [&](Chunk& chunk, std::size_t) {
@@ -1797,8 +1798,7 @@ class Builder {
                 const std::uint32_t* out = edges.find(edge_key(b, a));
                 if (out == nullptr) continue;  // model boundary
                 const std::uint32_t* in = edges.find(edge_key(a, b));
-                if (in == nullptr ||
-                    std::find(group.begin(), group.end(), tris_[*in].creator) == group.end()) {
+                if (in == nullptr || !in_group(group, tris_[*in].creator)) {
                   throw_internal("QEM PM: a fragment boundary edge has no replaced triangle");
                 }
                 const std::uint32_t inside = *in, outside = *out;
