@@ -8,7 +8,8 @@
 #   elev.tif                                from r-cran-terra
 # Meshes (into DIR/meshes, from libcgal-demo's data.tar.gz):
 #   bunny00.off armadillo.off refined_elephant.off ChineseDragon-10kv.off blobby_3cc.off
-#   elephant-with-holes.off mech-holes-shark.off pig.stl   (missing ones are skipped with a warning)
+#   elephant-with-holes.off mech-holes-shark.off pig.stl fandisk.off
+#   (missing ones are skipped with a warning)
 #
 # Idempotent: files already present are not fetched again. Data is never committed (.gitignore).
 set -euo pipefail
@@ -20,7 +21,7 @@ dest="$(cd "${dest}" && pwd)"
 
 dems=(jacksboro_fault_dem.npz topobathy.npz elev.tif)
 meshes=(bunny00.off armadillo.off refined_elephant.off ChineseDragon-10kv.off blobby_3cc.off
-        elephant-with-holes.off mech-holes-shark.off pig.stl)
+        elephant-with-holes.off mech-holes-shark.off pig.stl fandisk.off)
 
 need_matplotlib=0
 need_terra=0

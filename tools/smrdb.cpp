@@ -476,7 +476,8 @@ nlohmann::json ingest(const IngestArgs& a, const std::string& db_path, bool quie
                                 {"rejected_link", qs.rejected_link},
                                 {"rejected_flip", qs.rejected_flip},
                                 {"rejected_boundary", qs.rejected_boundary},
-                                {"rejected_intersection", qs.rejected_intersection}};
+                                {"rejected_intersection", qs.rejected_intersection},
+                                {"rejected_mixed_levels", qs.rejected_mixed_levels}};
   } else if (a.effective_builder() == "blocks") {
     return ingest_blocks(a, db_path, progress, verify);
   } else {

@@ -162,6 +162,7 @@ json ours_json(const smr::Crmr& crmr, const smr::QemPmStats& stats) {
           {"rejected_link", stats.rejected_link},
           {"rejected_flip", stats.rejected_flip},
           {"rejected_intersection", stats.rejected_intersection},
+          {"rejected_mixed_levels", stats.rejected_mixed_levels},
           {"rejected_boundary", stats.rejected_boundary},
           {"err0", crmr.header.err0},
           {"err_final", crmr.header.err_final},

@@ -911,7 +911,7 @@ class Builder {
   // collapse is refused (QemPmOptions::no_self_intersections): a source that does not cross
   // itself gives no level that does, and one that does can still simplify around its crossings
   // (refusing every collapse near them stalled the repaired pig at 258 base triangles).
-  bool crosses_after(std::uint32_t from, std::uint32_t to) {
+  bool crosses_after(std::uint32_t from, std::uint32_t to, double error) {
     if (!options_.no_self_intersections) return false;
     if (!grid_ready_) build_grid();
     made_.clear();
@@ -936,10 +936,21 @@ class Builder {
       made_boxes_.push_back(b);
       all.add(b);
     }
+    // The grid also holds the dead triangles of the recent bands (crosses_dead), by their
+    // destroyers' bounds; they take no part in this test.
     near_.clear();
-    grid_.visit(all, [&](std::uint32_t id, const Box3& tb) {
-      if (tri_marks_.of[id] != old_star) near_.push_back({id, tb});
-    });
+    dead_near_.clear();
+    const double above = options_.coalesce_error_ratio * error;
+    const auto sort_near = [&](std::uint32_t id, const Box3& tb) {
+      const std::uint32_t destroyer = tris_[id].destroyer;
+      if (destroyer == kNone) {
+        if (tri_marks_.of[id] != old_star) near_.push_back({id, tb});
+      } else if (collapses_[destroyer].error > above) {
+        dead_near_.push_back({id, tb});
+      }
+    };
+    grid_.visit(all, sort_near);
+    if (archive_largest_ > above) archive_.visit(all, sort_near);
     bool crossed = false;
     for (std::size_t i = 0; i < made_.size() && !crossed; ++i) {
       const MeshTriangle& m = made_[i];
@@ -952,8 +963,66 @@ class Builder {
         crossed = triangles_cross(m, other) && !crossed_before(from, other);
       }
     }
+    if (!crossed && !dead_near_.empty()) crossed = crosses_dead(from, above);
     if (crossed) ++stats_.rejected_intersection;
     return crossed;
+  }
+
+  // Mixed levels. A cut at one error (every op whose error exceeds it, refined) holds triangles
+  // of several states of the simplification: that of a split whose error exceeds the cut's and
+  // that of one whose error does not, whatever the order they were made in. Triangle X,
+  // destroyed by collapse x, and a new triangle Y of collapse c (bound b) are in one such cut
+  // only if x's op error exceeds c's. Op errors are at least the collapse's bound and, coalesced
+  // (a split joins an op whose error is at most 1/r of its bound, r = coalesce_error_ratio) and
+  // raised to their children's, at most 1/r of it: so only if b(x) > r b. And never if c depends
+  // on x (its op is an ancestor of x's): bounds do not rise along dependencies (star_bound's
+  // floor), so the collapses c depends on with bounds above r b are found from c's star through
+  // collapses with bounds above r b alone. The live triangles are tested above; here, the
+  // new star against the dead triangles of the other collapses with b(x) > r b (dead_near_,
+  // found by crosses_after's grid query). With this, no cut at one error crosses where the
+  // source does not (cuts of varying error are not covered: two triangles from states apart in
+  // the order, far apart in error, are never tested).
+  bool crosses_dead(std::uint32_t from, double above) {
+    bool depends_known = false;
+    std::uint32_t depends = 0;
+    for (const auto& [id, box] : dead_near_) {
+      if (!depends_known) {
+        depends = mark_dependencies(from, above);
+        depends_known = true;
+      }
+      if (collapse_marks_.of[tris_[id].destroyer] == depends) continue;
+      const MeshTriangle other = mesh_triangle(tris_[id].v);
+      for (std::size_t i = 0; i < made_.size(); ++i) {
+        if (!box.intersects(made_boxes_[i])) continue;
+        if (triangles_cross(made_[i], other) && !crossed_before(from, other)) {
+          ++stats_.rejected_mixed_levels;
+          return true;
+        }
+      }
+    }
+    return false;
+  }
+
+  // Marks (collapse_marks_, with the returned value) the collapses that collapsing `from` would
+  // depend on, directly or not, whose bounds exceed `above`.
+  std::uint32_t mark_dependencies(std::uint32_t from, double above) {
+    if (collapse_marks_.of.size() < collapses_.size())
+      collapse_marks_.of.resize(collapses_.size() * 3 / 2 + 16, 0);
+    const std::uint32_t mark = collapse_marks_.next();
+    dependency_stack_.clear();
+    const auto reach = [&](std::uint32_t id) {
+      const std::uint32_t c = tris_[id].creator;
+      if (c == kNone || collapse_marks_.of[c] == mark || !(collapses_[c].error > above)) return;
+      collapse_marks_.of[c] = mark;
+      dependency_stack_.push_back(c);
+    };
+    for (std::uint32_t id : star_[from]) reach(id);
+    while (!dependency_stack_.empty()) {
+      const Collapse& d = collapses_[dependency_stack_.back()];
+      dependency_stack_.pop_back();
+      for (std::uint32_t k = d.old_begin; k < d.old_end; ++k) reach(old_tris_[k]);
+    }
+    return mark;
   }
 
   // Whether a triangle of from's star (the old star) already crosses `other`: a crossing the
@@ -984,10 +1053,31 @@ class Builder {
       }
     }
     grid_.reset(bounds.empty() ? Vec3(0.0) : bounds.lo, count ? 2.0 * edges / double(count) : 1.0);
+    archive_.reset(bounds.empty() ? Vec3(0.0) : bounds.lo,
+                   count ? 2.0 * edges / double(count) : 1.0);
     for (std::uint32_t id = 0; id < tris_.size(); ++id) {
       if (tris_[id].destroyer == kNone) grid_.insert(id, box_of(tris_[id].v));
     }
     grid_ready_ = true;
+  }
+
+  // Dead triangles stay in the grid while a collapse can still need them (crosses_dead): with
+  // bounds b >= `least` to come, one whose destroyer's bound is at most r `least` moves to the
+  // archive, which only a collapse of a smaller bound (rare: bounds rise band by band) visits.
+  void retire_dead(double least) {
+    const double below = options_.coalesce_error_ratio * least;
+    std::size_t kept = 0;
+    for (const std::uint32_t id : dead_) {
+      const double b = collapses_[tris_[id].destroyer].error;
+      if (b > below) {
+        dead_[kept++] = id;
+        continue;
+      }
+      grid_.erase(id);
+      archive_.insert(id, box_of(tris_[id].v));
+      archive_largest_ = std::max(archive_largest_, b);
+    }
+    dead_.resize(kept);
   }
 
   // ---- simplification -----------------------------------------------------------------------
@@ -1005,7 +1095,13 @@ class Builder {
       old_tris_.push_back(id);
       tris_[id].destroyer = c;
       unlink_triangle(id, from);
-      if (grid_ready_) grid_.erase(id);
+      if (grid_ready_) {
+        if (track_dead_) {
+          dead_.push_back(id);  // stays in the grid, dead (crosses_dead)
+        } else {
+          grid_.erase(id);
+        }
+      }
       for (std::uint32_t w : tris_[id].v) {  // their neighbourhoods change
         if (!blocked_[w].empty()) {
           blocked_[w].clear();
@@ -1303,6 +1399,7 @@ class Builder {
     const auto current = [&](const Candidate& c) {
       return !removed_[c.from] && c.stamp == stamp_[c.from];
     };
+    track_dead_ = options_.no_self_intersections;
     while (alive > floor_vertices) {
       if (heap_.empty()) {
         double least = std::numeric_limits<double>::infinity();
@@ -1313,6 +1410,7 @@ class Builder {
           waiting.clear();  // only stale entries: nothing is left to collapse
           break;
         }
+        if (track_dead_ && grid_ready_) retire_dead(tolerance);  // the band that ended
         tolerance = options_.bound_band * least;
         // Those still above it would only come up to wait again.
         std::size_t kept = 0;
@@ -1366,7 +1464,7 @@ class Builder {
         push_best(top.from, top.to);
         continue;
       }
-      if (crosses_after(top.from, top.to)) {
+      if (crosses_after(top.from, top.to, error)) {
         refuse(top.from, top.to);
         push_best(top.from);
         continue;
@@ -1856,6 +1954,9 @@ class Builder {
   // cuts' triangle counts move by under 1.2 % either way. Returns the rounds that made a collapse.
   std::uint64_t simplify_rounds(double tolerance) {
     const std::size_t n = pos_.size();
+    track_dead_ = options_.no_self_intersections;
+    if (grid_ready_) retire_dead(last_tolerance_);  // the rounds of the last call
+    last_tolerance_ = tolerance;
     if (best_.size() != n) {
       best_.assign(n, Best{});
       for (std::uint32_t v = 0; v < n; ++v) dirty_list_.push_back(v);
@@ -1909,7 +2010,7 @@ class Builder {
           b.have_error = true;
         }
         if (b.error > tolerance) continue;
-        if (crosses_after(v, b.to)) {
+        if (crosses_after(v, b.to, b.error)) {
           refuse(v, b.to);
           dirty_list_.push_back(v);
           continue;
@@ -2022,6 +2123,16 @@ class Builder {
   // neighbourhood last changed, per triangle marks (the old star), the new star under test.
   TriangleGrid grid_;
   bool grid_ready_ = false;
+  // Mixed levels (crosses_dead): the in-core builder's dead triangles by band, each generation
+  // with the largest bound of the collapses that destroyed them.
+  bool track_dead_ = false;
+  std::vector<std::uint32_t> dead_;  // the dead triangles still in grid_
+  TriangleGrid archive_;             // the others (retire_dead)
+  double archive_largest_ = 0.0;     // the largest bound of their destroyers
+  double last_tolerance_ = 0.0;      // simplify_rounds: the last call's
+  std::vector<std::pair<std::uint32_t, Box3>> dead_near_;
+  Marks collapse_marks_;
+  std::vector<std::uint32_t> dependency_stack_;
   std::vector<std::vector<std::uint32_t>> blocked_;
   Marks tri_marks_;
   std::vector<MeshTriangle> made_;
@@ -2112,6 +2223,7 @@ class BlockPmBuilder {
           return leaf;
         },
         [&](Leaf& leaf) {
+          reject_duplicate_faces(leaf.faces);
           leaf.state = leaf_state(leaf.faces);
           leaf.done = compute(0, leaf.state);
         },
@@ -2142,6 +2254,22 @@ class BlockPmBuilder {
  private:
   void report(double f) const {
     if (opt_.progress) opt_.progress(std::clamp(f, 0.0, 1.0));
+  }
+
+  // Two faces on the same three vertices (in either orientation: a "pillow" is a closed surface
+  // of two triangles) are a user error, as read_mesh says in memory. They have the same
+  // centroid, so they meet in one leaf block.
+  void reject_duplicate_faces(const std::vector<std::array<std::uint32_t, 3>>& faces) const {
+    std::vector<std::array<std::uint32_t, 3>> sorted(faces);
+    for (auto& f : sorted) std::sort(f.begin(), f.end());
+    std::sort(sorted.begin(), sorted.end());
+    const auto twice = std::adjacent_find(sorted.begin(), sorted.end());
+    if (twice == sorted.end()) return;
+    throw_input("mesh '" + mesh_.name() + "': two faces use the same vertices " +
+                std::to_string((*twice)[0]) + ", " + std::to_string((*twice)[1]) + " and " +
+                std::to_string((*twice)[2]) +
+                " (a duplicate face); expected each face once; ingest it in memory (without "
+                "--memory) with --repair, which drops duplicates");
   }
 
   void read_vertices() {

@@ -81,7 +81,10 @@ struct QemPmStats {
   std::uint64_t base_vertices = 0, base_triangles = 0;
   std::uint64_t rejected_link = 0, rejected_flip = 0, rejected_boundary = 0;
   std::uint64_t rejected_intersection = 0;  // collapses refused: a new triangle would cross another
-  std::uint64_t bounds_computed = 0;        // guaranteed bounds of candidate collapses it needed
+  // Of those, refused because a new triangle would cross a triangle of another level that a cut
+  // at one error can show with it (mixed levels; see qem_pm.cpp crosses_dead).
+  std::uint64_t rejected_mixed_levels = 0;
+  std::uint64_t bounds_computed = 0;  // guaranteed bounds of candidate collapses it needed
   // QemPmOptions::threads > 1: bound computations handed over ahead of time, and those whose
   // result was used (computed by a helper, or by the calling thread when the candidate came up
   // before a helper had started it; the rest: their candidates changed first).
