@@ -12,8 +12,10 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -32,6 +34,7 @@
 #include "smr/io/mesh_writer.h"
 #include "smr/io/npy.h"
 #include "smr/io/synthetic.h"
+#include "smr/rcf/spec.h"
 #include "storage/lmdb_env.h"
 #include "tests/support/files.h"
 #include "tests/support/process.h"
@@ -596,6 +599,153 @@ TEST_F(DbCli, MeshIngestExtractInfoVerify) {
   EXPECT_FALSE(fs::exists(path("z.smrdb")));
 }
 
+// Canonical triangles of `mesh` (each rotated to start at its smallest index, orientation kept),
+// sorted, with the indices mapped through `to` (identity when empty).
+std::vector<std::array<std::uint32_t, 3>> canonical_faces(const smr::TriangleMesh& mesh,
+                                                          const std::vector<std::uint32_t>& to) {
+  std::vector<std::array<std::uint32_t, 3>> out;
+  for (auto t : mesh.triangles) {
+    if (!to.empty()) {
+      for (auto& v : t) v = to[v];
+    }
+    std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());
+    out.push_back(t);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// The source vertex within `tol` of each vertex of `mesh` (sources must be farther apart than
+// 2 tol); a vertex with none or several fails the test and maps to the source count.
+std::vector<std::uint32_t> match_vertices(const smr::TriangleMesh& mesh,
+                                          const smr::TriangleMesh& source, double tol) {
+  std::vector<std::uint32_t> by_x(source.positions.size());
+  for (std::uint32_t i = 0; i < by_x.size(); ++i) by_x[i] = i;
+  std::sort(by_x.begin(), by_x.end(), [&](std::uint32_t a, std::uint32_t b) {
+    return source.positions[a].x < source.positions[b].x;
+  });
+  std::vector<std::uint32_t> to(mesh.positions.size(), std::uint32_t(source.positions.size()));
+  std::size_t unmatched = 0;
+  for (std::size_t i = 0; i < mesh.positions.size(); ++i) {
+    const smr::Vec3& p = mesh.positions[i];
+    auto it = std::lower_bound(by_x.begin(), by_x.end(), p.x - tol, [&](std::uint32_t a, double x) {
+      return source.positions[a].x < x;
+    });
+    int found = 0;
+    for (; it != by_x.end() && source.positions[*it].x <= p.x + tol; ++it) {
+      const smr::Vec3 d = source.positions[*it] - p;
+      if (std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z) <= tol) ++found, to[i] = *it;
+    }
+    if (found != 1) ++unmatched, to[i] = std::uint32_t(source.positions.size());
+  }
+  EXPECT_EQ(unmatched, 0u) << "output vertices without exactly one source vertex within " << tol;
+  return to;
+}
+
+std::string coords(const smr::Vec3& p) {
+  char b[96];
+  std::snprintf(b, sizeof b, "%.17g,%.17g,%.17g", p.x, p.y, p.z);
+  return b;
+}
+
+// A mesh file with problems --repair fixes (a vertex repeated at the position of another, two
+// faces flipped, a duplicate face, a face using a vertex twice), made from blobby_3cc: without
+// --repair, exit code 1 naming the file and no database; with it, a database whose fully refined
+// extraction from disk is the source mesh itself: the same vertex positions (up to the
+// quantization, at most the reported shift) and the same oriented faces, up to order. A camera
+// view of it through --eye/--target/--pixel-error verifies, lies strictly between the base and
+// the full mesh, has exactly the triangles the library extracts from that database for the same
+// camera (the CLI's defaults: 60 degrees, 1024x768, up +z), and fewer than with --no-cull.
+TEST_F(DbCli, RepairedMeshIngestCameraViewAndFullRefinementFromDisk) {
+  const smr::TriangleMesh src = smr::read_mesh(smr::test::data_path("meshes/blobby_3cc.off"));
+  ASSERT_GT(src.triangles.size(), 8u);
+  std::string off = "OFF\n" + std::to_string(src.positions.size() + 1) + " " +
+                    std::to_string(src.triangles.size() + 2) + " 0\n";
+  for (const smr::Vec3& p : src.positions) {
+    char b[96];
+    std::snprintf(b, sizeof b, "%.17g %.17g %.17g\n", p.x, p.y, p.z);
+    off += b;
+  }
+  {
+    char b[96];
+    const smr::Vec3& p = src.positions[src.triangles[0][0]];
+    std::snprintf(b, sizeof b, "%.17g %.17g %.17g\n", p.x, p.y, p.z);
+    off += b;  // vertex n, a copy of face 0's first corner: weld
+  }
+  const auto face = [](std::uint32_t a, std::uint32_t b, std::uint32_t c) {
+    return "3 " + std::to_string(a) + " " + std::to_string(b) + " " + std::to_string(c) + "\n";
+  };
+  for (std::size_t i = 0; i < src.triangles.size(); ++i) {
+    const auto& t = src.triangles[i];
+    if (i == 0) {
+      off += face(std::uint32_t(src.positions.size()), t[1], t[2]);
+    } else if (i == 1 || i == 2) {
+      off += face(t[0], t[2], t[1]);  // flipped: orient
+    } else {
+      off += face(t[0], t[1], t[2]);
+    }
+  }
+  off += face(src.triangles[3][0], src.triangles[3][1], src.triangles[3][2]);  // duplicate
+  off += face(src.triangles[4][0], src.triangles[4][0], src.triangles[4][1]);  // degenerate
+  const std::string broken = path("broken.off");
+  write_file(broken, off);
+
+  expect_user_error("ingest " + broken + " -q -o " + path("no.smrdb"), "broken.off");
+  EXPECT_FALSE(fs::exists(path("no.smrdb")));
+  const std::string db = path("repaired.smrdb");
+  CliRun r = smrdb("ingest " + broken + " --repair -q --json -o " + db);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const nlohmann::json ingest = nlohmann::json::parse(r.out);
+  EXPECT_GE(ingest["input"]["repairs"].get<std::uint64_t>(), 5u) << r.out;
+  EXPECT_EQ(ingest["input"]["triangles"].get<std::size_t>(), src.triangles.size()) << r.out;
+  EXPECT_EQ(ingest["input"]["vertices"].get<std::size_t>(), src.positions.size()) << r.out;
+  const double shift = ingest["database"]["z_shift"].get<double>();
+
+  // Full refinement from disk: the source.
+  r = smrdb("extract " + db + " --floor 1 --verify --json -q -o " + path("all.ply"));
+  ASSERT_EQ(r.code, 0) << r.out;
+  const smr::TriangleMesh all = smr::read_mesh(path("all.ply"));
+  ASSERT_EQ(all.positions.size(), src.positions.size());
+  ASSERT_EQ(all.triangles.size(), src.triangles.size());
+  const std::vector<std::uint32_t> to = match_vertices(all, src, shift + 1e-12);
+  std::vector<std::uint32_t> hits(src.positions.size() + 1, 0);
+  for (std::uint32_t v : to) ++hits[v];
+  EXPECT_EQ(std::count(hits.begin(), hits.end() - 1, 1u), std::ptrdiff_t(src.positions.size()))
+      << "the output's vertices are not the source's, one for one";
+  EXPECT_TRUE(canonical_faces(all, to) == canonical_faces(src, {}))
+      << "the fully refined mesh's faces differ from the source's";
+
+  // A camera view.
+  smr::Box3 box;
+  for (const smr::Vec3& p : src.positions) box.add(p);
+  const smr::Vec3 centre = box.center();
+  const smr::Vec3 eye = centre + 1.5 * (box.hi - box.lo) * smr::Vec3{1.0, 0.3, 0.2};
+  const std::string camera = " --eye " + coords(eye) + " --target " + coords(centre);
+  r = smrdb("extract " + db + camera + " --pixel-error 2 --verify --json -q -o " +
+            path("view.ply"));
+  ASSERT_EQ(r.code, 0) << r.out;
+  const std::size_t view = nlohmann::json::parse(r.out)["output"]["triangles"].get<std::size_t>();
+  EXPECT_EQ(smr::read_mesh(path("view.ply")).triangles.size(), view);
+  EXPECT_GT(view, ingest["crmr"]["base_triangles"].get<std::size_t>());
+  EXPECT_LT(view, src.triangles.size());
+  {
+    const auto opened = smr::Database::open(db, {std::size_t{64} << 20});
+    smr::RcfSpec spec;
+    smr::Camera cam;
+    cam.eye = eye;
+    cam.target = centre;
+    spec.camera = cam;  // fov 60, 1024x768, up +z: the CLI's defaults
+    spec.pixel_error = 2.0;
+    const smr::Extraction e = smr::extract_minimal_surface(
+        *opened, smr::make_rcf(spec, smr::ModelKind::kMesh3d, nullptr));
+    EXPECT_EQ(e.triangles.size(), view) << "the CLI's camera is not the one asked for";
+  }
+  r = smrdb("extract " + db + camera + " --pixel-error 2 --no-cull --verify --json -q -o " +
+            path("nocull.ply"));
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_GT(nlohmann::json::parse(r.out)["output"]["triangles"].get<std::size_t>(), view);
+}
+
 // Out-of-core mesh ingest (issue 5): a PLY streamed through octree blocks under --memory. The
 // database verifies, a fully refined extraction gives every source triangle back, a second run
 // gives the same bytes, kill -9 then a re-run gives them too, ASCII PLY works, and broken or
@@ -634,13 +784,26 @@ TEST_F(DbCli, StreamedMeshIngestIsCompleteDeterministicAndRejectsBrokenFiles) {
   write_file(truncated, bin.substr(0, bin.size() / 2));
   expect_user_error("ingest " + truncated + " --memory 64M -o " + path("t.smrdb"), "truncated.ply");
   EXPECT_FALSE(fs::exists(path("t.smrdb")));
-  const std::string bad_index = path("index.ply");
-  write_file(bad_index,
-             "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-             "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
-             "end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n");
+  // An ascii PLY of three vertices and the given faces ("3 a b c\n" each).
+  const auto triangle_ply = [&](const std::string& name, int faces, const std::string& lines) {
+    write_file(path(name),
+               "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+               "property float y\nproperty float z\nelement face " +
+                   std::to_string(faces) +
+                   "\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 "
+                   "0 0\n0 1 0\n" +
+                   lines);
+    return path(name);
+  };
+  const std::string bad_index = triangle_ply("index.ply", 1, "3 0 1 7\n");
   expect_user_error("ingest " + bad_index + " --memory 64M -o " + path("i.smrdb"), "out of range");
   EXPECT_FALSE(fs::exists(path("i.smrdb")));
+  // A "pillow": the same triangle twice, once each way round (a closed surface of two faces,
+  // every directed edge once). In memory it is a duplicate face; streamed too.
+  const std::string pillow = triangle_ply("pillow.ply", 2, "3 0 1 2\n3 0 2 1\n");
+  expect_user_error("ingest " + pillow + " -o " + path("p.smrdb"), "duplicate");
+  expect_user_error("ingest " + pillow + " --memory 64M -o " + path("p.smrdb"), "duplicate face");
+  EXPECT_FALSE(fs::exists(path("p.smrdb")));
   expect_user_error("ingest " + smr::test::data_path("meshes/blobby_3cc.off") +
                         " --memory 64M -o " + path("o.smrdb"),
                     "only PLY");

@@ -3,13 +3,19 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 #include <glm/geometric.hpp>
 
 namespace smr::test {
 
-TriangleSoupDistance::TriangleSoupDistance(std::vector<std::array<Vec3, 3>> triangles)
-    : tris_(std::move(triangles)) {
+TriangleSoupDistance::TriangleSoupDistance(std::vector<std::array<Vec3, 3>> triangles,
+                                           std::vector<double> radii)
+    : tris_(std::move(triangles)), radii_(std::move(radii)) {
+  if (!radii_.empty() && radii_.size() != tris_.size()) {
+    throw std::invalid_argument("TriangleSoupDistance: one radius per triangle");
+  }
+  for (double r : radii_) max_radius_ = std::max(max_radius_, r);
   for (const auto& t : tris_) {
     for (const Vec3& p : t) box_.add(p);
   }
@@ -59,6 +65,25 @@ std::array<std::int64_t, 3> TriangleSoupDistance::cell_of(const Vec3& p) const {
   return c;
 }
 
+bool TriangleSoupDistance::within_own_radius(const Vec3& p, double scale) const {
+  if (radii_.empty()) throw std::logic_error("TriangleSoupDistance: no radii given");
+  bool found = false;
+  // Rings of buckets outwards, as in search(), until a triangle is found or no farther bucket
+  // is within the largest radius.
+  const Vec3 outside = glm::max(glm::max(box_.lo - p, p - box_.hi), Vec3(0.0));
+  const double to_box = glm::length(outside);
+  const auto c = cell_of(p);
+  const std::int64_t max_ring = std::max({dims_[0], dims_[1], dims_[2]});
+  for (std::int64_t r = 0; r <= max_ring && !found; ++r) {
+    if (std::max(to_box, double(r - 1) * cell_) > scale * max_radius_) break;
+    for_ring(c, r, [&](std::uint32_t i) {
+      const auto& t = tris_[i];
+      found = found || point_triangle_distance3d(p, t[0], t[1], t[2]) <= scale * radii_[i];
+    });
+  }
+  return found;
+}
+
 double TriangleSoupDistance::search(const Vec3& p, double radius) const {
   double best = std::numeric_limits<double>::infinity();
   if (tris_.empty()) return best;
@@ -71,23 +96,10 @@ double TriangleSoupDistance::search(const Vec3& p, double radius) const {
     const double nearest_beyond = std::max(to_box, double(r - 1) * cell_);
     if (r > 0 && best <= nearest_beyond) break;
     if (radius >= 0.0 && (best <= radius || nearest_beyond > radius)) break;
-    for (std::int64_t z = c[2] - r; z <= c[2] + r; ++z) {
-      if (z < 0 || z >= dims_[2]) continue;
-      for (std::int64_t y = c[1] - r; y <= c[1] + r; ++y) {
-        if (y < 0 || y >= dims_[1]) continue;
-        for (std::int64_t x = c[0] - r; x <= c[0] + r; ++x) {
-          if (x < 0 || x >= dims_[0]) continue;
-          if (std::max({std::abs(x - c[0]), std::abs(y - c[1]), std::abs(z - c[2])}) != r) {
-            continue;
-          }
-          const std::size_t b = std::size_t((z * dims_[1] + y) * dims_[0] + x);
-          for (std::uint32_t k = start_[b]; k < start_[b + 1]; ++k) {
-            const auto& t = tris_[items_[k]];
-            best = std::min(best, point_triangle_distance3d(p, t[0], t[1], t[2]));
-          }
-        }
-      }
-    }
+    for_ring(c, r, [&](std::uint32_t i) {
+      const auto& t = tris_[i];
+      best = std::min(best, point_triangle_distance3d(p, t[0], t[1], t[2]));
+    });
   }
   return best;
 }

@@ -4,8 +4,10 @@
 // bucket can hold a nearer triangle), so the answer equals the minimum over all triangles.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
+#include <cstdlib>
 #include <vector>
 
 #include "smr/core/geometry.h"
@@ -14,17 +16,43 @@ namespace smr::test {
 
 class TriangleSoupDistance {
  public:
-  explicit TriangleSoupDistance(std::vector<std::array<Vec3, 3>> triangles);
+  /// `radii`, when given, holds one radius per triangle, for within_own_radius.
+  explicit TriangleSoupDistance(std::vector<std::array<Vec3, 3>> triangles,
+                                std::vector<double> radii = {});
   /// min over triangles of the distance from p to the closed triangle.
   double distance(const Vec3& p) const { return search(p, -1.0); }
   /// distance(p) <= radius, searching only the buckets within `radius` of p.
   bool within(const Vec3& p, double radius) const { return search(p, radius) <= radius; }
+  /// Whether some triangle i is within scale * radii[i] of p (searching the buckets within the
+  /// largest such radius of p): the brute-force answer of "any i: distance(p, triangle i) <=
+  /// scale * radii[i]".
+  bool within_own_radius(const Vec3& p, double scale = 1.0) const;
 
  private:
   std::array<std::int64_t, 3> cell_of(const Vec3& p) const;
+  // Calls f(triangle index) for the items of every bucket at Chebyshev distance r from bucket c.
+  template <class F>
+  void for_ring(const std::array<std::int64_t, 3>& c, std::int64_t r, F&& f) const {
+    for (std::int64_t z = c[2] - r; z <= c[2] + r; ++z) {
+      if (z < 0 || z >= dims_[2]) continue;
+      for (std::int64_t y = c[1] - r; y <= c[1] + r; ++y) {
+        if (y < 0 || y >= dims_[1]) continue;
+        for (std::int64_t x = c[0] - r; x <= c[0] + r; ++x) {
+          if (x < 0 || x >= dims_[0]) continue;
+          if (std::max({std::abs(x - c[0]), std::abs(y - c[1]), std::abs(z - c[2])}) != r) {
+            continue;
+          }
+          const std::size_t b = std::size_t((z * dims_[1] + y) * dims_[0] + x);
+          for (std::uint32_t k = start_[b]; k < start_[b + 1]; ++k) f(items_[k]);
+        }
+      }
+    }
+  }
   // The distance, or (radius >= 0) any value <= radius once one is found, or > radius when none.
   double search(const Vec3& p, double radius) const;
   std::vector<std::array<Vec3, 3>> tris_;
+  std::vector<double> radii_;
+  double max_radius_ = 0.0;
   Box3 box_;
   double cell_ = 1.0;
   std::array<std::int64_t, 3> dims_{1, 1, 1};

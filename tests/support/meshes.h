@@ -19,7 +19,7 @@ struct BuiltMesh {
   QemPmStats stats;
 };
 
-/// `name` is a file of <data>/meshes (e.g. "bunny00.off").
+/// `name` is a file of <data>/meshes (e.g. "bunny00.off"); pig.stl is read with MeshRepair::all().
 const BuiltMesh& built_mesh(const std::string& name);
 
 /// A cut of a 3-D CRMR has the source's topology, except for components not spawned yet: at most
