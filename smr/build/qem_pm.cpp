@@ -2123,8 +2123,8 @@ class Builder {
   // neighbourhood last changed, per triangle marks (the old star), the new star under test.
   TriangleGrid grid_;
   bool grid_ready_ = false;
-  // Mixed levels (crosses_dead): the in-core builder's dead triangles by band, each generation
-  // with the largest bound of the collapses that destroyed them.
+  // Mixed levels (crosses_dead): dead triangles stay in grid_ while a collapse may still need
+  // them (dead_), then move to archive_ (retire_dead).
   bool track_dead_ = false;
   std::vector<std::uint32_t> dead_;  // the dead triangles still in grid_
   TriangleGrid archive_;             // the others (retire_dead)

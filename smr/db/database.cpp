@@ -119,9 +119,10 @@ CrmrInfo json_info(const json& j) {
 // Rough encoded size of an op, for packing leaves into pages of about WriteOptions::page_bytes.
 // A vertex costs most in 3-D: three coordinates on a grid of 2^-28 of the extent, which differ
 // in their low bits from one vertex to the next, where a terrain vertex has two on the DEM's
-// lattice. Measured (page bytes / ops against this estimate, 16 KiB pages): 2 bytes a vertex
-// fill terrain pages to 0.87 of the target; in 3-D they overfilled them 1.27-1.47x, 10 bytes
-// give 0.9-1.05 (bunny, armadillo, dragon, blobby, elephant-with-holes).
+// lattice. Measured on 16 KiB pages: 2 bytes a vertex fill terrain pages to 0.87 of the target
+// (Jacksboro, median; none over); in 3-D they overfilled every page 1.27-1.47x (past 4 LMDB
+// pages), 13 bytes fill them to 0.88-0.94 (median) with the largest at 0.95-1.01 (the seven
+// CGAL meshes but the pig).
 std::uint32_t estimated_bytes(const Op& op, ModelKind kind) {
   const std::size_t per_vertex = kind == ModelKind::kMesh3d ? 13 : 2;
   return static_cast<std::uint32_t>(24 + 4 * op.fragment.size() + per_vertex * op.vertices.size() +
