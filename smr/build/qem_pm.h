@@ -66,7 +66,9 @@ struct QemPmOptions {
   /// that follows it in the split order, at the error its absence costs.
   bool spawn_components = true;
   /// Refuse a collapse that would make a new triangle cross another triangle (exactly, anywhere
-  /// but in shared corners and edges), so that simplification introduces no self-intersection.
+  /// but in shared corners and edges), so that simplification introduces no self-intersection:
+  /// neither in any state of it nor in any cut at one error, which mixes states (the triangles a
+  /// collapse is checked against include recently dead ones; qem_pm.cpp, crosses_dead).
   bool no_self_intersections = true;
   /// Threads computing the bounds of the candidates that come next (0 = one per core). The
   /// result does not depend on it.
