@@ -12,27 +12,10 @@
 
 #include "smr/core/geometry.h"
 #include "smr/core/mesh.h"
+#include "tests/support/mesh_distance.h"
 
 namespace smr {
 namespace {
-
-double segment(const Vec3& p, const Vec3& a, const Vec3& b) {
-  const Vec3 ab = b - a;
-  const double l2 = glm::dot(ab, ab);
-  const double t = l2 > 0.0 ? std::clamp(glm::dot(p - a, ab) / l2, 0.0, 1.0) : 0.0;
-  return glm::length(p - (a + t * ab));
-}
-
-double textbook(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Vec3 n = glm::normalize(glm::cross(b - a, c - a));
-  const double d = glm::dot(p - a, n);
-  const Vec3 q = p - d * n;
-  const bool inside = glm::dot(glm::cross(b - a, q - a), n) >= 0.0 &&
-                      glm::dot(glm::cross(c - b, q - b), n) >= 0.0 &&
-                      glm::dot(glm::cross(a - c, q - c), n) >= 0.0;
-  if (inside) return std::abs(d);
-  return std::min({segment(p, a, b), segment(p, b, c), segment(p, c, a)});
-}
 
 TEST(Geometry, PointTriangleDistanceMatchesTheOracles) {
   std::mt19937_64 rng(7);
@@ -42,7 +25,7 @@ TEST(Geometry, PointTriangleDistanceMatchesTheOracles) {
     const Vec3 a = point(), b = point(), c = point();
     const Vec3 p = 2.0 * point();
     const double d = point_triangle_distance3d(p, a, b, c);
-    ASSERT_NEAR(d, textbook(p, a, b, c), 1e-12) << "case " << i;
+    ASSERT_NEAR(d, test::textbook_triangle_distance(p, a, b, c), 1e-12) << "case " << i;
     if (i % 100 == 0) {
       double sampled = 1e300;
       const int n = 200;

@@ -21,6 +21,7 @@
 #include "smr/extract/extract.h"
 #include "smr/io/mesh_reader.h"
 #include "smr/rcf/spec.h"
+#include "tests/support/mesh_distance.h"
 #include "tests/support/test_data.h"
 
 namespace smr {
@@ -51,13 +52,6 @@ std::vector<Segment> creases(const TriangleMesh& mesh, double degrees) {
   return out;
 }
 
-double point_segment(const Vec3& p, const Segment& s) {
-  const Vec3 ab = s.second - s.first;
-  const double len2 = glm::dot(ab, ab);
-  const double t = len2 > 0.0 ? std::clamp(glm::dot(p - s.first, ab) / len2, 0.0, 1.0) : 0.0;
-  return glm::length(p - (s.first + t * ab));
-}
-
 // For points along every segment of `from` (ends, quarters, middle): the largest and the mean
 // distance to the nearest segment of `to`.
 std::pair<double, double> deviation(const std::vector<Segment>& from,
@@ -68,7 +62,8 @@ std::pair<double, double> deviation(const std::vector<Segment>& from,
     for (double t : {0.0, 0.25, 0.5, 0.75, 1.0}) {
       const Vec3 p = s.first + t * (s.second - s.first);
       double d = std::numeric_limits<double>::infinity();
-      for (const Segment& o : to) d = std::min(d, point_segment(p, o));
+      for (const Segment& o : to)
+        d = std::min(d, test::textbook_segment_distance(p, o.first, o.second));
       largest = std::max(largest, d);
       sum += d;
       ++n;

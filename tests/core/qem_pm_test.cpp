@@ -405,29 +405,6 @@ TEST_P(QemPm, SimplificationMakesNoSelfIntersection) {
   expect_simplification_adds_no_crossing(built(GetParam()).crmr, GetParam(), true);
 }
 
-// Distance from p to the closed triangle abc, written here rather than taken from smr/core (the
-// oracle below shares no geometry with the RCF): to its plane when p projects inside it, else to
-// its nearest edge (a zero-area triangle is its edges).
-double distance_to_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-  const auto to_segment = [&](const Vec3& s, const Vec3& t) {
-    const Vec3 st = t - s;
-    const double l2 = glm::dot(st, st);
-    const double u = l2 > 0.0 ? std::clamp(glm::dot(p - s, st) / l2, 0.0, 1.0) : 0.0;
-    return glm::length(p - (s + u * st));
-  };
-  const Vec3 n = glm::cross(b - a, c - a);
-  const double n2 = glm::dot(n, n);
-  if (n2 > 0.0) {
-    const Vec3 q = p - (glm::dot(p - a, n) / n2) * n;  // p projected on the plane
-    if (glm::dot(glm::cross(b - a, q - a), n) >= 0.0 &&
-        glm::dot(glm::cross(c - b, q - b), n) >= 0.0 &&
-        glm::dot(glm::cross(a - c, q - c), n) >= 0.0) {
-      return glm::length(p - q);
-    }
-  }
-  return std::min({to_segment(a, b), to_segment(b, c), to_segment(c, a)});
-}
-
 // The 3-D screen-space rule pointwise, from its definition (Brown 4.6.3) with the camera's own
 // numbers, not the RCF's functions. With culling off nothing may escape the rule, and Theorem
 // 5.1.1 gives every output triangle t that an op replaces the screen-space component at its
@@ -464,9 +441,9 @@ TEST_P(QemPm, ScreenSpaceRuleHoldsPointwiseAndCullingSavesTriangles) {
       if (!t.killer.valid()) continue;  // final: the finest the model has
       ++checked;
       const double error = (1.0 - t.death_res) * (info.err0 - info.err_final) + info.err_final;
-      const double px =
-          error * focal /
-          distance_to_triangle(cam.eye, op.position(t, 0), op.position(t, 1), op.position(t, 2));
+      const double px = error * focal /
+                        test::textbook_triangle_distance(cam.eye, op.position(t, 0),
+                                                         op.position(t, 1), op.position(t, 2));
       closest = std::max(closest, px / tau);
       if (px > tau * (1.0 + 1e-9) && failures++ == 0) {
         first = "op " + std::to_string(ref.op.value) + " triangle " + std::to_string(ref.index) +

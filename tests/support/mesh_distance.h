@@ -10,9 +10,37 @@
 #include <cstdlib>
 #include <vector>
 
+#include <glm/geometric.hpp>
+
 #include "smr/core/geometry.h"
 
 namespace smr::test {
+
+/// Textbook distances, written independently of smr/core's (oracles for it and for code using it).
+/// From p to the closed segment ab (a point when a == b).
+inline double textbook_segment_distance(const Vec3& p, const Vec3& a, const Vec3& b) {
+  const Vec3 ab = b - a;
+  const double l2 = glm::dot(ab, ab);
+  const double t = l2 > 0.0 ? std::clamp(glm::dot(p - a, ab) / l2, 0.0, 1.0) : 0.0;
+  return glm::length(p - (a + t * ab));
+}
+/// From p to the closed triangle abc: to its plane when p projects inside it, else to its
+/// nearest edge (a zero-area triangle is its edges).
+inline double textbook_triangle_distance(const Vec3& p, const Vec3& a, const Vec3& b,
+                                         const Vec3& c) {
+  const Vec3 n = glm::cross(b - a, c - a);
+  const double n2 = glm::dot(n, n);
+  if (n2 > 0.0) {
+    const Vec3 q = p - (glm::dot(p - a, n) / n2) * n;  // p projected on the plane
+    if (glm::dot(glm::cross(b - a, q - a), n) >= 0.0 &&
+        glm::dot(glm::cross(c - b, q - b), n) >= 0.0 &&
+        glm::dot(glm::cross(a - c, q - c), n) >= 0.0) {
+      return glm::length(p - q);
+    }
+  }
+  return std::min({textbook_segment_distance(p, a, b), textbook_segment_distance(p, b, c),
+                   textbook_segment_distance(p, c, a)});
+}
 
 class TriangleSoupDistance {
  public:
