@@ -1052,9 +1052,10 @@ class Builder {
         ++count;
       }
     }
-    grid_.reset(bounds.empty() ? Vec3(0.0) : bounds.lo, count ? 2.0 * edges / double(count) : 1.0);
-    archive_.reset(bounds.empty() ? Vec3(0.0) : bounds.lo,
-                   count ? 2.0 * edges / double(count) : 1.0);
+    const Vec3 origin = bounds.empty() ? Vec3(0.0) : bounds.lo;
+    const double cell = count ? 2.0 * edges / double(count) : 1.0;
+    grid_.reset(origin, cell);
+    archive_.reset(origin, cell);
     for (std::uint32_t id = 0; id < tris_.size(); ++id) {
       if (tris_[id].destroyer == kNone) grid_.insert(id, box_of(tris_[id].v));
     }
