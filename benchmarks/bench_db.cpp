@@ -39,15 +39,15 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "base/error.h"
 #include "benchmarks/bench_common.h"
-#include "smr/build/greedy_tin.h"
+#include "smr/builders/greedy_tin.h"
 #include "smr/db/database.h"
 #include "smr/db/page.h"
 #include "smr/extract/extract.h"
 #include "smr/rcf/spec.h"
 #include "storage/checksum.h"
 #include "storage/codec.h"
-#include "storage/error.h"
 #include "storage/lmdb_env.h"
 
 namespace {

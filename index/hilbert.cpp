@@ -1,7 +1,7 @@
 // Skilling 2004, "Programming the Hilbert curve": AxestoTranspose, then bit interleaving.
 #include "index/hilbert.h"
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace smr::index {
 

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <limits>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace smr::index::detail {
 namespace {

@@ -11,10 +11,10 @@
 #include <unordered_map>
 #include <utility>
 
+#include "base/error.h"
 #include "index/hilbert.h"
 #include "index/node_codec.h"
 #include "storage/checksum.h"
-#include "storage/error.h"
 
 namespace smr::index {
 namespace {

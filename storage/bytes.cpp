@@ -3,7 +3,7 @@
 #include <bit>
 #include <cstring>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace smr::storage {
 namespace {

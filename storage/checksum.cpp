@@ -6,7 +6,7 @@
 
 #include <xxhash.h>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace smr::storage {
 namespace {

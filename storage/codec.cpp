@@ -11,8 +11,8 @@
 #include <cstdint>
 #include <string>
 
+#include "base/error.h"
 #include "storage/codec_draco.h"
-#include "storage/error.h"
 
 namespace smr::storage {
 namespace {

@@ -26,8 +26,8 @@
 #include <draco/compression/expert_encode.h>
 #include <draco/mesh/mesh.h>
 
+#include "base/error.h"
 #include "storage/codec_draco.h"
-#include "storage/error.h"
 
 namespace smr::storage::detail {
 namespace {

@@ -5,8 +5,8 @@
 
 #include <zstd.h>
 
+#include "base/error.h"
 #include "storage/codec.h"
-#include "storage/error.h"
 
 namespace smr::storage {
 

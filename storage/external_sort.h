@@ -31,7 +31,7 @@
 #include <utility>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "storage/temp_file.h"
 
 namespace smr::storage {

@@ -18,7 +18,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "storage/mapped_file.h"
 
 namespace smr::storage {

@@ -9,7 +9,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace smr::storage {
 

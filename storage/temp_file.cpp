@@ -8,7 +8,7 @@
 #include <filesystem>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace smr::storage {
 

@@ -21,9 +21,10 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include "smr/build/block_tin.h"
-#include "smr/build/greedy_tin.h"
-#include "smr/build/qem_pm.h"
+#include "base/error.h"
+#include "smr/builders/block_tin.h"
+#include "smr/builders/greedy_tin.h"
+#include "smr/builders/qem_pm.h"
 #include "smr/core/invariants.h"
 #include "smr/db/database.h"
 #include "smr/extract/extract.h"
@@ -33,7 +34,6 @@
 #include "smr/io/render.h"
 #include "smr/io/synthetic.h"
 #include "smr/rcf/spec.h"
-#include "storage/error.h"
 #include "tools/progress.h"
 
 namespace {

@@ -52,12 +52,12 @@
 #include <glm/geometric.hpp>
 #include <nlohmann/json.hpp>
 
+#include "base/error.h"
 #include "benchmarks/bench_common.h"
-#include "smr/build/qem_pm.h"
+#include "smr/builders/qem_pm.h"
 #include "smr/extract/extract.h"
 #include "smr/io/mesh_reader.h"
 #include "smr/rcf/spec.h"
-#include "storage/error.h"
 
 namespace {
 

@@ -19,10 +19,10 @@
 
 #include <nlohmann/json.hpp>
 
+#include "base/error.h"
 #include "smr/core/parallel.h"
 #include "smr/db/page.h"
 #include "storage/checksum.h"
-#include "storage/error.h"
 #include "storage/external_sort.h"
 #include "storage/record_file.h"
 #include "storage/temp_file.h"

@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <unordered_map>
 
+#include "base/error.h"
 #include "smr/core/crmr.h"
-#include "storage/error.h"
 
 namespace smr {
 

@@ -7,7 +7,7 @@
 #include <limits>
 #include <string>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace smr {
 

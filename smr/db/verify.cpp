@@ -5,10 +5,10 @@
 
 #include <nlohmann/json.hpp>
 
+#include "base/error.h"
 #include "smr/db/database.h"
 #include "smr/db/page.h"
 #include "storage/checksum.h"
-#include "storage/error.h"
 
 namespace smr {
 

@@ -16,9 +16,9 @@
 #include <unordered_map>
 #include <utility>
 
+#include "base/error.h"
 #include "smr/core/id_map.h"
 #include "smr/core/invariants.h"
-#include "storage/error.h"
 
 namespace smr {
 

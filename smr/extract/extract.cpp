@@ -10,8 +10,8 @@
 #include <utility>
 #include <vector>
 
+#include "base/error.h"
 #include "smr/extract/expansion.h"
-#include "storage/error.h"
 
 namespace smr {
 

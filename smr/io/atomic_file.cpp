@@ -10,7 +10,7 @@
 #include <cstring>
 #include <filesystem>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace smr {
 

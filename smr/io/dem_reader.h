@@ -1,7 +1,7 @@
 // Reading DEMs into a Heightfield (smr/core/heightfield.h conventions: row 0 = south, (x0, y0) =
 // centre of sample (0, 0), dx, dy > 0, `valid` empty when every sample has data).
 //
-// Every reader throws smr::Error (storage/error.h): kIo when the operating system refuses
+// Every reader throws smr::Error (base/error.h): kIo when the operating system refuses
 // (missing file, permission), kInvalidInput for anything wrong with the content; the message names
 // the file (and the band / array / zip member) and says what was expected. No-data samples hold
 // z = 0 (finite, so that code that forgets `valid` cannot be poisoned by NaN).

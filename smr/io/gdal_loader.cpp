@@ -7,10 +7,10 @@
 #include <mutex>
 #include <vector>
 
+#include "base/error.h"
 #include "smr/io/dem_reader.h"
 #include "smr/io/gdal_module.h"
 #include "smr/io/gdal_raster.h"
-#include "storage/error.h"
 
 namespace smr {
 

@@ -20,9 +20,9 @@
 #include <mutex>
 #include <new>
 
+#include "base/error.h"
 #include "smr/io/atomic_file.h"
 #include "smr/io/gdal_module.h"
-#include "storage/error.h"
 
 namespace smr {
 

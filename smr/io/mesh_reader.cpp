@@ -30,7 +30,7 @@
 #include <span>
 #include <vector>
 
-#include "storage/error.h"
+#include "base/error.h"
 #include "storage/mapped_file.h"
 
 namespace smr {

@@ -27,7 +27,7 @@
 //
 // Counts are never trusted: a count the rest of the file cannot hold ("the header says 4000000000
 // vertices, the file has room for at most N") is rejected before anything is allocated, and no
-// read goes past the buffer. Every problem throws smr::Error (storage/error.h): kIo when the file
+// read goes past the buffer. Every problem throws smr::Error (base/error.h): kIo when the file
 // cannot be opened or read, kInvalidInput for anything wrong with its content. Messages name the
 // file, the element (vertex / face number, 0-based in file order except for OBJ's 1-based
 // vertex numbers, plus the line for text formats) and what was expected, and say which repair, if

@@ -23,9 +23,9 @@
 #include <tuple>
 #include <utility>
 
+#include "base/error.h"
 #include "smr/io/dem_reader.h"
 #include "smr/io/mesh_writer.h"
-#include "storage/error.h"
 
 namespace smr {
 

@@ -12,8 +12,8 @@
 
 #include <glm/geometric.hpp>
 
+#include "base/error.h"
 #include "smr/io/mesh_writer.h"
-#include "storage/error.h"
 
 namespace smr {
 

@@ -10,8 +10,8 @@
 #include <thread>
 #include <vector>
 
+#include "base/error.h"
 #include "smr/core/ids.h"
-#include "storage/error.h"
 
 namespace smr {
 

@@ -5,7 +5,7 @@
 
 #include <glm/geometric.hpp>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace smr {
 

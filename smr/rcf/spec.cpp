@@ -4,7 +4,7 @@
 #include <memory>
 #include <string>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace smr {
 

@@ -10,13 +10,13 @@
 #include <iterator>
 #include <unordered_map>
 
-#include "smr/build/block_tin.h"
+#include "base/error.h"
+#include "smr/builders/block_tin.h"
 #include "smr/core/invariants.h"
 #include "smr/core/parallel.h"
 #include "smr/db/database.h"
 #include "smr/db/page.h"
 #include "smr/extract/extract.h"
-#include "storage/error.h"
 #include "tests/support/datasets.h"
 #include "tests/support/files.h"
 #include "tests/support/meshes.h"

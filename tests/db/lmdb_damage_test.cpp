@@ -35,12 +35,12 @@
 #include <utility>
 #include <vector>
 
-#include "smr/build/greedy_tin.h"
+#include "base/error.h"
+#include "smr/builders/greedy_tin.h"
 #include "smr/db/database.h"
 #include "smr/extract/extract.h"
 #include "smr/io/synthetic.h"
 #include "smr/rcf/spec.h"
-#include "storage/error.h"
 #include "storage/lmdb_env.h"
 #include "tests/support/extraction_result.h"
 #include "tests/support/files.h"

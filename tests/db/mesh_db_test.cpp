@@ -10,10 +10,10 @@
 
 #include <gtest/gtest.h>
 
+#include "base/error.h"
 #include "smr/core/invariants.h"
 #include "smr/db/database.h"
 #include "smr/extract/extract.h"
-#include "storage/error.h"
 #include "tests/support/files.h"
 #include "tests/support/meshes.h"
 #include "tests/support/sanitized.h"

@@ -15,10 +15,10 @@
 #include <optional>
 #include <thread>
 
+#include "base/error.h"
 #include "smr/db/database.h"
 #include "smr/extract/extract.h"
 #include "smr/rcf/spec.h"
-#include "storage/error.h"
 #include "storage/lmdb_env.h"
 #include "tests/support/datasets.h"
 #include "tests/support/extraction_result.h"

@@ -22,8 +22,8 @@
 #include <string>
 #include <string_view>
 
+#include "base/error.h"
 #include "smr/io/mesh_reader.h"
-#include "storage/error.h"
 
 namespace smr::fuzz {
 

@@ -7,8 +7,8 @@
 #include <random>
 #include <vector>
 
+#include "base/error.h"
 #include "index/rtree.h"
-#include "storage/error.h"
 
 namespace smr::index::test {
 

@@ -13,7 +13,7 @@
 
 #include <gtest/gtest.h>
 
-#include "storage/error.h"
+#include "base/error.h"
 
 namespace smr::test {
 

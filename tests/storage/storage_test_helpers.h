@@ -11,8 +11,8 @@
 
 #include <gtest/gtest.h>
 
+#include "base/error.h"
 #include "storage/bytes.h"
-#include "storage/error.h"
 
 namespace smr::storage::test {
 

@@ -9,7 +9,7 @@
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
 
-#include "smr/build/greedy_tin.h"
+#include "smr/builders/greedy_tin.h"
 #include "smr/core/invariants.h"
 
 namespace smr::test {

@@ -1,13 +1,13 @@
 // Out-of-core assembly of a decimation's CRMR; op_assembly.h describes the method.
-#include "smr/build/op_assembly.h"
+#include "smr/builders/op_assembly.h"
 
 #include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <vector>
 
+#include "base/error.h"
 #include "smr/core/parallel.h"
-#include "storage/error.h"
 #include "storage/external_sort.h"
 #include "storage/record_file.h"
 

@@ -5,7 +5,7 @@
 //  2. emit: order the reversed collapses (vertex splits) topologically, largest error first,
 //     and replay them from the base mesh to assign triangles to ops, find each fragment boundary
 //     edge's closest coarser version (Brown 4.5.1) and the mesh error before each split.
-#include "smr/build/qem_pm.h"
+#include "smr/builders/qem_pm.h"
 
 #include <algorithm>
 #include <array>
@@ -27,13 +27,13 @@
 
 #include <glm/geometric.hpp>
 
-#include "smr/build/exact_intersection.h"
-#include "smr/build/op_assembly.h"
-#include "smr/build/star_distance.h"
+#include "base/error.h"
+#include "smr/builders/exact_intersection.h"
+#include "smr/builders/op_assembly.h"
+#include "smr/builders/star_distance.h"
 #include "smr/core/geometry.h"
 #include "smr/core/id_map.h"
 #include "smr/core/parallel.h"
-#include "storage/error.h"
 #include "storage/external_sort.h"
 
 namespace smr {

@@ -1,4 +1,4 @@
-// Hierarchical block decimation (smr/build/block_tin.h) with tiny blocks, so that the hierarchy
+// Hierarchical block decimation (smr/builders/block_tin.h) with tiny blocks, so that the hierarchy
 // has several levels: CRMR invariants, the error bound of every fragment triangle against the
 // source samples, cuts that mix resolutions across block borders (tiling, RCF, set formula ==
 // advancing front), lossless reproduction, determinism and the DAG height bound.
@@ -11,11 +11,11 @@
 #include <string>
 #include <tuple>
 
-#include "smr/build/block_tin.h"
+#include "base/error.h"
+#include "smr/builders/block_tin.h"
 #include "smr/core/invariants.h"
 #include "smr/extract/extract.h"
 #include "smr/io/synthetic.h"
-#include "storage/error.h"
 #include "tests/support/datasets.h"
 #include "tests/support/oracles.h"
 #include "tests/support/rcf_spread.h"

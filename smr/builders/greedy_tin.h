@@ -24,8 +24,8 @@ struct GreedyTinOptions {
   std::uint64_t max_vertices = 0;
   /// Vertices of the base mesh R^0: 4 = the corner triangulation; more = a coarse greedy TIN.
   std::uint64_t base_vertices = 4;
-  /// Grid samples (col, row) put into R^0 besides the corners (smr/build/block_tin.cpp: a block's
-  /// border vertices, which its neighbour shares).
+  /// Grid samples (col, row) put into R^0 besides the corners (smr/builders/block_tin.cpp: a
+  /// block's border vertices, which its neighbour shares).
   std::vector<std::pair<std::uint32_t, std::uint32_t>> initial_vertices;
   /// Never insert a sample of the grid's outer rows and columns (a block whose border vertices
   /// are given in initial_vertices and shared with its neighbours). Applies to DEMs with no-data

@@ -9,9 +9,9 @@
 
 #include <unordered_set>
 
+#include "base/error.h"
 #include "smr/io/synthetic.h"
 #include "smr/rcf/spec.h"
-#include "storage/error.h"
 #include "tests/support/datasets.h"
 #include "tests/support/sanitized.h"
 

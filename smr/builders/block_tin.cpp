@@ -3,7 +3,7 @@
 // Geometry is exact where it decides topology: vertices sit on integer grid positions, so the
 // orientation and in-circle tests of the hole re-triangulation are evaluated exactly in 64- and
 // 128-bit integers. Errors are doubles, rounded outward by the DEM's exact tolerance.
-#include "smr/build/block_tin.h"
+#include "smr/builders/block_tin.h"
 
 #include <algorithm>
 #include <array>
@@ -19,13 +19,13 @@
 #include <utility>
 #include <vector>
 
-#include "smr/build/greedy_tin.h"
-#include "smr/build/op_assembly.h"
-#include "smr/build/triangle_rows.h"
+#include "base/error.h"
+#include "smr/builders/greedy_tin.h"
+#include "smr/builders/op_assembly.h"
+#include "smr/builders/triangle_rows.h"
 #include "smr/core/chunked.h"
 #include "smr/core/id_map.h"
 #include "smr/core/parallel.h"
-#include "storage/error.h"
 #include "storage/temp_file.h"
 
 namespace smr {

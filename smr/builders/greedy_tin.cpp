@@ -24,7 +24,7 @@
 //   (their distinct creators) and the bounds (compute_op_bounds, while the op is in cache), and
 //   finish sets birth_res, killer/death_res and children in one pass, then compute_rois. The
 //   result is field for field what link_dag computes (bench_build --fingerprint).
-#include "smr/build/greedy_tin.h"
+#include "smr/builders/greedy_tin.h"
 
 #include <CGAL/Delaunay_triangulation_2.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
@@ -41,8 +41,8 @@
 #include <utility>
 #include <vector>
 
-#include "smr/build/triangle_rows.h"
-#include "storage/error.h"
+#include "base/error.h"
+#include "smr/builders/triangle_rows.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>

@@ -1,4 +1,4 @@
-#include "smr/build/exact_intersection.h"
+#include "smr/builders/exact_intersection.h"
 
 #include <algorithm>
 #include <array>

@@ -1,4 +1,4 @@
-// The QEM progressive-mesh builder (smr/build/qem_pm.h) on real meshes no one here made (CGAL's
+// The QEM progressive-mesh builder (smr/builders/qem_pm.h) on real meshes no one here made (CGAL's
 // demo data, all eight: pig.stl read with the repairs): the CRMR invariants, exact reproduction
 // of the source when fully refined, coalescing and DAG depth, no collapse turning a normal past
 // the limit, and, for a spread of 3-D RCFs (object-space levels, cameras around and close to the
@@ -17,11 +17,11 @@
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
 
-#include "smr/build/qem_pm.h"
+#include "base/error.h"
+#include "smr/builders/qem_pm.h"
 #include "smr/core/invariants.h"
 #include "smr/extract/extract.h"
 #include "smr/io/mesh_reader.h"
-#include "storage/error.h"
 #include "tests/support/datasets.h"
 #include "tests/support/mesh_distance.h"
 #include "tests/support/meshes.h"
@@ -495,7 +495,7 @@ TEST_P(QemPm, MostNormalConesAreNarrow) {
 }
 
 // Normal turns, per collapse, exactly as the builder guarantees them (valid() in
-// smr/build/qem_pm.cpp): a half-edge collapse v' -> u turns each triangle of the star of v' that
+// smr/builders/qem_pm.cpp): a half-edge collapse v' -> u turns each triangle of the star of v' that
 // does not hold u into the same triangle with u in place of v'; that triangle must not be
 // degenerate, and when the old one was not, the angle between their normals is at most
 // max_normal_turn_degrees. Coalescing hides the triangles between the splits of one op, so this
