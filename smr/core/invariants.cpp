@@ -110,11 +110,11 @@ std::string op_name(OpId id) {
   return "op " + std::to_string(id.value);
 }
 
-void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
-                    std::unordered_map<std::uint64_t, std::pair<OpId, Vec3>>& vertex_owner) {
-  const CrmrInfo& info = crmr.header;
-  const std::string name = op_name(op.id);
-  // Vertices: new ones introduced here, others introduced earlier with identical positions.
+using VertexOwners = std::unordered_map<std::uint64_t, std::pair<OpId, Vec3>>;
+
+// Vertices: new ones introduced by `op`, others introduced earlier with identical positions.
+void check_vertices(const Op& op, const std::string& name, InvariantReport& r,
+                    VertexOwners& vertex_owner) {
   for (std::size_t i = 0; i < op.vertices.size(); ++i) {
     const Vertex& v = op.vertices[i];
     ++r.checked;
@@ -133,37 +133,104 @@ void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
              " has a different position than in " + op_name(it->second.first));
     }
   }
-  std::vector<GridTri> f, pre;
+}
+
+bool vertex_index_out_of_range(const Op& op, const FragmentTriangle& t, std::size_t i,
+                               const std::string& name, InvariantReport& r) {
+  for (auto v : t.v) {
+    if (v >= op.vertices.size()) {
+      r.fail(name + ": triangle " + std::to_string(i) + " has a vertex index out of range");
+      return true;
+    }
+  }
+  return false;
+}
+
+// Neighbour links within F are symmetric and share the reversed edge a-b of triangle i's edge k.
+void check_neighbour_link(const Op& op, const FragmentTriangle& t, std::size_t i, int k,
+                          const std::string& name, InvariantReport& r) {
+  const VertexId a = op.vertex_id(t, k), b = op.vertex_id(t, (k + 1) % 3);
+  const auto& n = op.fragment.at(static_cast<std::size_t>(t.nbr[k]));
+  bool found = false;
+  for (int j = 0; j < 3; ++j) {
+    found |= op.vertex_id(n, j) == b && op.vertex_id(n, (j + 1) % 3) == a &&
+             n.nbr[j] == static_cast<std::int32_t>(i);
+  }
+  if (!found) r.fail(name + ": asymmetric neighbour link at triangle " + std::to_string(i));
+}
+
+// A coarser link (Hypermesh, Brown 4.5.1) of triangle i's edge k points to a coarser op and
+// names the same edge there.
+void check_coarser_link(const Crmr& crmr, const Op& op, const FragmentTriangle& t, std::size_t i,
+                        int k, const CoarserLink& link, const std::string& name,
+                        InvariantReport& r) {
+  if (op.id == kBaseOp || link.coarser.tri.op >= op.id) {
+    r.fail(name + ": coarser link points to a finer op");
+    return;
+  }
+  const VertexId a = op.vertex_id(t, k), b = op.vertex_id(t, (k + 1) % 3);
+  const Op& target = crmr.ops.at(link.coarser.tri.op.value);
+  const FragmentTriangle& tt = target.fragment.at(link.coarser.tri.index);
+  const int e = link.coarser.edge;
+  const VertexId ta = target.vertex_id(tt, e), tb = target.vertex_id(tt, (e + 1) % 3);
+  if (!((ta == a && tb == b) || (ta == b && tb == a))) {
+    r.fail(name + ": coarser link of triangle " + std::to_string(i) + " names a different edge");
+  }
+}
+
+// PreF: one triangle of a parent's fragment per entry, and pre_tris holds each as its creator
+// does (corners and flags). visit(creator, triangle) sees every PreF triangle.
+template <class Visit>
+void check_pre(const Crmr& crmr, const Op& op, const std::string& name, InvariantReport& r,
+               const char* differs, Visit&& visit) {
+  if (op.pre_tris.size() != op.pre.size()) r.fail(name + ": pre_tris does not match PreF");
+  for (std::size_t i = 0; i < op.pre.size(); ++i) {
+    const TriRef& t = op.pre[i];
+    const Op& p = crmr.ops.at(t.op.value);
+    const FragmentTriangle& pt = p.fragment.at(t.index);
+    visit(p, pt);
+    if (i >= op.pre_tris.size()) continue;
+    const PreTriangle& mine = op.pre_tris[i];
+    bool same = mine.flags == pt.flags;
+    for (int k = 0; k < 3 && same; ++k) {
+      same = mine.v[k] < op.vertices.size() && op.vertices[mine.v[k]] == p.vertices[pt.v[k]];
+    }
+    if (!same) r.fail(name + ": PreF triangle " + std::to_string(i) + differs);
+  }
+}
+
+// Union-find over small index sets (fragment triangles, F and PreF pieces).
+struct Components {
+  explicit Components(std::size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0); }
+  std::size_t find(std::size_t x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  }
+  void join(std::size_t x, std::size_t y) { parent[find(x)] = find(y); }
+  std::vector<std::size_t> parent;
+};
+
+// F's triangles on the grid, checking indices, orientation, neighbour links and coarser links;
+// false if an index is out of range (nothing more can be checked).
+bool check_terrain_fragment(const Crmr& crmr, const Op& op, const std::string& name,
+                            InvariantReport& r, std::vector<GridTri>& f) {
+  const CrmrInfo& info = crmr.header;
   for (std::size_t i = 0; i < op.fragment.size(); ++i) {
     const FragmentTriangle& t = op.fragment[i];
     ++r.checked;
-    bool bad_index = false;
-    for (auto v : t.v) bad_index |= v >= op.vertices.size();
-    if (bad_index) {
-      r.fail(name + ": triangle " + std::to_string(i) + " has a vertex index out of range");
-      return;
-    }
+    if (vertex_index_out_of_range(op, t, i, name, r)) return false;
     f.push_back(grid_tri(info, op, t));
     if (orient(f.back().p[0], f.back().p[1], f.back().p[2]) <= 0) {
       r.fail(name + ": triangle " + std::to_string(i) + " is not counter-clockwise");
     }
-    // Neighbour links within F are symmetric and share the reversed edge.
     for (int k = 0; k < 3; ++k) {
-      const VertexId a = op.vertex_id(t, k), b = op.vertex_id(t, (k + 1) % 3);
       if (t.nbr[k] >= 0) {
-        const auto& n = op.fragment.at(static_cast<std::size_t>(t.nbr[k]));
-        bool found = false;
-        for (int j = 0; j < 3; ++j) {
-          found |= op.vertex_id(n, j) == b && op.vertex_id(n, (j + 1) % 3) == a &&
-                   n.nbr[j] == static_cast<std::int32_t>(i);
-        }
-        if (!found) r.fail(name + ": asymmetric neighbour link at triangle " + std::to_string(i));
+        check_neighbour_link(op, t, i, k, name, r);
         continue;
       }
       const CoarserLink* link =
           op.coarser_link(static_cast<std::uint32_t>(i), static_cast<std::uint8_t>(k));
-      const bool model_boundary = on_domain_boundary(info, f.back().p[k], f.back().p[(k + 1) % 3]);
-      if (model_boundary) {
+      if (on_domain_boundary(info, f.back().p[k], f.back().p[(k + 1) % 3])) {
         if (link != nullptr) r.fail(name + ": model boundary edge has a coarser link");
         continue;
       }
@@ -174,40 +241,17 @@ void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
         }
         continue;
       }
-      if (link->coarser.tri.op >= op.id) {
-        r.fail(name + ": coarser link points to a finer op");
-        continue;
-      }
-      const Op& target = crmr.ops.at(link->coarser.tri.op.value);
-      const FragmentTriangle& tt = target.fragment.at(link->coarser.tri.index);
-      const int e = link->coarser.edge;
-      const VertexId ta = target.vertex_id(tt, e), tb = target.vertex_id(tt, (e + 1) % 3);
-      if (!((ta == a && tb == b) || (ta == b && tb == a))) {
-        r.fail(name + ": coarser link of triangle " + std::to_string(i) +
-               " names a different edge");
-      }
+      check_coarser_link(crmr, op, t, i, k, *link, name, r);
     }
   }
-  if (op.pre_tris.size() != op.pre.size()) r.fail(name + ": pre_tris does not match PreF");
-  for (std::size_t i = 0; i < op.pre.size(); ++i) {
-    const TriRef& t = op.pre[i];
-    const Op& p = crmr.ops.at(t.op.value);
-    const FragmentTriangle& pt = p.fragment.at(t.index);
-    pre.push_back(grid_tri(info, p, pt));
-    if (i >= op.pre_tris.size()) continue;
-    const PreTriangle& mine = op.pre_tris[i];
-    bool same = mine.flags == pt.flags;
-    for (int k = 0; k < 3 && same; ++k) {
-      same = mine.v[k] < op.vertices.size() && op.vertices[mine.v[k]] == p.vertices[pt.v[k]];
-    }
-    if (!same) {
-      r.fail(name + ": PreF triangle " + std::to_string(i) +
-             " differs from the triangle of its creator (corners or flags)");
-    }
-  }
-  if (op.id == kBaseOp) return;
+  return true;
+}
 
-  // Complete (Brown 4.4.1): every PreF boundary edge off the model boundary is an F boundary edge.
+// Complete (Brown 4.4.1): every PreF boundary edge off the model boundary is an F boundary edge;
+// and F and PreF cover the same region: equal areas (exact).
+void check_terrain_complete(const CrmrInfo& info, const std::vector<GridTri>& f,
+                            const std::vector<GridTri>& pre, const std::string& name,
+                            InvariantReport& r) {
   ++r.checked;
   const auto bf = boundary_of(f), bp = boundary_of(pre);
   std::unordered_set<DirectedEdge, EdgeHash> bfs(bf.begin(), bf.end());
@@ -222,41 +266,38 @@ void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
              std::to_string(e.b) + " is not on the boundary of F");
     }
   }
-  // F and PreF cover the same region: equal areas (exact).
   auto area2 = [](const std::vector<GridTri>& ts) {
     std::int64_t s = 0;
     for (const GridTri& t : ts) s += orient(t.p[0], t.p[1], t.p[2]);
     return s;
   };
   if (area2(f) != area2(pre)) r.fail(name + ": F and PreF cover different areas");
+}
 
-  // Minimal (Brown 4.4.1): no proper subsets S1 of PreF and S2 of F share a boundary. Such a
-  // pair covers a region that no other triangle of the op overlaps, so it is a union of connected
-  // components of the graph joining overlapping PreF and F triangles; the op is minimal iff no
-  // proper union of components has equal PreF and F boundaries. (An insertion on an edge gives two
-  // components whose boundaries differ by the split edge: minimal.)
+// Minimal (Brown 4.4.1): no proper subsets S1 of PreF and S2 of F share a boundary. Such a
+// pair covers a region that no other triangle of the op overlaps, so it is a union of connected
+// components of the graph joining overlapping PreF and F triangles; the op is minimal iff no
+// proper union of components has equal PreF and F boundaries. (An insertion on an edge gives two
+// components whose boundaries differ by the split edge: minimal.)
+void check_terrain_minimal(const std::vector<GridTri>& f, const std::vector<GridTri>& pre,
+                           const std::string& name, InvariantReport& r) {
   ++r.checked;
   const std::size_t n = f.size() + pre.size();
-  std::vector<std::size_t> parent(n);
-  std::iota(parent.begin(), parent.end(), 0);
-  auto find = [&](std::size_t x) {
-    while (parent[x] != x) x = parent[x] = parent[parent[x]];
-    return x;
-  };
+  Components c(n);
   for (std::size_t i = 0; i < f.size(); ++i) {
     for (std::size_t j = 0; j < pre.size(); ++j) {
-      if (interiors_overlap(f[i], pre[j])) parent[find(i)] = find(f.size() + j);
+      if (interiors_overlap(f[i], pre[j])) c.join(i, f.size() + j);
     }
   }
   std::vector<std::size_t> roots;
   for (std::size_t i = 0; i < n; ++i) {
-    if (find(i) == i) roots.push_back(i);
+    if (c.find(i) == i) roots.push_back(i);
   }
   const std::size_t k = std::min<std::size_t>(roots.size(), 12);
   for (std::uint32_t mask = 1; k > 1 && mask + 1 < (1u << k); ++mask) {
     std::vector<GridTri> s1, s2;
     for (std::size_t i = 0; i < n; ++i) {
-      const auto pos_root = std::find(roots.begin(), roots.begin() + k, find(i)) - roots.begin();
+      const auto pos_root = std::find(roots.begin(), roots.begin() + k, c.find(i)) - roots.begin();
       if (pos_root >= static_cast<std::ptrdiff_t>(k) || !(mask & (1u << pos_root))) continue;
       (i < f.size() ? s2 : s1).push_back(i < f.size() ? f[i] : pre[i - f.size()]);
     }
@@ -273,63 +314,46 @@ void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
   }
 }
 
+// One 2.5-D op on its own: vertices, fragment, PreF, completeness and minimality.
+void check_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
+                    VertexOwners& vertex_owner) {
+  const std::string name = op_name(op.id);
+  check_vertices(op, name, r, vertex_owner);
+  std::vector<GridTri> f, pre;
+  if (!check_terrain_fragment(crmr, op, name, r, f)) return;
+  check_pre(crmr, op, name, r, " differs from the triangle of its creator (corners or flags)",
+            [&](const Op& p, const FragmentTriangle& pt) {
+              pre.push_back(grid_tri(crmr.header, p, pt));
+            });
+  if (op.id == kBaseOp) return;
+  check_terrain_complete(crmr.header, f, pre, name, r);
+  check_terrain_minimal(f, pre, name, r);
+}
+
 // The 3-D counterpart of check_op_local: vertices, in-fragment neighbours, coarser links naming
 // the same edge in a coarser op, PreF triangles as their creators hold them, completeness (every
 // F boundary edge with a coarser version is a PreF boundary edge; no area or domain in 3-D) and
 // minimality: one piece of F is glued to the mesh (a vertex split's star; two glued pieces could
 // be two ops), any other piece being a spawned component.
 void check_mesh_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
-                         std::unordered_map<std::uint64_t, std::pair<OpId, Vec3>>& vertex_owner) {
+                         VertexOwners& vertex_owner) {
   const std::string name = op_name(op.id);
-  for (std::size_t i = 0; i < op.vertices.size(); ++i) {
-    const Vertex& v = op.vertices[i];
-    ++r.checked;
-    auto it = vertex_owner.find(v.id.value);
-    if (i < op.new_vertex_count) {
-      if (it != vertex_owner.end()) {
-        r.fail(name + ": new vertex " + std::to_string(v.id.value) + " already introduced by " +
-               op_name(it->second.first));
-      } else {
-        vertex_owner.emplace(v.id.value, std::pair{op.id, v.p});
-      }
-    } else if (it == vertex_owner.end()) {
-      r.fail(name + ": vertex " + std::to_string(v.id.value) + " used before it is introduced");
-    } else if (it->second.second != v.p) {
-      r.fail(name + ": vertex " + std::to_string(v.id.value) +
-             " has a different position than in " + op_name(it->second.first));
-    }
-  }
+  check_vertices(op, name, r, vertex_owner);
   std::unordered_set<DirectedEdge, EdgeHash> f_edges, pre_edges;
   std::vector<DirectedEdge> linked;          // F boundary edges with a coarser version
   std::vector<std::size_t> linked_triangle;  // the F triangle of each
-  std::vector<std::size_t> parent(op.fragment.size());
-  std::iota(parent.begin(), parent.end(), 0);
-  auto find = [&](std::size_t x) {
-    while (parent[x] != x) x = parent[x] = parent[parent[x]];
-    return x;
-  };
+  Components pieces(op.fragment.size());
   for (std::size_t i = 0; i < op.fragment.size(); ++i) {
     const FragmentTriangle& t = op.fragment[i];
     ++r.checked;
-    for (auto v : t.v) {
-      if (v >= op.vertices.size()) {
-        r.fail(name + ": triangle " + std::to_string(i) + " has a vertex index out of range");
-        return;
-      }
-    }
+    if (vertex_index_out_of_range(op, t, i, name, r)) return;
     for (int k = 0; k < 3; ++k) {
       const VertexId a = op.vertex_id(t, k), b = op.vertex_id(t, (k + 1) % 3);
       if (!f_edges.insert({a.value, b.value}).second)
         r.fail(name + ": directed edge used twice in F");
       if (t.nbr[k] >= 0) {
-        const auto& n = op.fragment.at(static_cast<std::size_t>(t.nbr[k]));
-        bool found = false;
-        for (int j = 0; j < 3; ++j) {
-          found |= op.vertex_id(n, j) == b && op.vertex_id(n, (j + 1) % 3) == a &&
-                   n.nbr[j] == static_cast<std::int32_t>(i);
-        }
-        if (!found) r.fail(name + ": asymmetric neighbour link at triangle " + std::to_string(i));
-        parent[find(i)] = find(static_cast<std::size_t>(t.nbr[k]));
+        check_neighbour_link(op, t, i, k, name, r);
+        pieces.join(i, static_cast<std::size_t>(t.nbr[k]));
         continue;
       }
       const CoarserLink* link =
@@ -337,37 +361,15 @@ void check_mesh_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
       if (link == nullptr) continue;  // model boundary (checked through extraction outputs)
       linked.push_back({a.value, b.value});
       linked_triangle.push_back(i);
-      if (op.id == kBaseOp || link->coarser.tri.op >= op.id) {
-        r.fail(name + ": coarser link points to a finer op");
-        continue;
-      }
-      const Op& target = crmr.ops.at(link->coarser.tri.op.value);
-      const FragmentTriangle& tt = target.fragment.at(link->coarser.tri.index);
-      const int e = link->coarser.edge;
-      const VertexId ta = target.vertex_id(tt, e), tb = target.vertex_id(tt, (e + 1) % 3);
-      if (!((ta == a && tb == b) || (ta == b && tb == a))) {
-        r.fail(name + ": coarser link of triangle " + std::to_string(i) +
-               " names a different edge");
-      }
+      check_coarser_link(crmr, op, t, i, k, *link, name, r);
     }
   }
-  if (op.pre_tris.size() != op.pre.size()) r.fail(name + ": pre_tris does not match PreF");
-  for (std::size_t i = 0; i < op.pre.size(); ++i) {
-    const TriRef& t = op.pre[i];
-    const Op& p = crmr.ops.at(t.op.value);
-    const FragmentTriangle& pt = p.fragment.at(t.index);
-    for (int k = 0; k < 3; ++k) {
-      pre_edges.insert({p.vertex_id(pt, k).value, p.vertex_id(pt, (k + 1) % 3).value});
-    }
-    if (i >= op.pre_tris.size()) continue;
-    const PreTriangle& mine = op.pre_tris[i];
-    bool same = mine.flags == pt.flags;
-    for (int k = 0; k < 3 && same; ++k) {
-      same = mine.v[k] < op.vertices.size() && op.vertices[mine.v[k]] == p.vertices[pt.v[k]];
-    }
-    if (!same)
-      r.fail(name + ": PreF triangle " + std::to_string(i) + " differs from its creator's");
-  }
+  check_pre(crmr, op, name, r, " differs from its creator's",
+            [&](const Op& p, const FragmentTriangle& pt) {
+              for (int k = 0; k < 3; ++k) {
+                pre_edges.insert({p.vertex_id(pt, k).value, p.vertex_id(pt, (k + 1) % 3).value});
+              }
+            });
   if (op.id == kBaseOp) return;
   ++r.checked;
   for (const DirectedEdge& e : linked) {
@@ -380,7 +382,7 @@ void check_mesh_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
   // One piece of F is glued to the mesh around PreF; any other piece has no coarser version
   // anywhere: a component the op spawns (Brown Fig. 4.9d).
   std::unordered_set<std::size_t> glued;
-  for (std::size_t t : linked_triangle) glued.insert(find(t));
+  for (std::size_t t : linked_triangle) glued.insert(pieces.find(t));
   if (glued.size() > 1) {
     r.fail(name + " is not minimal: " + std::to_string(glued.size()) +
            " separate pieces of F replace parts of PreF");
