@@ -1,4 +1,4 @@
-// The out-of-core mesh builder (block_pm.h; Hoppe 1998, section 4's block construction in 3-D;
+// The out-of-core mesh builder (block_pm.h; Hoppe 1998's block construction in 3-D;
 // De Floriani et al.'s independent-set decimation within each block).
 #include "smr/builders/block_pm.h"
 

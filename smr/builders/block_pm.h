@@ -1,6 +1,6 @@
 // The out-of-core mesh builder behind build_block_pm (qem_pm.h: BlockPmOptions says what it
 // does): Hoppe 1998's block construction ("Smooth view-dependent level-of-detail control and
-// its application to terrain rendering", section 4) in 3-D, with De Floriani et al.'s
+// its application to terrain rendering") in 3-D, with De Floriani et al.'s
 // independent-set rounds (qem_rounds.h) inside each block. The triangles are sorted by octree
 // leaf cell (an external sort); each leaf block is simplified with its border locked; 2x2x2
 // blocks merge, their shared borders unlock and simplification goes on, up to the root; every

@@ -111,11 +111,7 @@ Box3 make_new_star(CrossingScratch& s, const PmMesh& m, std::uint32_t from, std:
   for (std::uint32_t id : m.star[from]) {
     const Tri& t = m.tris[id];
     if (has(t, to)) continue;
-    std::array<std::uint32_t, 3> v = t.v;
-    for (std::uint32_t& w : v) {
-      if (w == from) w = to;
-    }
-    s.made.push_back(mesh_triangle(m, v));
+    s.made.push_back(mesh_triangle(m, corners_after(t, from, to)));
   }
   Box3 all;
   s.made_boxes.clear();

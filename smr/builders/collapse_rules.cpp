@@ -1,5 +1,5 @@
-// The legal half-edge collapses (Hoppe 1996, section 4.3; Dey et al. 1999's link condition;
-// Garland & Heckbert 1997, section 6.1's boundaries): collapse_rules.h.
+// The legal half-edge collapses (Hoppe et al. 1993; Dey et al. 1999's link condition; Garland &
+// Heckbert 1997, 6.1 boundaries and 6.2 mesh inversion): collapse_rules.h.
 #include "smr/builders/collapse_rules.h"
 
 #include <array>
@@ -33,11 +33,7 @@ bool no_flip(const PmMesh& m, double cos_max_turn, std::uint32_t from, std::uint
   for (std::uint32_t id : m.star[from]) {
     const Tri& t = m.tris[id];
     if (has(t, to)) continue;
-    std::array<std::uint32_t, 3> nv = t.v;
-    for (std::uint32_t& w : nv) {
-      if (w == from) w = to;
-    }
-    const Vec3 before = normal(m, t.v), after = normal(m, nv);
+    const Vec3 before = normal(m, t.v), after = normal(m, corners_after(t, from, to));
     const double lb = glm::length(before), la = glm::length(after);
     if (!(la > 1e-12 * (lb + 1e-300)) || !(la > 0.0)) return false;
     if (lb > 0.0 && glm::dot(before, after) < cos_max_turn * lb * la) return false;

@@ -1,9 +1,9 @@
-// The rules a half-edge collapse must pass (Hoppe 1996, section 4.3's legal moves; Garland &
-// Heckbert 1997, section 6.1's boundaries): the link condition (Dey, Edelsbrunner, Guha & Nekhayev
-// 1999, with a virtual vertex joined to the boundary), no flipped, over-turned or degenerate
-// triangle, a boundary vertex only moves along its boundary, locked vertices stay and no
-// component shrinks below a tetrahedron (closed) or a triangle (open). The self-intersection
-// rule is collapse_crossings.h.
+// The rules a half-edge collapse must pass (Hoppe et al. 1993, "Mesh optimization", its legal
+// edge collapse; Garland & Heckbert 1997, sections 6.1 and 6.2): the link condition (Dey,
+// Edelsbrunner, Guha & Nekhayev 1999, with a virtual vertex joined to the boundary), no
+// flipped, over-turned or degenerate triangle, a boundary vertex only moves along its boundary,
+// locked vertices stay and no component shrinks below a tetrahedron (closed) or a triangle
+// (open). The self-intersection rule is collapse_crossings.h.
 #pragma once
 
 #include <cstdint>

@@ -216,10 +216,7 @@ void collapse_mesh(PmMesh& m, CollapseLog& log, std::uint32_t from, std::uint32_
     const std::uint32_t id = log.old_tris[k];
     if (has(m.tris[id], to)) continue;
     Tri t;
-    t.v = m.tris[id].v;
-    for (std::uint32_t& w : t.v) {
-      if (w == from) w = to;
-    }
+    t.v = corners_after(m.tris[id], from, to);
     t.e = new_e[made++];
     t.creator = c;
     log.new_tris.push_back(add_triangle(m, t));

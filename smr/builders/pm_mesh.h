@@ -1,7 +1,7 @@
-// The mesh under half-edge collapse (Hoppe 1996, "Progressive meshes", section 3, in the
-// half-edge form Kim & Lee 2001 use: v' -> v, v keeps its position): per-vertex stars,
-// quadrics, boundary flags and components, and the log of every collapse (the star it removed,
-// the triangles it made) that emit (pm_emit.h) reverses into vertex-split ops (Brown 4.4.1).
+// The mesh under half-edge collapse (Hoppe 1996, "Progressive meshes", section 3's ecol, in
+// its half-edge form: v' -> v, v keeps its position): per-vertex stars, quadrics, boundary
+// flags and components, and the log of every collapse (the star it removed, the triangles it
+// made) that emit (pm_emit.h) reverses into vertex-split ops (Brown 4.4.1).
 // Internal to the QEM builders (qem_pm.h, block_pm.h).
 #pragma once
 
@@ -81,6 +81,15 @@ struct CollapseLog {
 
 inline bool has(const Tri& t, std::uint32_t v) {
   return t.v[0] == v || t.v[1] == v || t.v[2] == v;
+}
+// t's corners once `from` has collapsed onto `to`.
+inline std::array<std::uint32_t, 3> corners_after(const Tri& t, std::uint32_t from,
+                                                  std::uint32_t to) {
+  std::array<std::uint32_t, 3> v = t.v;
+  for (std::uint32_t& w : v) {
+    if (w == from) w = to;
+  }
+  return v;
 }
 inline Vec3 normal(const PmMesh& m, const std::array<std::uint32_t, 3>& v) {
   return glm::cross(m.pos[v[1]] - m.pos[v[0]], m.pos[v[2]] - m.pos[v[0]]);

@@ -1,6 +1,6 @@
 // The QEM builders' candidate collapses (Garland & Heckbert 1997, section 4: each vertex's
-// cheapest quadric cost, in a heap; here half-edge collapses, Hoppe 1996 section 4.3's legal
-// moves tested lazily, when a candidate comes up): per vertex its cheapest target, the targets
+// cheapest quadric cost, in a heap; here half-edge collapses, whose rules, collapse_rules.h, are
+// tested lazily, when a candidate comes up): per vertex its cheapest target, the targets
 // the self-intersection test refused, and the heap of the in-core simplification.
 #pragma once
 

@@ -1,5 +1,5 @@
 // The in-core QEM simplification (qem_pm.h): half-edge collapses cheapest quadric cost first
-// (Garland & Heckbert 1997, section 4; Hoppe 1996's progressive mesh, section 4, in reverse)
+// (Garland & Heckbert 1997, section 4; Hoppe 1996's progressive mesh construction)
 // within bands of their guaranteed error bound, under the collapse rules; and the state one
 // simplification holds, by concern, shared with the block builder (block_pm.cpp).
 #pragma once
