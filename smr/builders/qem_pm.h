@@ -59,7 +59,7 @@ struct QemPmOptions {
   /// Collapses go in bands of their bound: the next band's tolerance is this many times the
   /// least bound that waited (at least 1). 0 = no bands, cheapest quadric cost first only: 1.3x
   /// fewer instructions, and 5-12 % more triangles in a 1 px view of the dragon and the
-  /// armadillo (benchmarks/README.md, stop 23; 2.7x faster before stop 23's cheaper waits).
+  /// armadillo (benchmarks/README.md).
   double bound_band = 2.0;
   /// Once simplification has run to its end, remove every component but one (the one whose
   /// removal would cost most): refinement then spawns them (Brown Fig. 4.9d), each inside the op
@@ -68,7 +68,7 @@ struct QemPmOptions {
   /// Refuse a collapse that would make a new triangle cross another triangle (exactly, anywhere
   /// but in shared corners and edges), so that simplification introduces no self-intersection:
   /// neither in any state of it nor in any cut at one error, which mixes states (the triangles a
-  /// collapse is checked against include recently dead ones; qem_pm.cpp, crosses_dead).
+  /// collapse is checked against include recently dead ones; collapse_crossings.cpp).
   bool no_self_intersections = true;
   /// Threads computing the bounds of the candidates that come next (0 = one per core). The
   /// result does not depend on it.
@@ -84,7 +84,7 @@ struct QemPmStats {
   std::uint64_t rejected_link = 0, rejected_flip = 0, rejected_boundary = 0;
   std::uint64_t rejected_intersection = 0;  // collapses refused: a new triangle would cross another
   // Of those, refused because a new triangle would cross a triangle of another level that a cut
-  // at one error can show with it (mixed levels; see qem_pm.cpp crosses_dead).
+  // at one error can show with it (mixed levels; see collapse_crossings.cpp, crosses_dead).
   std::uint64_t rejected_mixed_levels = 0;
   std::uint64_t bounds_computed = 0;  // guaranteed bounds of candidate collapses it needed
   // QemPmOptions::threads > 1: bound computations handed over ahead of time, and those whose

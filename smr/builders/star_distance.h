@@ -1,6 +1,6 @@
-// The distance bounds of a collapse's star (the mesh builder's guaranteed error bound,
-// qem_pm.cpp): a branch and bound over pieces of triangles, cut by the star's spoke planes.
-// Internal to smr/build; a header so that tests can check it against brute force.
+// The distance bounds of a collapse's star (the mesh builders' guaranteed error bound,
+// collapse_bound.h): a branch and bound over pieces of triangles, cut by the star's spoke planes.
+// Internal to smr/builders; a header so that tests can check it against brute force.
 #pragma once
 
 #include <algorithm>

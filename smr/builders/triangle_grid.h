@@ -1,0 +1,132 @@
+// Triangles by their bounding boxes, for the QEM builder's self-intersection test
+// (collapse_crossings.h): a hierarchical grid (Ericson, "Real-Time Collision Detection", ch. 7),
+// cell sizes cell * 2^level, cells in open-addressing tables (std::unordered_map's node chains
+// made the lookups most of the test's time on large meshes), each triangle in the one cell of
+// the level whose cells are at least its box's extent that holds its box's centre. At a level of
+// cell size s, a box then meets only triangles of the cells holding its own box grown by s / 2;
+// where that range has more cells than the level holds, the level's cells are scanned instead. A
+// cell keeps its triangles' boxes, so the boxes that miss the query are dropped without touching
+// the mesh.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <utility>
+#include <vector>
+
+#include "smr/core/geometry.h"
+#include "smr/core/id_map.h"
+
+namespace smr::qem {
+
+class TriangleGrid {
+ public:
+  void reset(const Vec3& origin, double cell);
+  void insert(std::uint32_t id, const Box3& b);
+  void erase(std::uint32_t id);
+  // f(id, box) for every triangle whose box meets b (box: its box, rounded outwards to floats).
+  template <class F>
+  void visit(const Box3& b, F&& f) const {
+    double size = cell_;
+    for (int level = 0; level < kLevels; ++level, size *= 2.0) {
+      const Level& l = levels_[std::size_t(level)];
+      if (l.occupied == 0) continue;
+      const Vec3 half(0.5 * size);
+      const std::array<std::int64_t, 3> lo = index_of(b.lo - half, size),
+                                        hi = index_of(b.hi + half, size);
+      double range = 1.0;
+      for (int k = 0; k < 3; ++k) range *= double(hi[std::size_t(k)] - lo[std::size_t(k)] + 1);
+      const auto inside = [&](std::uint64_t key) {
+        for (int k = 0; k < 3; ++k) {
+          const auto i = std::int64_t((key >> (21 * k)) & kMask) - kOffset;
+          if (i < lo[std::size_t(k)] || i > hi[std::size_t(k)]) return false;
+        }
+        return true;
+      };
+      if (range > double(l.keys.size())) {  // fewer cells than the range: all of them
+        for (std::size_t c = 0; c < l.keys.size(); ++c) {
+          if (l.ids[c].empty() || !inside(l.keys[c])) continue;
+          for (const Entry& e : l.ids[c]) e.visit(b, f);
+        }
+        continue;
+      }
+      for (std::int64_t x = lo[0]; x <= hi[0]; ++x) {
+        for (std::int64_t y = lo[1]; y <= hi[1]; ++y) {
+          for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
+            const std::uint32_t* slot = l.index.find(key_of({x, y, z}));
+            if (slot == nullptr) continue;
+            for (const Entry& e : l.ids[*slot - 1]) e.visit(b, f);
+          }
+        }
+      }
+    }
+  }
+
+ private:
+  static constexpr int kLevels = 40;
+  static constexpr int kNoLevel = -1;
+  static constexpr std::int64_t kOffset = std::int64_t{1} << 20;
+  static constexpr std::uint64_t kMask = (std::uint64_t{1} << 21) - 1;
+  // A triangle and its box in floats, rounded outwards: the box test runs on the cell's own
+  // memory (looking up each triangle's corners missed the cache on most visits).
+  struct Entry {
+    std::uint32_t id;
+    std::array<float, 3> lo, hi;
+    static Entry of(std::uint32_t id, const Box3& b) {
+      Entry e{id, {}, {}};
+      for (int k = 0; k < 3; ++k) {
+        e.lo[std::size_t(k)] = below(b.lo[k]);
+        e.hi[std::size_t(k)] = above(b.hi[k]);
+      }
+      return e;
+    }
+    static float below(double x) {
+      const auto f = static_cast<float>(x);
+      return double(f) <= x ? f : std::nextafter(f, -std::numeric_limits<float>::infinity());
+    }
+    static float above(double x) {
+      const auto f = static_cast<float>(x);
+      return double(f) >= x ? f : std::nextafter(f, std::numeric_limits<float>::infinity());
+    }
+    template <class F>
+    void visit(const Box3& b, F& f) const {
+      for (int k = 0; k < 3; ++k) {
+        if (double(lo[std::size_t(k)]) > b.hi[k] || double(hi[std::size_t(k)]) < b.lo[k]) return;
+      }
+      Box3 box;
+      box.lo = Vec3(lo[0], lo[1], lo[2]);
+      box.hi = Vec3(hi[0], hi[1], hi[2]);
+      f(id, box);
+    }
+  };
+  // One grid: its cells in a flat hash table (cells emptied stay, to be filled again).
+  struct Level {
+    IdMap<std::uint32_t> index;           // cell key -> its index + 1
+    std::vector<std::uint64_t> keys;      // per cell
+    std::vector<std::vector<Entry>> ids;  // per cell: its triangles
+    std::size_t occupied = 0;             // cells holding a triangle
+  };
+  std::array<std::int64_t, 3> index_of(const Vec3& p, double size) const {
+    std::array<std::int64_t, 3> i{};
+    for (int k = 0; k < 3; ++k) {
+      const double c = std::floor((p[k] - origin_[k]) / size);
+      i[std::size_t(k)] = std::int64_t(std::clamp(c, -double(kOffset), double(kOffset - 1)));
+    }
+    return i;
+  }
+  // 3 x 21 bits: never IdMap's empty key.
+  static std::uint64_t key_of(const std::array<std::int64_t, 3>& i) {
+    std::uint64_t key = 0;
+    for (int k = 0; k < 3; ++k) key |= std::uint64_t(i[std::size_t(k)] + kOffset) << (21 * k);
+    return key;
+  }
+  Vec3 origin_{0.0};
+  double cell_ = 1.0;
+  std::vector<Level> levels_;
+  std::vector<std::pair<int, std::uint32_t>> where_;  // triangle -> (level, cell); kNoLevel: none
+};
+
+}  // namespace smr::qem
