@@ -89,6 +89,8 @@ struct BlockTinOptions {
   std::function<void(double)> progress;
 };
 
+// More than 20 members: one flat record of a build's figures, each a field of its own (what the
+// CLI prints and the tests and benchmarks read by name), not state any code works on.
 struct BlockTinStats {
   int levels = 0;                 // block levels above the leaves (the root is the last)
   std::uint64_t leaf_blocks = 0;  // blocks read

@@ -1,4 +1,9 @@
 // Out-of-core assembly of a decimation's CRMR; op_assembly.h describes the method.
+//
+// finish() runs in named steps: join_base (R^0 joins like any star), rank_ops (the op order,
+// Brown 4.4.3.3), join_fixups (PreF's owners) and join_links (the Hypermesh links, Brown 4.5.1),
+// both by external sorts, then emit_base and emit_ops (OpMaker makes the ops on the workers,
+// InOrder hands them to the sink in id order).
 #include "smr/builders/op_assembly.h"
 
 #include <algorithm>
@@ -159,6 +164,447 @@ void clear_keeping_buffers(Op& op) {
   op = std::move(fresh);
 }
 
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+void report(const AssemblyOptions& options, double f) {
+  if (options.progress) options.progress(std::clamp(f, 0.0, 1.0));
+}
+
+using StarTriangle = OpAssembler::StarTriangle;
+using MadeTriangle = OpAssembler::MadeTriangle;
+constexpr std::uint32_t kNever = kNone;  // killer of a finest triangle: never replaced
+
+// ---- the joins (finish's first part) ----
+
+// R^0's triangles join like any star (destroyer kNone = R^0): their fixups into `fixups`, their
+// edges into `edges`.
+void join_base(std::span<const StarTriangle> base, std::size_t m, RecordFile<RawFixup>& fixups,
+               EdgeSorter& edges) {
+  for (std::uint32_t j = 0; j < base.size(); ++j) {
+    const StarTriangle& t = base[j];
+    if (t.creator != kNone) {
+      if (t.creator >= m) throw_internal("op assembly: a base triangle made by no removal");
+      fixups.push({t.creator, t.id, kNone, j});
+    }
+    for (std::uint32_t i = 0; i < 3; ++i) {
+      edges.add(EdgeItem::make(t.v[i], t.v[(i + 1) % 3], kNone, t.creator, j, i, false));
+    }
+  }
+}
+
+// Op ids: ranks in the order (R^0 is 0), into op_of (per removal); `ops` gets each op's record's
+// place in the spool, in id order.
+void rank_ops(UniqueSorter<OrderKey>& order, std::vector<std::uint32_t>& op_of,
+              RecordFile<OrderEntry>& ops) {
+  OrderKey o;
+  std::uint32_t i = 0;
+  while (order.next(o)) {
+    op_of[o.k] = ++i;
+    ops.push({o.offset, o.k, o.bytes});
+  }
+  ops.flush();
+}
+
+std::uint32_t op_id(const std::vector<std::uint32_t>& op_of, std::uint32_t removal) {
+  return removal == kNone ? 0 : op_of[removal];
+}
+
+// PreF's references: the raw fixups (by removal) by op ids, sorted by op.
+void join_fixups(const RecordFile<RawFixup>& raw, const std::vector<std::uint32_t>& op_of,
+                 UniqueSorter<Fixup>& fixups) {
+  raw.for_each([&](const RawFixup& f) {
+    fixups.add({op_of[f.creator], f.tri, op_id(op_of, f.dest), f.local});
+  });
+  fixups.seal();
+}
+
+// The Hypermesh links, from the edges sorted by edge. Each edge's group: the question of op i is
+// answered by the triangle across alive just before i (owner < i < killer; one at most, as
+// triangles with one directed edge live one after another).
+void join_links(EdgeSorter& edges, const std::vector<std::uint32_t>& op_of,
+                UniqueSorter<Link>& links) {
+  std::vector<EdgeItem> group;
+  EdgeItem e;
+  bool more = edges.next(e);
+  while (more) {
+    group.clear();
+    const std::uint64_t key = e.key();
+    for (; more && e.key() == key; more = edges.next(e)) group.push_back(e);
+    for (const EdgeItem& q : group) {
+      if (!q.question()) continue;
+      const std::uint32_t i = op_of[q.dest];
+      for (const EdgeItem& r : group) {
+        if (r.question()) continue;
+        const std::uint32_t owner = op_id(op_of, r.dest);
+        const std::uint32_t killer = r.creator == kNone ? kNever : op_of[r.creator];
+        if (owner < i && i < killer) {
+          links.add({i, q.local(), q.edge(), owner, r.local(), r.edge()});
+          break;
+        }
+      }
+    }
+  }
+  links.seal();
+}
+
+// ---- making the ops (finish's second part) ----
+
+struct Raw {  // what op i is made from
+  std::uint32_t k = 0;
+  std::vector<std::uint32_t> verts;
+  std::vector<StarTriangle> star;
+  std::vector<MadeTriangle> made;
+  std::vector<Fixup> fixups;
+  std::vector<Link> links;
+};
+
+// The records are read a chunk of ops at a time: ops follow falling error, the spool the
+// build's order, so one by one they would be a read each; a chunk's are read in runs of nearby
+// records (RecordFile::read_pieces), its bytes held within a share of the budget.
+class RecordChunks {
+ public:
+  RecordChunks(const RecordFile<std::uint8_t>& spool, const RecordFile<OrderEntry>& ops,
+               std::uint64_t m, std::uint64_t chunk_bytes)
+      : spool_(spool), ops_(ops), m_(m), chunk_bytes_(chunk_bytes) {}
+
+  // Op i's record into r.k, r.verts, r.star and r.made; ops are read in id order from 1.
+  void read(std::uint32_t i, Raw& r) {
+    if (i - 1 == at_ + chunk_.size()) load(i - 1);
+    r.k = chunk_[i - 1 - at_].k;
+    SpoolHead head;
+    const std::uint8_t* p = bytes_.data() + chunk_at_[i - 1 - at_];
+    std::memcpy(&head, p, sizeof head);
+    p += sizeof head;
+    p = get(p, r.verts, head.vertices);
+    p = get(p, r.star, head.star);
+    get(p, r.made, head.made);
+  }
+
+ private:
+  // The chunk of ops from `at` (a 0-based index into the order).
+  void load(std::uint64_t at) {
+    at_ = at;
+    chunk_.resize(
+        static_cast<std::size_t>(std::min<std::uint64_t>(std::uint64_t{1} << 16, m_ - at_)));
+    ops_.read(at_, chunk_);
+    std::size_t n = 0, total = 0;  // the entries whose records fit the chunk's bytes
+    for (; n < chunk_.size() && (n == 0 || total + chunk_[n].bytes <= chunk_bytes_); ++n)
+      total += chunk_[n].bytes;
+    chunk_.resize(n);
+    pieces_.resize(n);
+    chunk_at_.resize(n);
+    for (std::size_t j = 0, to = 0; j < n; to += chunk_[j].bytes, ++j) {
+      pieces_[j] = {chunk_[j].offset, chunk_[j].bytes, to};
+      chunk_at_[j] = to;
+    }
+    bytes_.resize(total);
+    spool_.read_pieces(pieces_, bytes_.data());
+  }
+
+  const RecordFile<std::uint8_t>& spool_;
+  const RecordFile<OrderEntry>& ops_;
+  const std::uint64_t m_, chunk_bytes_;
+  std::vector<OrderEntry> chunk_;
+  std::vector<std::size_t> chunk_at_;  // each chunk entry's record in `bytes_`
+  std::vector<std::uint8_t> bytes_;
+  std::vector<RecordFile<std::uint8_t>::Piece> pieces_;
+  std::uint64_t at_ = 0;
+};
+
+// Sorted parents and children.
+void sort_ids(Op& op) {
+  for (std::vector<OpId>* ids : {&op.parents, &op.children}) {
+    std::sort(ids->begin(), ids->end());
+    ids->erase(std::unique(ids->begin(), ids->end()), ids->end());
+  }
+}
+
+// Sorted parents and children, bounds: an op as a sink that does not encode takes it.
+void finish_op(Op& op) {
+  sort_ids(op);
+  compute_op_bounds(op);
+}
+
+// Makes the ops from their records. Runs on the workers: everything it reads is fixed by then.
+class OpMaker {
+ public:
+  OpMaker(const CrmrInfo& info, const std::vector<double>& err,
+          const std::vector<std::uint32_t>& op_of,
+          const std::function<Vec3(std::uint32_t)>& position)
+      : info_(info), err_(err), op_of_(op_of), position_(position) {}
+
+  // Fills the op's vertices (`first` introduced, then the rest of F's by id; R^0 introduces
+  // them all) and fragment. `vs` is the caller's scratch: the op's vertex ids, the `first.size()`
+  // introduced ones, then the rest sorted.
+  void fill(Op& op, std::span<const std::uint32_t> first, std::span<const StarTriangle> frag,
+            std::vector<std::uint32_t>& vs) const {
+    const bool base_op = op.id == kBaseOp;
+    vs.clear();
+    for (const StarTriangle& t : frag) vs.insert(vs.end(), t.v.begin(), t.v.end());
+    std::sort(vs.begin(), vs.end());
+    vs.erase(std::unique(vs.begin(), vs.end()), vs.end());
+    if (!base_op) {
+      for (std::uint32_t v : first) {
+        const auto it = std::lower_bound(vs.begin(), vs.end(), v);
+        if (it == vs.end() || *it != v)
+          throw_internal("op assembly: a removed vertex is on none of its star's triangles");
+        vs.erase(it);
+      }
+      vs.insert(vs.begin(), first.begin(), first.end());
+    }
+    op.new_vertex_count = static_cast<std::uint32_t>(base_op ? vs.size() : first.size());
+    op.vertices.reserve(vs.size());
+    for (std::uint32_t v : vs) op.vertices.push_back({VertexId(v), position_(v)});
+    op.fragment.resize(frag.size());
+    op.children.reserve(frag.size());
+    for (std::size_t i = 0; i < frag.size(); ++i) {
+      FragmentTriangle& ft = op.fragment[i];
+      for (int k = 0; k < 3; ++k) ft.v[k] = vertex_index(vs, first.size(), frag[i].v[k]);
+      if (frag[i].is_void) ft.flags |= FragmentTriangle::kVoid;
+      if (frag[i].creator != kNone) {
+        ft.killer = OpId(op_of_[frag[i].creator]);
+        ft.death_res = birth(frag[i].creator);
+        op.children.push_back(ft.killer);
+      }
+    }
+    derive_fragment_neighbours(op);
+  }
+
+  // Op `id` (not R^0) from its record: F, the error, PreF and its parents, the links. `vs` and
+  // `owner` are the caller's scratch. Returns the links made.
+  std::uint64_t make(std::uint32_t id, const Raw& r, Op& op, std::vector<std::uint32_t>& vs,
+                     std::vector<std::pair<std::uint32_t, std::uint32_t>>& owner) const {
+    op.id = OpId(id);
+    fill(op, r.verts, r.star, vs);
+    op.error = err_[r.k];
+    op.birth_res = birth(r.k);
+    owners(r, owner);
+    op.pre.reserve(r.made.size());
+    op.pre_tris.reserve(r.made.size());
+    op.parents.reserve(r.made.size());
+    op.coarser.reserve(r.links.size());
+    for (std::size_t j = 0; j < r.made.size(); ++j) {
+      if (owner[j].first == kNone)
+        throw_internal("op assembly: a made triangle is in no later star nor in R^0");
+      op.pre.push_back({OpId(owner[j].first), owner[j].second});
+      op.parents.push_back(OpId(owner[j].first));
+      PreTriangle pt;
+      for (int k = 0; k < 3; ++k) pt.v[k] = vertex_index(vs, r.verts.size(), r.made[j].v[k]);
+      if (r.made[j].is_void) pt.flags |= FragmentTriangle::kVoid;
+      op.pre_tris.push_back(pt);
+    }
+    for (const Link& l : r.links) op.coarser.push_back(coarser(r, l, owner));
+    return r.links.size();
+  }
+
+ private:
+  double birth(std::uint32_t removal) const { return resolution_of(info_, err_[removal]); }
+
+  // PreF's owners: per made triangle, the op and index of the fragment that holds it.
+  static void owners(const Raw& r, std::vector<std::pair<std::uint32_t, std::uint32_t>>& owner) {
+    owner.assign(r.made.size(), {kNone, 0});
+    for (const Fixup& f : r.fixups) {
+      bool found = false;
+      for (std::size_t j = 0; j < r.made.size(); ++j) {
+        if (r.made[j].id == f.tri) owner[j] = {f.owner, f.local}, found = true;
+      }
+      if (!found)
+        throw_internal("op assembly: a star triangle names a creator that did not make it");
+    }
+  }
+
+  // A link: the newer of PreF's triangle with a->b and the live one across.
+  static CoarserLink coarser(const Raw& r, const Link& l,
+                             const std::vector<std::pair<std::uint32_t, std::uint32_t>>& owner) {
+    const std::array<std::uint32_t, 3>& v = r.star[l.tri].v;
+    const std::uint32_t a = v[l.edge], b = v[(l.edge + 1) % 3];
+    std::size_t inside = r.made.size();
+    int inside_edge = -1;
+    for (std::size_t j = 0; j < r.made.size(); ++j) {
+      const int x = index_of(r.made[j].v, a);
+      if (x >= 0 && r.made[j].v[(x + 1) % 3] == b) {
+        inside = j;
+        inside_edge = x;
+      }
+    }
+    if (inside == r.made.size())
+      throw_internal("op assembly: a fragment boundary edge has no PreF triangle");
+    EdgeRef target{TriRef{OpId(owner[inside].first), owner[inside].second},
+                   static_cast<std::uint8_t>(inside_edge)};
+    if (l.owner > owner[inside].first) {
+      target = EdgeRef{TriRef{OpId(l.owner), l.local}, static_cast<std::uint8_t>(l.coarser_edge)};
+    }
+    return {l.tri, static_cast<std::uint8_t>(l.edge), target};
+  }
+
+  const CrmrInfo& info_;
+  const std::vector<double>& err_;
+  const std::vector<std::uint32_t>& op_of_;
+  const std::function<Vec3(std::uint32_t)>& position_;
+};
+
+// Hands the ops to the sink in id order (the calling thread), keeping each op's DAG depth.
+class InOrder {
+ public:
+  InOrder(OpSink& sink, std::uint64_t ops, std::uint64_t& dag_height)
+      : sink_(sink), depth_(ops, 0), dag_height_(dag_height) {}
+  void add(Op&& op) {
+    deepen(op.id.value, op.parents);
+    sink_.add(std::move(op));
+  }
+  void add_encoded(std::uint64_t id, std::span<const OpId> parents,
+                   std::span<const std::uint8_t> bytes) {
+    deepen(id, parents);
+    sink_.add_encoded(bytes);
+  }
+
+ private:
+  void deepen(std::uint64_t id, std::span<const OpId> parents) {
+    std::uint32_t& d = depth_[id];
+    for (OpId p : parents) d = std::max(d, depth_[p.value] + 1);
+    dag_height_ = std::max<std::uint64_t>(dag_height_, d);
+  }
+  OpSink& sink_;
+  std::vector<std::uint32_t> depth_;
+  std::uint64_t& dag_height_;
+};
+
+// R^0, op 0: the triangles `base`, of error err0.
+void emit_base(const OpMaker& maker, OpSink& sink, InOrder& out, std::span<const StarTriangle> base,
+               double err0) {
+  Op op;
+  op.id = OpId(0);
+  std::vector<std::uint32_t> vs;
+  maker.fill(op, {}, base, vs);
+  op.error = err0;
+  if (sink.encodes()) {
+    sort_ids(op);
+    std::vector<std::uint8_t> bytes;
+    sink.encode(op, bytes);
+    out.add_encoded(0, op.parents, bytes);
+  } else {
+    finish_op(op);
+    out.add(std::move(op));
+  }
+}
+
+// A batch of ops as the pipeline makes them.
+struct Batch {
+  std::uint32_t first = 0;  // op id of raw[0]
+  std::vector<Raw> raw;
+  std::vector<Op> ops;  // or, encoding, each op's bytes and parents:
+  std::vector<std::uint8_t> encoded;
+  std::vector<std::size_t> encoded_end;
+  std::vector<OpId> parents;
+  std::vector<std::size_t> parents_end;
+  std::uint64_t links = 0;
+};
+
+// What the ops are made from, besides their records: the fixups and links sorted by op.
+struct Joined {
+  const RecordFile<std::uint8_t>& spool;
+  const RecordFile<OrderEntry>& ops;
+  UniqueSorter<Fixup>& fixups;
+  UniqueSorter<Link>& links;
+};
+
+// Ops 1..m in batches through a pipeline: the calling thread reads each batch's records and
+// its share of the fixups and links (sequential streams), the workers make the ops, and the
+// calling thread hands them to the sink in id order, so the output does not depend on the
+// thread count. A sink that encodes (OpSink::encodes) gets each op encoded on the worker that
+// made it: the sink's own work on the op runs on the workers, the op's buffers are reused there
+// instead of being freed by the sink's thread, and what goes through in id order is a copy of
+// bytes. Returns the links made.
+std::uint64_t emit_ops(const AssemblyOptions& options, std::uint64_t m, std::uint64_t chunk_bytes,
+                       const Joined& joined, const OpMaker& maker, OpSink& sink, InOrder& out) {
+  constexpr std::uint32_t kBatchOps = 256;
+  const bool encoding = sink.encodes();
+  const std::uint64_t batches = (m + kBatchOps - 1) / kBatchOps;
+  Cursor<Fixup> fix(joined.fixups);
+  Cursor<Link> link(joined.links);
+  RecordChunks records(joined.spool, joined.ops, m, chunk_bytes);
+  std::uint64_t links = 0;
+  // Merged batches, whose buffers the next batches reuse: a batch's encoded bytes (~100 KiB)
+  // were fresh mapped memory, faulted in and unmapped every batch (with the sink's work moved
+  // to the workers, the reuse took this stage from 1.8 to 1.15 s on the 8193² terrain), and the
+  // records' buffers are made and freed on this thread, not made here and freed on a worker.
+  std::vector<std::unique_ptr<Batch>> spare;
+  auto make = [&](std::size_t b) {
+    std::unique_ptr<Batch> batch;
+    if (spare.empty()) {
+      batch = std::make_unique<Batch>();
+    } else {
+      batch = std::move(spare.back());
+      spare.pop_back();
+      batch->ops.clear();
+      batch->encoded.clear();
+      batch->encoded_end.clear();
+      batch->parents.clear();
+      batch->parents_end.clear();
+      batch->links = 0;
+    }
+    batch->first = static_cast<std::uint32_t>(b * kBatchOps + 1);
+    const std::uint32_t last =
+        static_cast<std::uint32_t>(std::min<std::uint64_t>(m, (b + 1) * kBatchOps));
+    batch->raw.resize(last - batch->first + 1);
+    for (std::uint32_t i = batch->first; i <= last; ++i) {
+      Raw& r = batch->raw[i - batch->first];
+      records.read(i, r);
+      r.fixups.clear();
+      r.links.clear();
+      fix.take(i, [&](const Fixup& f) { r.fixups.push_back(f); });
+      link.take(i, [&](const Link& l) { r.links.push_back(l); });
+    }
+    return batch;
+  };
+  auto work = [&](Batch& batch) {
+    std::vector<std::uint32_t> vs;
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> owner;  // per made triangle: op, index
+    // Encoding, one op at a time, its buffers reused from op to op.
+    thread_local Op reused;
+    if (!encoding) batch.ops.resize(batch.raw.size());
+    for (std::size_t n = 0; n < batch.raw.size(); ++n) {
+      Op& op = encoding ? reused : batch.ops[n];
+      if (encoding) clear_keeping_buffers(op);
+      batch.links +=
+          maker.make(batch.first + static_cast<std::uint32_t>(n), batch.raw[n], op, vs, owner);
+      if (!encoding) {
+        finish_op(op);
+        continue;
+      }
+      sort_ids(op);
+      sink.encode(op, batch.encoded);
+      batch.encoded_end.push_back(batch.encoded.size());
+      batch.parents.insert(batch.parents.end(), op.parents.begin(), op.parents.end());
+      batch.parents_end.push_back(batch.parents.size());
+    }
+  };
+  auto merge = [&](Batch& batch, std::size_t b) {
+    for (Op& op : batch.ops) out.add(std::move(op));
+    const std::span<const std::uint8_t> encoded(batch.encoded);
+    const std::span<const OpId> parents(batch.parents);
+    for (std::size_t n = 0; n < batch.encoded_end.size(); ++n) {
+      const std::size_t e0 = n == 0 ? 0 : batch.encoded_end[n - 1];
+      const std::size_t p0 = n == 0 ? 0 : batch.parents_end[n - 1];
+      out.add_encoded(batch.first + static_cast<std::uint32_t>(n),
+                      parents.subspan(p0, batch.parents_end[n] - p0),
+                      encoded.subspan(e0, batch.encoded_end[n] - e0));
+    }
+    links += batch.links;
+    spare.push_back(std::make_unique<Batch>(std::move(batch)));
+    const std::uint64_t done = std::min<std::uint64_t>(m, (b + 1) * kBatchOps);
+    if ((b & 0xff) == 0) report(options, 0.35 + 0.65 * double(done) / double(m));
+  };
+  const unsigned threads = thread_count(options.threads);
+  ordered_pipeline(static_cast<std::size_t>(batches), threads, 2 * std::size_t(threads), make, work,
+                   merge);
+  if (!fix.done() || !link.done()) throw_internal("op assembly: records name no op");
+  return links;
+}
+
 }  // namespace
 
 struct OpAssembler::State {
@@ -262,374 +708,53 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
                          const std::function<Vec3(std::uint32_t)>& position, OpSink& sink) {
   State& s = *s_;
   if (s.finished) throw_internal("op assembly: finish() called twice");
-  const auto t0 = std::chrono::steady_clock::now();
-  auto since = [](std::chrono::steady_clock::time_point t) {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
-  };
+  const auto t0 = Clock::now();
   s.finished = true;
   const std::size_t m = s.err.size();
-  auto report = [&](double f) {
-    if (s.options.progress) s.options.progress(std::clamp(f, 0.0, 1.0));
-  };
 
-  // R^0's triangles join like any star (destroyer kNone = R^0).
-  for (std::uint32_t j = 0; j < base.size(); ++j) {
-    const StarTriangle& t = base[j];
-    if (t.creator != kNone) {
-      if (t.creator >= m) throw_internal("op assembly: a base triangle made by no removal");
-      s.fixups.push({t.creator, t.id, kNone, j});
-    }
-    for (std::uint32_t i = 0; i < 3; ++i) {
-      s.edges->add(EdgeItem::make(t.v[i], t.v[(i + 1) % 3], kNone, t.creator, j, i, false));
-    }
-  }
+  join_base(base, m, s.fixups, *s.edges);
   s.spool.flush();
   s.fixups.flush();
-
-  // Op ids: ranks in the order (R^0 is 0).
   std::vector<std::uint32_t> op_of(m, 0);
   RecordFile<OrderEntry> ops(s.dir);
-  {
-    OrderKey o;
-    std::uint32_t i = 0;
-    while (s.order->next(o)) {
-      op_of[o.k] = ++i;
-      ops.push({o.offset, o.k, o.bytes});
-    }
-    ops.flush();
-  }
+  rank_ops(*s.order, op_of, ops);
   s.stats.scratch_bytes += s.order->spilled_bytes();
   s.order.reset();
-  auto op_id = [&](std::uint32_t removal) { return removal == kNone ? 0 : op_of[removal]; };
-  constexpr std::uint32_t kNever = kNone;  // killer of a finest triangle: never replaced
-  report(0.05);
+  report(s.options, 0.05);
 
   // The two joins are independent (both only read op_of): the fixups' on one thread, the
   // links' on another, each sorting its output's full buffers on a third.
   UniqueSorter<Fixup> fixups(s.dir, s.budget(4), std::less<Fixup>{}, storage::Spill::kBackground);
   UniqueSorter<Link> links(s.dir, s.budget(4), std::less<Link>{}, storage::Spill::kBackground);
-  auto join_fixups = [&] {
-    s.fixups.for_each([&](const RawFixup& f) {
-      fixups.add({op_of[f.creator], f.tri, op_id(f.dest), f.local});
-    });
-    fixups.seal();
-  };
-  auto join_links = [&] {
-    // Each edge's group: the question of op i is answered by the triangle across alive just
-    // before i (owner < i < killer; one at most, as triangles with one directed edge live one
-    // after another).
-    std::vector<EdgeItem> group;
-    EdgeItem e;
-    bool more = s.edges->next(e);
-    while (more) {
-      group.clear();
-      const std::uint64_t key = e.key();
-      for (; more && e.key() == key; more = s.edges->next(e)) group.push_back(e);
-      for (const EdgeItem& q : group) {
-        if (!q.question()) continue;
-        const std::uint32_t i = op_of[q.dest];
-        for (const EdgeItem& r : group) {
-          if (r.question()) continue;
-          const std::uint32_t owner = op_id(r.dest);
-          const std::uint32_t killer = r.creator == kNone ? kNever : op_of[r.creator];
-          if (owner < i && i < killer) {
-            links.add({i, q.local(), q.edge(), owner, r.local(), r.edge()});
-            break;
-          }
-        }
-      }
-    }
-    links.seal();
-  };
   parallel_for(2, std::min(2u, thread_count(s.options.threads)), [&](std::size_t job) {
     if (job == 0) {
-      join_links();
+      join_links(*s.edges, op_of, links);
     } else {
-      join_fixups();
+      join_fixups(s.fixups, op_of, fixups);
     }
   });
   s.stats.scratch_bytes += s.edges->spilled_bytes();
   s.edges.reset();
   s.stats.scratch_bytes += s.spool.bytes() + s.fixups.bytes() + ops.bytes();
-  report(0.35);
+  report(s.options, 0.35);
 
   double err0 = info.err0;
   for (double e : s.err) err0 = std::max(err0, e);
   info.err0 = err0;
   info.err_final = std::min(info.err_final, err0);
-  auto birth = [&](std::uint32_t removal) { return resolution_of(info, s.err[removal]); };
   s.stats.seconds_join = since(t0);
-  const auto t1 = std::chrono::steady_clock::now();
+  const auto t1 = Clock::now();
   sink.begin(info, m + 1);
 
-  std::vector<std::uint32_t> depth(m + 1, 0);
-  // Fills the op's vertices (`first` introduced, then the rest of F's by id; R^0 introduces
-  // them all) and fragment. `vs` is the caller's scratch: the op's vertex ids, the `first.size()`
-  // introduced ones, then the rest sorted. Runs on the workers (everything it reads is fixed).
-  auto fill = [&](Op& op, std::span<const std::uint32_t> first, std::span<const StarTriangle> frag,
-                  std::vector<std::uint32_t>& vs) {
-    const bool base_op = op.id == kBaseOp;
-    vs.clear();
-    for (const StarTriangle& t : frag) vs.insert(vs.end(), t.v.begin(), t.v.end());
-    std::sort(vs.begin(), vs.end());
-    vs.erase(std::unique(vs.begin(), vs.end()), vs.end());
-    if (!base_op) {
-      for (std::uint32_t v : first) {
-        const auto it = std::lower_bound(vs.begin(), vs.end(), v);
-        if (it == vs.end() || *it != v)
-          throw_internal("op assembly: a removed vertex is on none of its star's triangles");
-        vs.erase(it);
-      }
-      vs.insert(vs.begin(), first.begin(), first.end());
-    }
-    op.new_vertex_count = static_cast<std::uint32_t>(base_op ? vs.size() : first.size());
-    op.vertices.reserve(vs.size());
-    for (std::uint32_t v : vs) op.vertices.push_back({VertexId(v), position(v)});
-    op.fragment.resize(frag.size());
-    op.children.reserve(frag.size());
-    for (std::size_t i = 0; i < frag.size(); ++i) {
-      FragmentTriangle& ft = op.fragment[i];
-      for (int k = 0; k < 3; ++k) ft.v[k] = vertex_index(vs, first.size(), frag[i].v[k]);
-      if (frag[i].is_void) ft.flags |= FragmentTriangle::kVoid;
-      if (frag[i].creator != kNone) {
-        ft.killer = OpId(op_of[frag[i].creator]);
-        ft.death_res = birth(frag[i].creator);
-        op.children.push_back(ft.killer);
-      }
-    }
-    derive_fragment_neighbours(op);
-  };
-  // Sorted parents and children, bounds (workers); then the DAG depth and the sink, in id order
-  // (the calling thread).
-  auto sort_ids = [](Op& op) {
-    for (std::vector<OpId>* ids : {&op.parents, &op.children}) {
-      std::sort(ids->begin(), ids->end());
-      ids->erase(std::unique(ids->begin(), ids->end()), ids->end());
-    }
-  };
-  auto finish_op = [&](Op& op) {
-    sort_ids(op);
-    compute_op_bounds(op);
-  };
-  auto deepen = [&](std::uint64_t id, std::span<const OpId> parents) {
-    std::uint32_t& d = depth[id];
-    for (OpId p : parents) d = std::max(d, depth[p.value] + 1);
-    s.stats.dag_height = std::max<std::uint64_t>(s.stats.dag_height, d);
-  };
-  auto emit = [&](Op&& op) {
-    deepen(op.id.value, op.parents);
-    sink.add(std::move(op));
-  };
-  // A sink that encodes (OpSink::encodes) gets each op encoded on the worker that made it: the
-  // sink's own work on the op runs on the workers, the op's buffers are reused there instead of
-  // being freed by the sink's thread, and what goes through in id order is a copy of bytes.
-  const bool encoding = sink.encodes();
-  {
-    Op op;
-    op.id = OpId(0);
-    std::vector<std::uint32_t> vs;
-    fill(op, {}, base, vs);
-    op.error = err0;
-    if (encoding) {
-      sort_ids(op);
-      std::vector<std::uint8_t> bytes;
-      sink.encode(op, bytes);
-      deepen(0, op.parents);
-      sink.add_encoded(bytes);
-    } else {
-      finish_op(op);
-      emit(std::move(op));
-    }
-  }
-
-  // The ops in batches through a pipeline: the calling thread reads each batch's records and
-  // its share of the fixups and links (sequential streams), the workers make the ops, and the
-  // calling thread hands them to the sink in id order, so the output does not depend on the
-  // thread count.
-  struct Raw {  // what op i is made from
-    std::uint32_t k = 0;
-    std::vector<std::uint32_t> verts;
-    std::vector<StarTriangle> star;
-    std::vector<MadeTriangle> made;
-    std::vector<Fixup> fixups;
-    std::vector<Link> links;
-  };
-  struct Batch {
-    std::uint32_t first = 0;  // op id of raw[0]
-    std::vector<Raw> raw;
-    std::vector<Op> ops;  // or, encoding, each op's bytes and parents:
-    std::vector<std::uint8_t> encoded;
-    std::vector<std::size_t> encoded_end;
-    std::vector<OpId> parents;
-    std::vector<std::size_t> parents_end;
-    std::uint64_t links = 0;
-  };
-  constexpr std::uint32_t kBatchOps = 256;
-  const std::uint64_t batches = (m + kBatchOps - 1) / kBatchOps;
-  Cursor<Fixup> fix(fixups);
-  Cursor<Link> link(links);
-  // The records are read a chunk of ops at a time: ops follow falling error, the spool the
-  // build's order, so one by one they would be a read each; a chunk's are read in runs of nearby
-  // records (RecordFile::read_pieces), its bytes held within a share of the budget.
-  std::vector<OrderEntry> chunk;
-  std::vector<std::size_t> chunk_at;  // each chunk entry's record in `bytes`
-  std::vector<std::uint8_t> bytes;
-  std::vector<RecordFile<std::uint8_t>::Piece> pieces;
+  const OpMaker maker(info, s.err, op_of, position);
+  InOrder out(sink, m + 1, s.stats.dag_height);
+  emit_base(maker, sink, out, base, err0);
   const std::uint64_t chunk_bytes = std::max<std::uint64_t>(s.budget(8), 1 << 16);
-  std::uint64_t at = 0;
-  // Merged batches, whose buffers the next batches reuse: a batch's encoded bytes (~100 KiB)
-  // were fresh mapped memory, faulted in and unmapped every batch (with the sink's work moved
-  // to the workers, the reuse took this stage from 1.8 to 1.15 s on the 8193² terrain), and the
-  // records' buffers are made and freed on this thread, not made here and freed on a worker.
-  std::vector<std::unique_ptr<Batch>> spare;
-  auto make = [&](std::size_t b) {
-    std::unique_ptr<Batch> batch;
-    if (spare.empty()) {
-      batch = std::make_unique<Batch>();
-    } else {
-      batch = std::move(spare.back());
-      spare.pop_back();
-      batch->ops.clear();
-      batch->encoded.clear();
-      batch->encoded_end.clear();
-      batch->parents.clear();
-      batch->parents_end.clear();
-      batch->links = 0;
-    }
-    batch->first = static_cast<std::uint32_t>(b * kBatchOps + 1);
-    const std::uint32_t last =
-        static_cast<std::uint32_t>(std::min<std::uint64_t>(m, (b + 1) * kBatchOps));
-    batch->raw.resize(last - batch->first + 1);
-    for (std::uint32_t i = batch->first; i <= last; ++i) {
-      if (i - 1 == at + chunk.size()) {
-        at = i - 1;
-        chunk.resize(
-            static_cast<std::size_t>(std::min<std::uint64_t>(std::uint64_t{1} << 16, m - at)));
-        ops.read(at, chunk);
-        std::size_t n = 0, total = 0;  // the entries whose records fit the chunk's bytes
-        for (; n < chunk.size() && (n == 0 || total + chunk[n].bytes <= chunk_bytes); ++n)
-          total += chunk[n].bytes;
-        chunk.resize(n);
-        pieces.resize(n);
-        chunk_at.resize(n);
-        for (std::size_t j = 0, to = 0; j < n; to += chunk[j].bytes, ++j) {
-          pieces[j] = {chunk[j].offset, chunk[j].bytes, to};
-          chunk_at[j] = to;
-        }
-        bytes.resize(total);
-        s.spool.read_pieces(pieces, bytes.data());
-      }
-      Raw& r = batch->raw[i - batch->first];
-      r.k = chunk[i - 1 - at].k;
-      SpoolHead head;
-      const std::uint8_t* p = bytes.data() + chunk_at[i - 1 - at];
-      std::memcpy(&head, p, sizeof head);
-      p += sizeof head;
-      p = get(p, r.verts, head.vertices);
-      p = get(p, r.star, head.star);
-      get(p, r.made, head.made);
-      r.fixups.clear();
-      r.links.clear();
-      fix.take(i, [&](const Fixup& f) { r.fixups.push_back(f); });
-      link.take(i, [&](const Link& l) { r.links.push_back(l); });
-    }
-    return batch;
-  };
-  auto work = [&](Batch& batch) {
-    std::vector<std::uint32_t> vs;
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> owner;  // per made triangle: op, index
-    // Encoding, one op at a time, its buffers reused from op to op.
-    thread_local Op reused;
-    if (!encoding) batch.ops.resize(batch.raw.size());
-    for (std::size_t n = 0; n < batch.raw.size(); ++n) {
-      const Raw& r = batch.raw[n];
-      Op& op = encoding ? reused : batch.ops[n];
-      if (encoding) clear_keeping_buffers(op);
-      op.id = OpId(batch.first + static_cast<std::uint32_t>(n));
-      fill(op, r.verts, r.star, vs);
-      op.error = s.err[r.k];
-      op.birth_res = birth(r.k);
-      owner.assign(r.made.size(), {kNone, 0});
-      op.pre.reserve(r.made.size());
-      op.pre_tris.reserve(r.made.size());
-      op.parents.reserve(r.made.size());
-      op.coarser.reserve(r.links.size());
-      for (const Fixup& f : r.fixups) {
-        bool found = false;
-        for (std::size_t j = 0; j < r.made.size(); ++j) {
-          if (r.made[j].id == f.tri) owner[j] = {f.owner, f.local}, found = true;
-        }
-        if (!found)
-          throw_internal("op assembly: a star triangle names a creator that did not make it");
-      }
-      for (std::size_t j = 0; j < r.made.size(); ++j) {
-        if (owner[j].first == kNone)
-          throw_internal("op assembly: a made triangle is in no later star nor in R^0");
-        op.pre.push_back({OpId(owner[j].first), owner[j].second});
-        op.parents.push_back(OpId(owner[j].first));
-        PreTriangle pt;
-        for (int k = 0; k < 3; ++k) pt.v[k] = vertex_index(vs, r.verts.size(), r.made[j].v[k]);
-        if (r.made[j].is_void) pt.flags |= FragmentTriangle::kVoid;
-        op.pre_tris.push_back(pt);
-      }
-      // Links: the newer of PreF's triangle with a->b and the live one across.
-      for (const Link& l : r.links) {
-        const std::array<std::uint32_t, 3>& v = r.star[l.tri].v;
-        const std::uint32_t a = v[l.edge], b = v[(l.edge + 1) % 3];
-        std::size_t inside = r.made.size();
-        int inside_edge = -1;
-        for (std::size_t j = 0; j < r.made.size(); ++j) {
-          const int x = index_of(r.made[j].v, a);
-          if (x >= 0 && r.made[j].v[(x + 1) % 3] == b) {
-            inside = j;
-            inside_edge = x;
-          }
-        }
-        if (inside == r.made.size())
-          throw_internal("op assembly: a fragment boundary edge has no PreF triangle");
-        EdgeRef target{TriRef{OpId(owner[inside].first), owner[inside].second},
-                       static_cast<std::uint8_t>(inside_edge)};
-        if (l.owner > owner[inside].first) {
-          target =
-              EdgeRef{TriRef{OpId(l.owner), l.local}, static_cast<std::uint8_t>(l.coarser_edge)};
-        }
-        op.coarser.push_back({l.tri, static_cast<std::uint8_t>(l.edge), target});
-        ++batch.links;
-      }
-      if (!encoding) {
-        finish_op(op);
-        continue;
-      }
-      sort_ids(op);
-      sink.encode(op, batch.encoded);
-      batch.encoded_end.push_back(batch.encoded.size());
-      batch.parents.insert(batch.parents.end(), op.parents.begin(), op.parents.end());
-      batch.parents_end.push_back(batch.parents.size());
-    }
-  };
-  auto merge = [&](Batch& batch, std::size_t b) {
-    for (Op& op : batch.ops) emit(std::move(op));
-    const std::span<const std::uint8_t> encoded(batch.encoded);
-    const std::span<const OpId> parents(batch.parents);
-    for (std::size_t n = 0; n < batch.encoded_end.size(); ++n) {
-      const std::size_t e0 = n == 0 ? 0 : batch.encoded_end[n - 1];
-      const std::size_t p0 = n == 0 ? 0 : batch.parents_end[n - 1];
-      deepen(batch.first + static_cast<std::uint32_t>(n),
-             parents.subspan(p0, batch.parents_end[n] - p0));
-      sink.add_encoded(encoded.subspan(e0, batch.encoded_end[n] - e0));
-    }
-    s.stats.links += batch.links;
-    spare.push_back(std::make_unique<Batch>(std::move(batch)));
-    const std::uint64_t done = std::min<std::uint64_t>(m, (b + 1) * kBatchOps);
-    if ((b & 0xff) == 0) report(0.35 + 0.65 * double(done) / double(m));
-  };
-  const unsigned threads = thread_count(s.options.threads);
-  ordered_pipeline(static_cast<std::size_t>(batches), threads, 2 * std::size_t(threads), make, work,
-                   merge);
-  if (!fix.done() || !link.done()) throw_internal("op assembly: records name no op");
+  s.stats.links +=
+      emit_ops(s.options, m, chunk_bytes, Joined{s.spool, ops, fixups, links}, maker, sink, out);
   s.stats.scratch_bytes += fixups.spilled_bytes() + links.spilled_bytes();
   s.stats.seconds_emit = since(t1);
-  report(1.0);
+  report(s.options, 1.0);
 }
 
 }  // namespace smr
