@@ -294,7 +294,7 @@ class Builder {
   // ---- vertices and samples ----
   std::uint32_t add_vertex(std::uint32_t col, std::uint32_t row) {
     verts_.push_back({col, row, has_data(col, row) ? dem_.at(col, row) : fill_z_});
-    op_new_vertices_.push_back(static_cast<std::uint32_t>(verts_.size() - 1));
+    op_.new_vertices.push_back(static_cast<std::uint32_t>(verts_.size() - 1));
     return static_cast<std::uint32_t>(verts_.size() - 1);
   }
   Vec3 world(const BuildVertex& v) const {
@@ -385,10 +385,10 @@ class Builder {
     t = BuildTri{};
     t.face = f;
     for (int i = 0; i < 3; ++i) t.v[i] = f->vertex(i)->info();
-    t.op = current_op_ & ((1u << BuildTri::kOpBits) - 1);  // begin_op checks the range
+    t.op = op_.index & ((1u << BuildTri::kOpBits) - 1);  // begin_op checks the range
     t.seq = next_seq_++;
-    f->info() = {id, current_op_, kNone};
-    if (!mesh_only_) op_created_.push_back(id);
+    f->info() = {id, op_.index, kNone};
+    if (!mesh_only_) op_.created.push_back(id);
     scan(t);
     push(id);
     return id;
@@ -529,8 +529,8 @@ class Builder {
     heap_remove(id);
     if (mesh_only_) {
       free_tris_.push_back(id);  // no op refers to it
-    } else if (t.op != current_op_) {
-      op_killed_.push_back(id);
+    } else if (t.op != op_.index) {
+      op_.killed.push_back(id);
     }
   }
 
@@ -542,30 +542,30 @@ class Builder {
     const auto row = static_cast<std::uint32_t>(sample / dem_.width);
     const Point p(col, row);
 
-    conflicts_.clear();
-    boundary_.clear();
-    dt_.get_conflicts_and_boundary(p, std::back_inserter(conflicts_), std::back_inserter(boundary_),
-                                   tris_[tid].face);
-    if (conflicts_.empty()) throw_internal("greedy TIN: empty conflict zone");
-    for (FaceHandle f : conflicts_) {
+    scr_.conflicts.clear();
+    scr_.boundary.clear();
+    dt_.get_conflicts_and_boundary(p, std::back_inserter(scr_.conflicts),
+                                   std::back_inserter(scr_.boundary), tris_[tid].face);
+    if (scr_.conflicts.empty()) throw_internal("greedy TIN: empty conflict zone");
+    for (FaceHandle f : scr_.conflicts) {
       if (f->info().id != kNone) kill(f->info().id);
     }
     const std::uint32_t vid = add_vertex(col, row);
-    Dt::Vertex_handle vh =
-        dt_.star_hole(p, boundary_.begin(), boundary_.end(), conflicts_.begin(), conflicts_.end());
+    Dt::Vertex_handle vh = dt_.star_hole(p, scr_.boundary.begin(), scr_.boundary.end(),
+                                         scr_.conflicts.begin(), scr_.conflicts.end());
     vh->info() = vid;
     // The DEM under the whole new star is fetched before any of it is scanned.
-    star_.clear();
+    scr_.star.clear();
     Dt::Face_circulator fc = dt_.incident_faces(vh), done = fc;
     do {
       if (dt_.is_infinite(fc)) {
         fc->info().id = kNone;
       } else {
-        star_.push_back(fc);
+        scr_.star.push_back(fc);
         prefetch(fc);
       }
     } while (++fc != done);
-    for (FaceHandle f : star_) new_tri(f);
+    for (FaceHandle f : scr_.star) new_tri(f);
   }
 
   // ---- ops ----
@@ -573,46 +573,47 @@ class Builder {
     if (ops_.size() >= (std::size_t(1) << BuildTri::kOpBits)) {
       throw_input(dem_.source + ": too many refinement operations for the builder");
     }
-    current_op_ = static_cast<std::uint32_t>(ops_.size());
-    op_err_start_ = e_start;
-    op_created_.clear();
-    op_killed_.clear();
-    op_new_vertices_.clear();
+    op_.index = static_cast<std::uint32_t>(ops_.size());
+    op_.err_start = e_start;
+    op_.created.clear();
+    op_.killed.clear();
+    op_.new_vertices.clear();
   }
 
   void close_op() {
     Op op;
-    op.id = OpId(current_op_);
-    op.error = op_err_start_;
+    op.id = OpId(op_.index);
+    op.error = op_.err_start;
 
-    frag_.clear();
-    for (std::uint32_t id : op_created_) {
-      if (tris_[id].alive) frag_.push_back(id);
+    scr_.frag.clear();
+    for (std::uint32_t id : op_.created) {
+      if (tris_[id].alive) scr_.frag.push_back(id);
     }
-    for (std::uint32_t i = 0; i < frag_.size(); ++i) tris_[frag_[i]].local = i;
+    for (std::uint32_t i = 0; i < scr_.frag.size(); ++i) tris_[scr_.frag[i]].local = i;
 
     // Vertices: V(R) first, in insertion order, then the others by id (their positions from the
     // CGAL vertices and the DEM, both in cache, rather than from verts_).
-    others_.clear();
-    for (std::uint32_t id : frag_) {
+    scr_.others.clear();
+    for (std::uint32_t id : scr_.frag) {
       const BuildTri& t = tris_[id];
-      for (int k = 0; k < 3; ++k) others_.push_back({t.v[k], t.face->vertex(k)});
+      for (int k = 0; k < 3; ++k) scr_.others.push_back({t.v[k], t.face->vertex(k)});
     }
-    std::sort(others_.begin(), others_.end(),
+    std::sort(scr_.others.begin(), scr_.others.end(),
               [](const VertexRef& a, const VertexRef& b) { return a.id < b.id; });
-    others_.erase(std::unique(others_.begin(), others_.end(),
-                              [](const VertexRef& a, const VertexRef& b) { return a.id == b.id; }),
-                  others_.end());
-    op.new_vertex_count = static_cast<std::uint32_t>(op_new_vertices_.size());
-    op.vertices.reserve(others_.size());
-    for (std::uint32_t v : op_new_vertices_) {
-      local_of_[v] = static_cast<std::uint32_t>(op.vertices.size());
+    scr_.others.erase(
+        std::unique(scr_.others.begin(), scr_.others.end(),
+                    [](const VertexRef& a, const VertexRef& b) { return a.id == b.id; }),
+        scr_.others.end());
+    op.new_vertex_count = static_cast<std::uint32_t>(op_.new_vertices.size());
+    op.vertices.reserve(scr_.others.size());
+    for (std::uint32_t v : op_.new_vertices) {
+      scr_.local_of[v] = static_cast<std::uint32_t>(op.vertices.size());
       op.vertices.push_back({VertexId(v), world(verts_[v])});
     }
-    std::sort(op_new_vertices_.begin(), op_new_vertices_.end());
-    for (const VertexRef& r : others_) {
-      if (std::binary_search(op_new_vertices_.begin(), op_new_vertices_.end(), r.id)) continue;
-      local_of_[r.id] = static_cast<std::uint32_t>(op.vertices.size());
+    std::sort(op_.new_vertices.begin(), op_.new_vertices.end());
+    for (const VertexRef& r : scr_.others) {
+      if (std::binary_search(op_.new_vertices.begin(), op_.new_vertices.end(), r.id)) continue;
+      scr_.local_of[r.id] = static_cast<std::uint32_t>(op.vertices.size());
       op.vertices.push_back({VertexId(r.id), world(r.vh->point())});
     }
 
@@ -620,57 +621,57 @@ class Builder {
     // indices into this op's vertices: every PreF corner is a vertex of F), parents (the distinct
     // creators, so sorted and unique) and the edges of PreF triangles for the coarser links.
     // link_dag would derive the same from the parents' records; the builder has them at hand.
-    killed_.clear();
-    for (std::uint32_t id : op_killed_) {
+    scr_.killed.clear();
+    for (std::uint32_t id : op_.killed) {
       const BuildTri& t = tris_[id];
-      killed_.push_back({(std::uint64_t(t.op) << 32) | t.local, id});
+      scr_.killed.push_back({(std::uint64_t(t.op) << 32) | t.local, id});
     }
-    std::sort(killed_.begin(), killed_.end(),
+    std::sort(scr_.killed.begin(), scr_.killed.end(),
               [](const Killed& a, const Killed& b) { return a.key < b.key; });
-    pre_edges_.clear();
-    parents_.clear();
-    op.pre.reserve(killed_.size());
-    op.pre_tris.reserve(killed_.size());
-    for (const Killed& kd : killed_) {
+    scr_.pre_edges.clear();
+    scr_.parents.clear();
+    op.pre.reserve(scr_.killed.size());
+    op.pre_tris.reserve(scr_.killed.size());
+    for (const Killed& kd : scr_.killed) {
       const BuildTri& t = tris_[kd.id];
       op.pre.push_back({OpId(t.op), t.local});
       PreTriangle pt;
       for (int k = 0; k < 3; ++k) {
-        pt.v[k] = local_of_[t.v[k]];
+        pt.v[k] = scr_.local_of[t.v[k]];
         if (pt.v[k] >= op.vertices.size() || op.vertices[pt.v[k]].id.value != t.v[k]) {
           throw_internal("greedy TIN: a PreF corner is not a vertex of F");
         }
       }
       if (t.is_void) pt.flags |= FragmentTriangle::kVoid;
       op.pre_tris.push_back(pt);
-      if (parents_.empty() || parents_.back() != t.op) {
-        parents_.push_back(t.op);
+      if (scr_.parents.empty() || scr_.parents.back() != t.op) {
+        scr_.parents.push_back(t.op);
         ++child_count_[t.op];  // each parent gets one child entry per op: sized once at the end
       }
       for (std::uint8_t k = 0; k < 3; ++k) {
-        pre_edges_.push_back({edge_key(t.v[k], t.v[(k + 1) % 3]), kd.id, k});
+        scr_.pre_edges.push_back({edge_key(t.v[k], t.v[(k + 1) % 3]), kd.id, k});
       }
     }
-    op.parents.reserve(parents_.size());
-    for (std::uint32_t p : parents_) op.parents.push_back(OpId(p));
+    op.parents.reserve(scr_.parents.size());
+    for (std::uint32_t p : scr_.parents) op.parents.push_back(OpId(p));
     child_count_.push_back(0);
-    std::sort(pre_edges_.begin(), pre_edges_.end(),
+    std::sort(scr_.pre_edges.begin(), scr_.pre_edges.end(),
               [](const PreEdge& a, const PreEdge& b) { return a.key < b.key; });
 
-    coarser_.clear();
-    op.fragment.resize(frag_.size());
-    for (std::uint32_t i = 0; i < frag_.size(); ++i) {
-      const BuildTri& t = tris_[frag_[i]];
+    scr_.coarser.clear();
+    op.fragment.resize(scr_.frag.size());
+    for (std::uint32_t i = 0; i < scr_.frag.size(); ++i) {
+      const BuildTri& t = tris_[scr_.frag[i]];
       FragmentTriangle& ft = op.fragment[i];
       t.face->info().local = i;
-      for (int k = 0; k < 3; ++k) ft.v[k] = local_of_[t.v[k]];
+      for (int k = 0; k < 3; ++k) ft.v[k] = scr_.local_of[t.v[k]];
       if (t.is_void) ft.flags |= FragmentTriangle::kVoid;
       for (std::uint8_t k = 0; k < 3; ++k) {
         // Our edge k joins v[k], v[k+1]: CGAL's edge opposite vertex k+2.
         const FaceHandle nf = t.face->neighbor((k + 2) % 3);
         const FaceInfo& n = nf->info();
         if (n.id == kNone) continue;  // infinite face: model boundary, no coarser version
-        if (n.op == current_op_) {
+        if (n.op == op_.index) {
           ft.nbr[k] = static_cast<std::int32_t>(tris_[n.id].local);
           continue;
         }
@@ -678,9 +679,9 @@ class Builder {
         // it on either side; the closest coarser one is the newer of the replaced triangle inside
         // (from PreF) and the surviving triangle outside.
         const std::uint64_t key = edge_key(t.v[k], t.v[(k + 1) % 3]);
-        auto it = std::lower_bound(pre_edges_.begin(), pre_edges_.end(), key,
+        auto it = std::lower_bound(scr_.pre_edges.begin(), scr_.pre_edges.end(), key,
                                    [](const PreEdge& e, std::uint64_t kk) { return e.key < kk; });
-        if (it == pre_edges_.end() || it->key != key) {
+        if (it == scr_.pre_edges.end() || it->key != key) {
           throw_internal("greedy TIN: fragment boundary edge without a replaced triangle");
         }
         const BuildTri& inside = tris_[it->tri];
@@ -688,21 +689,21 @@ class Builder {
           // The neighbour's edge is the one opposite its vertex facing t: CGAL's edge j is our
           // edge j + 1 (vertex order is fixed at creation; faces are never flipped here).
           const auto edge = static_cast<std::uint8_t>((nf->index(t.face) + 1) % 3);
-          coarser_.push_back({i, k, EdgeRef{TriRef{OpId(n.op), n.local}, edge}});
+          scr_.coarser.push_back({i, k, EdgeRef{TriRef{OpId(n.op), n.local}, edge}});
         } else {
-          coarser_.push_back({i, k, EdgeRef{TriRef{OpId(inside.op), inside.local}, it->edge}});
+          scr_.coarser.push_back({i, k, EdgeRef{TriRef{OpId(inside.op), inside.local}, it->edge}});
         }
       }
     }
-    op.coarser.assign(coarser_.begin(), coarser_.end());
+    op.coarser.assign(scr_.coarser.begin(), scr_.coarser.end());
     // The bounds from the op's own record, as link_dag computes them (and smr/db recomputes
     // them), while that record is in cache.
     compute_op_bounds(op);
     ops_.push_back(std::move(op));
 
     // The dead are no longer referenced: recycle their records.
-    for (std::uint32_t id : op_killed_) free_tris_.push_back(id);
-    for (std::uint32_t id : op_created_) {
+    for (std::uint32_t id : op_.killed) free_tris_.push_back(id);
+    for (std::uint32_t id : op_.created) {
       if (!tris_[id].alive) free_tris_.push_back(id);
     }
   }
@@ -743,9 +744,9 @@ class Builder {
     release(heap_);
     release(verts_);
     release(free_tris_);
-    release(local_of_.map);
-    release(pre_edges_);
-    release(killed_);
+    release(scr_.local_of.map);
+    release(scr_.pre_edges);
+    release(scr_.killed);
     ops_.move_to(crmr.ops);
     crmr.ops[0].error = err0;
     for (std::size_t i = 0; i < crmr.ops.size(); ++i) crmr.ops[i].children.reserve(child_count_[i]);
@@ -798,9 +799,12 @@ class Builder {
   std::vector<HeapEntry> heap_;
   OpStore ops_;
   std::vector<std::uint32_t> child_count_;  // per op: how many later ops replace its triangles
-  std::uint32_t current_op_ = 0;
-  double op_err_start_ = 0.0;
-  std::vector<std::uint32_t> op_created_, op_killed_, op_new_vertices_;
+  // The op being made (Brown 4.4.1: PreF = the triangles it kills, F = the ones it creates).
+  struct CurrentOp {
+    std::uint32_t index = 0;
+    double err_start = 0.0;
+    std::vector<std::uint32_t> created, killed, new_vertices;
+  } op_;
   // Scratch, reused by every op.
   struct VertexRef {
     std::uint32_t id;
@@ -810,20 +814,23 @@ class Builder {
     std::uint64_t key;  // (creating op, index in its fragment)
     std::uint32_t id;
   };
-  std::vector<std::uint32_t> frag_, parents_;
-  std::vector<Killed> killed_;
-  std::vector<VertexRef> others_;
-  std::vector<PreEdge> pre_edges_;
-  std::vector<CoarserLink> coarser_;
-  std::vector<FaceHandle> conflicts_, star_;
-  std::vector<Dt::Edge> boundary_;
   struct LocalMap {
     std::vector<std::uint32_t> map;
     std::uint32_t& operator[](std::uint32_t v) {
       if (v >= map.size()) map.resize(std::max<std::size_t>(v + 1, map.size() * 2), kNone);
       return map[v];
     }
-  } local_of_;
+  };
+  struct Scratch {
+    std::vector<std::uint32_t> frag, parents;
+    std::vector<Killed> killed;
+    std::vector<VertexRef> others;
+    std::vector<PreEdge> pre_edges;
+    std::vector<CoarserLink> coarser;
+    std::vector<FaceHandle> conflicts, star;
+    std::vector<Dt::Edge> boundary;
+    LocalMap local_of;
+  } scr_;
 };
 
 }  // namespace
