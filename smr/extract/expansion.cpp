@@ -403,37 +403,37 @@ class Expander {
   void track_fan(const Op& op, std::uint32_t i, int entry_edge) {
     const FragmentTriangle& t = op.fragment[i];
     bool continues = false;
-    if (entry_edge >= 0 && fan_op_ == op.id &&
-        t.nbr[entry_edge] == static_cast<std::int32_t>(fan_last_)) {
+    if (entry_edge >= 0 && fan_.op == op.id &&
+        t.nbr[entry_edge] == static_cast<std::int32_t>(fan_.last)) {
       const std::uint64_t u = op.vertex_id(t, entry_edge).value;
       const std::uint64_t v = op.vertex_id(t, (entry_edge + 1) % 3).value;
-      if (fan_len_ == 1) {
-        fan_apex_ = {u, v};
-        fan_apex_n_ = 2;
+      if (fan_.len == 1) {
+        fan_.apex = {u, v};
+        fan_.apex_n = 2;
         continues = true;
       } else {
         std::array<std::uint64_t, 2> keep{};
         int n = 0;
-        for (int j = 0; j < fan_apex_n_; ++j) {
-          if (fan_apex_[j] == u || fan_apex_[j] == v) keep[n++] = fan_apex_[j];
+        for (int j = 0; j < fan_.apex_n; ++j) {
+          if (fan_.apex[j] == u || fan_.apex[j] == v) keep[n++] = fan_.apex[j];
         }
         if (n > 0) {
-          fan_apex_ = keep;
-          fan_apex_n_ = n;
+          fan_.apex = keep;
+          fan_.apex_n = n;
           continues = true;
         }
       }
     }
     if (continues) {
-      ++fan_len_;
+      ++fan_.len;
     } else {
       out_.fan_starts.push_back(static_cast<std::uint32_t>(triangles_.size() - 1));
       ++out_.stats.fans;
-      fan_len_ = 1;
-      fan_apex_n_ = 0;
+      fan_.len = 1;
+      fan_.apex_n = 0;
     }
-    fan_op_ = op.id;
-    fan_last_ = i;
+    fan_.op = op.id;
+    fan_.last = i;
   }
 
   std::array<GridPoint, 3> grid_triangle(const Op& op, const FragmentTriangle& t) const {
@@ -454,11 +454,15 @@ class Expander {
   std::unique_ptr<DomainIndex> domain_;
   std::unique_ptr<HeldOps> held_;
   std::uint64_t anomalies_ = 0;
-  OpId fan_op_;
-  std::uint32_t fan_last_ = 0;
-  std::uint64_t fan_len_ = 0;
-  std::array<std::uint64_t, 2> fan_apex_{};
-  int fan_apex_n_ = 0;
+  // The triangle fan being grown (Brown 5.1.2: the front emits fans): its op, last triangle,
+  // length and the one or two vertices every triangle of it shares so far.
+  struct Fan {
+    OpId op;
+    std::uint32_t last = 0;
+    std::uint64_t len = 0;
+    std::array<std::uint64_t, 2> apex{};
+    int apex_n = 0;
+  } fan_;
 };
 
 }  // namespace
