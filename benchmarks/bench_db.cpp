@@ -44,7 +44,10 @@
 #include "smr/builders/greedy_tin.h"
 #include "smr/db/database.h"
 #include "smr/db/page.h"
+#include "smr/db/tables.h"
+#include "smr/db/writer.h"
 #include "smr/extract/extract.h"
+#include "smr/query/indexed_source.h"
 #include "smr/rcf/spec.h"
 #include "storage/checksum.h"
 #include "storage/codec.h"
@@ -138,8 +141,8 @@ class AllVisitor final : public smr::index::Visitor {
   bool accept(const smr::index::Entry&) override { return true; }
 };
 
-// Forwards to the database and records, in order, every op fetched and every R-tree leaf the
-// indexed X query reads.
+// Forwards to the database's IndexedSource and records, in order, every op fetched and every
+// R-tree leaf the indexed X query reads.
 class RecordingSource final : public smr::OpSource, public smr::RcfIndexedSource {
  public:
   explicit RecordingSource(const smr::Database& db) : db_(db) {}
@@ -162,7 +165,7 @@ class RecordingSource final : public smr::OpSource, public smr::RcfIndexedSource
   mutable std::vector<std::uint64_t> leaves;
 
  private:
-  const smr::Database& db_;
+  const smr::IndexedSource db_;
 };
 
 // ---- mode: extract --------------------------------------------------------------------------
@@ -189,7 +192,8 @@ struct Timed {
 Timed run_extraction(const smr::Database& db, const smr::Rcf& rcf, bool reduced) {
   Timed t;
   std::uint64_t t0 = now_ns();
-  t.e = reduced ? smr::extract_reduced(db, rcf) : smr::extract_minimal_surface(db, rcf);
+  const smr::IndexedSource source(db);
+  t.e = reduced ? smr::extract_reduced(source, rcf) : smr::extract_minimal_surface(source, rcf);
   t.extract_seconds = seconds_since(t0);
   const std::uint64_t pages_before_mesh = db.stats().pages_read;
   t0 = now_ns();
@@ -229,11 +233,11 @@ json stats_json(const smr::DatabaseStats& s) {
 double raw_read(const std::string& path, const std::vector<std::uint64_t>& pages,
                 std::uint64_t* bytes) {
   const std::uint64_t t0 = now_ns();
-  const smr::storage::Env env = smr::storage::Env::open_read_only(path);
+  const smr::storage::Env env = smr::storage::Env::open_read_only(path, smr::kTableNames);
   const smr::storage::ReadTxn txn = env.read();
   std::uint64_t sum = 0, total = 0;
   for (std::uint64_t p : pages) {
-    const auto v = txn.get(smr::storage::Table::kPages, p);
+    const auto v = txn.get(smr::Table::kPages, p);
     if (!v) smr::throw_internal("raw read: page " + std::to_string(p) + " missing");
     total += v->size();
     for (std::size_t i = 0; i < v->size(); i += 64) sum += (*v)[i];
@@ -259,10 +263,10 @@ json mode_extract(const ExtractArgs& a) {
   std::vector<std::uint64_t> page_size(index_db->page_count(), 0);
   std::uint64_t all_page_bytes = 0;
   {
-    const smr::storage::Env env = smr::storage::Env::open_read_only(a.db);
+    const smr::storage::Env env = smr::storage::Env::open_read_only(a.db, smr::kTableNames);
     const smr::storage::ReadTxn txn = env.read();
     for (std::uint64_t p = 0; p < page_size.size(); ++p) {
-      page_size[p] = txn.get(smr::storage::Table::kPages, p)->size();
+      page_size[p] = txn.get(smr::Table::kPages, p)->size();
       all_page_bytes += page_size[p];
     }
   }
@@ -524,12 +528,11 @@ json mode_codecs(const CodecArgs& a) {
     std::vector<smr::storage::ByteView> payloads, geos;
     std::uint64_t geo_bytes = 0, record_bytes = 0, page_bytes = 0;
     {
-      const smr::storage::Env env = smr::storage::Env::open_read_only(path);
+      const smr::storage::Env env = smr::storage::Env::open_read_only(path, smr::kTableNames);
       const smr::storage::ReadTxn txn = env.read();
-      txn.for_each(smr::storage::Table::kPages,
-                   [&](smr::storage::ByteView, smr::storage::ByteView v) {
-                     pages.emplace_back(v.begin(), v.end());
-                   });
+      txn.for_each(smr::Table::kPages, [&](smr::storage::ByteView, smr::storage::ByteView v) {
+        pages.emplace_back(v.begin(), v.end());
+      });
     }
     for (std::size_t i = 0; i < pages.size(); ++i) {
       page_bytes += pages[i].size();

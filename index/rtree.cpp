@@ -28,9 +28,6 @@ constexpr std::size_t kMaxHeight = 64;
 std::string node_key(std::uint64_t node_id) {
   return std::to_string(node_id);
 }
-std::string node_context(std::uint64_t node_id) {
-  return "rtree/" + node_key(node_id);
-}
 
 void check_options(const BuildOptions& o) {
   if (o.max_leaf_entries < 1) throw_input("R-tree: max_leaf_entries must be at least 1");
@@ -339,10 +336,10 @@ Bytes write(const Plan& plan, std::span<const Entry> entries, const BuildOptions
 
 struct RTree::Node : detail::Node {};
 
-RTree::RTree(ByteView header, std::function<Bytes(std::uint64_t node_id)> fetch)
-    : fetch_(std::move(fetch)) {
-  const ByteView payload = storage::unseal(header, "rtree", "header");
-  storage::ByteReader r(payload, "rtree/header");
+RTree::RTree(ByteView header, std::function<Bytes(std::uint64_t node_id)> fetch, std::string table)
+    : fetch_(std::move(fetch)), table_(std::move(table)) {
+  const ByteView payload = storage::unseal(header, table_, "header");
+  storage::ByteReader r(payload, table_ + "/header");
   if (r.u32() != kHeaderMagic) r.fail("not an R-tree header (bad magic)");
   const std::uint64_t version = r.varint();
   if (version != kFormatVersion) r.fail("unsupported format version " + std::to_string(version));
@@ -376,10 +373,14 @@ RTree::RTree(ByteView header, std::function<Bytes(std::uint64_t node_id)> fetch)
   r.expect_end();
 }
 
+std::string RTree::node_context(std::uint64_t node_id) const {
+  return table_ + "/" + node_key(node_id);
+}
+
 RTree::Node RTree::read_node(std::uint64_t node_id, std::uint64_t level) const {
   const Bytes sealed = fetch_(node_id);
   const std::string key = node_key(node_id);
-  const ByteView payload = storage::unseal(sealed, "rtree", key);
+  const ByteView payload = storage::unseal(sealed, table_, key);
   const std::string context = node_context(node_id);
   Node node{detail::decode_node(payload, context)};
   if (node.level != level) {

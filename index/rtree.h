@@ -1,9 +1,10 @@
 // Packed R-tree over regions of influence (Maheshwari et al. section 4.4: "build a packed R-tree
 // on the list of vertex splits, where the box associated with a vertex split v is roi(v)";
 // DESIGN.md section 5). Bulk-loaded once from a static set of entries, stored as sealed byte
-// nodes that the caller keeps wherever it likes (smr/db: the LMDB table `rtree`); this module
-// never touches LMDB. A query retrieves every entry a Visitor accepts, pruning subtrees whose
-// summary it rejects (Maheshwari 3.2: GET-SPLITS over roi boxes, here over tree nodes).
+// nodes that the caller keeps wherever it likes (a table of its own, named in RTree's error
+// messages); this module never touches LMDB. A query retrieves every entry a Visitor accepts,
+// pruning subtrees whose summary it rejects (Maheshwari 3.2: GET-SPLITS over roi boxes, here over
+// tree nodes).
 //
 // Leaf order (the design point). One leaf is one data page (DESIGN.md section 3), so the order of
 // entries decides what an extraction reads. Entries are refinement ops: coarse ops have big
@@ -33,7 +34,8 @@
 // of the hierarchy lands in the first few leaves). Internal levels group `fanout` consecutive
 // nodes of the level below, so a subtree is a run of consecutive leaves.
 //
-// Node format (all nodes sealed with storage::seal; checksum errors name "rtree/<node id>"):
+// Node format (all nodes sealed with storage::seal; errors name "<table>/<node id>", the table
+// the caller gives RTree):
 //   varint level (0 = leaf), varint count, frame (3 x f64 origin, 3 x f64 step);
 //   internal: varint first_child (children are first_child .. first_child + count - 1);
 //   per item: roi and box as 12 x u8 on the node's frame (coordinate = origin + q * step),
@@ -54,6 +56,7 @@
 #include <cstdint>
 #include <functional>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "index/box.h"
@@ -211,10 +214,11 @@ struct QueryStats {
 // query visits (the caller caches). Safe to query from several threads if `fetch` is.
 class RTree {
  public:
-  // `header` is write()'s result; `fetch(node_id)` returns the node's bytes as given to put().
+  // `header` is write()'s result; `fetch(node_id)` returns the node's bytes as given to put();
+  // `table` is where the caller keeps them, for messages ("<table>/<node id>", "<table>/header").
   // Every node read is verified (checksum, level, counts, child ids within the level below —
   // which also rules out cycles) and a malformation throws smr::Error (kCorrupt) naming the node.
-  RTree(ByteView header, std::function<Bytes(std::uint64_t node_id)> fetch);
+  RTree(ByteView header, std::function<Bytes(std::uint64_t node_id)> fetch, std::string table);
 
   std::uint64_t leaf_count() const { return level_sizes_.empty() ? 0 : level_sizes_.front(); }
   std::uint64_t entry_count() const { return root_.count; }
@@ -231,10 +235,12 @@ class RTree {
  private:
   struct Node;
   Node read_node(std::uint64_t node_id, std::uint64_t level) const;
+  std::string node_context(std::uint64_t node_id) const;  // "<table>/<node id>"
   void visit(std::uint64_t node_id, std::uint64_t level, std::uint64_t expected_count,
              Visitor& visitor, std::vector<Hit>& hits, QueryStats& stats) const;
 
   std::function<Bytes(std::uint64_t)> fetch_;
+  std::string table_;
   std::vector<std::uint64_t> level_sizes_;   // nodes per level, leaves first
   std::vector<std::uint64_t> level_starts_;  // first node id of each level
   std::uint64_t node_count_ = 0;

@@ -44,7 +44,7 @@ class ByteWriter {
 // Reads from a view that must outlive the reader (returned views point into it).
 class ByteReader {
  public:
-  // `context` names what is being decoded ("pages/42") and prefixes every error message.
+  // `context` names what is being decoded ("<table>/<key>", say) and prefixes every error message.
   ByteReader(ByteView in, std::string context) : in_(in), context_(std::move(context)) {}
 
   std::uint8_t u8();

@@ -24,12 +24,7 @@
 namespace smr::storage {
 namespace {
 
-constexpr std::size_t kTables = std::size(kAllTables);
-constexpr unsigned kMaxDbs = 8;
-
-std::size_t index_of(Table table) {
-  return static_cast<std::size_t>(table);
-}
+constexpr unsigned kMaxDbs = kMaxTables;
 
 [[noreturn]] void throw_mdb(int rc, const std::string& where) {
   const std::string message = where + ": " + mdb_strerror(rc);
@@ -81,7 +76,7 @@ std::string quoted(std::string_view text) {
 // read past the end of the mapping, or follow a null pointer (a leaf node flagged F_DUPDATA in a
 // table without MDB_DUPSORT) — a crash, not an error. Database files never change, so every page
 // LMDB is about to read is checked here once, the first time: the meta pages and the table of
-// tables (LMDB's main table, which names the five) when the file is opened, the pages on the way
+// tables (LMDB's main table, which names the others) when the file is opened, the pages on the way
 // to a key before each get, every page of a table before a cursor walks it. LMDB then reads only
 // checked pages, and what it returns is compared with what the check found. Layout: mdb.c's
 // MDB_meta, MDB_page, MDB_node and MDB_db of 64-bit builds, little-endian.
@@ -260,8 +255,8 @@ std::string check_tree_record(const std::uint8_t* db, std::uint64_t pages, Tree&
   tree.root = read_le(db + kDbRoot, 8);
   tree.depth = u16(db + kDbDepth);
   if (u16(db + kDbFlags) != 0) {
-    // smrdb's tables are plain ones: with MDB_DUPSORT, MDB_INTEGERKEY... LMDB would read the
-    // pages another way.
+    // The tables DatabaseWriter makes are plain ones: with MDB_DUPSORT, MDB_INTEGERKEY... LMDB
+    // would read the pages another way.
     return "flags " + std::to_string(u16(db + kDbFlags));
   }
   if (tree.root == kNoPage
@@ -280,10 +275,36 @@ struct OpenCheck {
   std::uint64_t page_size = 0, pages = 0;  // pages: last page + 1
   std::uint64_t main_root = kNoPage;
   std::vector<std::uint8_t> main_page;  // the table of tables (a leaf), when not empty
-  Tree trees[kTables];
+  std::vector<Tree> trees;              // per Table
 };
 
-OpenCheck check_before_open(const std::string& path, std::uint64_t file_bytes) {
+// The caller's table names, checked: at most kMaxTables, no two alike.
+std::vector<std::string> table_names(std::span<const std::string_view> tables,
+                                     const std::string& path) {
+  if (tables.size() > kMaxTables) {
+    throw_internal(path + ": " + std::to_string(tables.size()) + " tables, LMDB is set up for " +
+                   std::to_string(kMaxTables));
+  }
+  std::vector<std::string> names(tables.begin(), tables.end());
+  for (std::size_t a = 0; a < names.size(); ++a) {
+    for (std::size_t b = a + 1; b < names.size(); ++b) {
+      if (names[a] == names[b]) throw_internal(path + ": table '" + names[a] + "' named twice");
+    }
+  }
+  return names;
+}
+
+// The index of `table` in a list of `count` tables; kInternal when out of range.
+std::size_t index_of(Table table, std::size_t count, const std::string& path) {
+  if (table.index() >= count) {
+    throw_internal(path + ": table " + std::to_string(table.index()) + " of " +
+                   std::to_string(count));
+  }
+  return table.index();
+}
+
+OpenCheck check_before_open(const std::string& path, std::uint64_t file_bytes,
+                            const std::vector<std::string>& tables) {
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) throw_io(path + ": cannot open database: " + errno_text(errno));
   struct Closer {
@@ -291,6 +312,7 @@ OpenCheck check_before_open(const std::string& path, std::uint64_t file_bytes) {
     ~Closer() { ::close(fd); }
   } closer{fd};
   OpenCheck out;
+  out.trees.resize(tables.size());
   const MetaPage m0 = read_meta(fd, 0);
   if (!m0.valid) return out;
   if (!good_page_size(m0.page_size)) {
@@ -336,24 +358,23 @@ OpenCheck check_before_open(const std::string& path, std::uint64_t file_bytes) {
   }
   for (std::size_t i = 0; i < node_count(p); ++i) {
     const Node node = node_at(p, i);
-    for (Table table : kAllTables) {
-      const std::string_view name = table_name(table);
+    for (std::size_t t = 0; t < tables.size(); ++t) {
+      const std::string& name = tables[t];
       if (node.flags != kSubData || node.key.size() != name.size() ||
           std::memcmp(node.key.data(), name.data(), name.size()) != 0) {
         continue;
       }
-      if (const std::string bad =
-              check_tree_record(node.data, out.pages, out.trees[static_cast<std::size_t>(table)]);
+      if (const std::string bad = check_tree_record(node.data, out.pages, out.trees[t]);
           !bad.empty()) {
-        throw_corrupt(page + ": table '" + std::string(name) + "' has " + bad);
+        throw_corrupt(page + ": table '" + name + "' has " + bad);
       }
     }
   }
-  for (std::size_t a = 0; a < kTables; ++a) {
-    for (std::size_t b = a + 1; b < kTables; ++b) {
+  for (std::size_t a = 0; a < tables.size(); ++a) {
+    for (std::size_t b = a + 1; b < tables.size(); ++b) {
       if (out.trees[a].root != kNoPage && out.trees[a].root == out.trees[b].root) {
-        throw_corrupt(page + ": tables '" + std::string(table_name(kAllTables[a])) + "' and '" +
-                      std::string(table_name(kAllTables[b])) + "' have the same root page");
+        throw_corrupt(page + ": tables '" + tables[a] + "' and '" + tables[b] +
+                      "' have the same root page");
       }
     }
   }
@@ -362,54 +383,39 @@ OpenCheck check_before_open(const std::string& path, std::uint64_t file_bytes) {
 
 }  // namespace
 
-std::string_view table_name(Table table) {
-  switch (table) {
-    case Table::kMeta:
-      return "meta";
-    case Table::kNodes:
-      return "nodes";
-    case Table::kPages:
-      return "pages";
-    case Table::kRtree:
-      return "rtree";
-    case Table::kAux:
-      return "aux";
-  }
-  return "?";
-}
-
 namespace detail {
 
 struct EnvState {
   std::string path;
+  std::vector<std::string> tables;  // the names, by Table index
   MDB_env* env = nullptr;
-  MDB_dbi dbis[kTables] = {};
+  std::vector<MDB_dbi> dbis;  // per Table
   std::uint64_t file_bytes = 0;
   mutable std::atomic<std::uint64_t> bytes_read{0};
   // The file as LMDB mapped it, and what has been checked of it.
   const std::uint8_t* map = nullptr;  // page 0; the mapping is file_bytes long
   std::uint64_t page_size = 0, pages = 0;
-  Tree trees[kTables];
+  std::vector<Tree> trees;  // per Table
   // Per page: 0 until it passed check_page, then 1 + the table whose tree holds it.
   std::unique_ptr<std::atomic<std::uint8_t>[]> owner;
 
   ~EnvState() {
     if (env != nullptr) mdb_env_close(env);
   }
-  std::string where(Table table) const {
-    return path + ", table '" + std::string(table_name(table)) + "'";
-  }
+  std::size_t index(Table table) const { return index_of(table, tables.size(), path); }
+  MDB_dbi dbi(Table table) const { return dbis[index(table)]; }
+  std::string where(Table table) const { return path + ", table '" + tables[index(table)] + "'"; }
   const std::uint8_t* page(std::uint64_t pgno) const { return map + pgno * page_size; }
 
   // Throws kCorrupt naming the table and page unless `pgno` is a sound page of `table`'s tree
   // (and of no other table's).
   void check_page(Table table, std::uint64_t pgno, const ByteView* lo, const ByteView* hi) const {
-    const auto mine = static_cast<std::uint8_t>(index_of(table) + 1);
+    const auto mine = static_cast<std::uint8_t>(index(table) + 1);
     const std::uint8_t seen = owner[pgno].load(std::memory_order_acquire);
     if (seen == mine) return;
-    std::string bad =
-        seen != 0 ? "it is a page of table '" + std::string(table_name(kAllTables[seen - 1])) + "'"
-                  : check_tree_page(page(pgno), pgno, page_size, pages, false, lo, hi);
+    std::string bad = seen != 0
+                          ? "it is a page of table '" + tables[seen - 1] + "'"
+                          : check_tree_page(page(pgno), pgno, page_size, pages, false, lo, hi);
     if (!bad.empty()) {
       throw_corrupt(where(table) + ": damaged LMDB page " + std::to_string(pgno) + ": " + bad);
     }
@@ -419,7 +425,7 @@ struct EnvState {
   // Follows LMDB's search for `key` down `table`'s tree, checking each page on the way, and
   // returns the key's node, if there is one.
   std::optional<Node> find(Table table, ByteView key, const std::string& key_text) const {
-    const Tree& tree = trees[index_of(table)];
+    const Tree& tree = trees[index(table)];
     if (tree.root == kNoPage) return std::nullopt;
     std::uint64_t pgno = tree.root;
     ByteView lo_key, hi_key;
@@ -456,16 +462,16 @@ struct EnvState {
 
   // Checks every page of `table`'s tree (before a cursor walks it).
   void check_tree(Table table) const {
-    const Tree& tree = trees[index_of(table)];
+    const Tree& tree = trees[index(table)];
     if (tree.root != kNoPage) check_subtree(table, tree.root, 1, nullptr, nullptr);
   }
   void check_subtree(Table table, std::uint64_t pgno, std::uint64_t depth, const ByteView* lo,
                      const ByteView* hi) const {
     check_page(table, pgno, lo, hi);
     const std::uint8_t* p = page(pgno);
-    if (is_branch(p) != (depth < trees[index_of(table)].depth)) {
+    if (is_branch(p) != (depth < trees[index(table)].depth)) {
       throw_corrupt(where(table) + ": damaged LMDB page " + std::to_string(pgno) +
-                    ": the tree is not " + std::to_string(trees[index_of(table)].depth) +
+                    ": the tree is not " + std::to_string(trees[index(table)].depth) +
                     " pages deep there");
     }
     if (!is_branch(p)) return;
@@ -537,7 +543,7 @@ const std::uint8_t* find_mapping(MDB_txn* txn, const OpenCheck& c, const std::st
 
 }  // namespace
 
-Env Env::open_read_only(const std::string& path) {
+Env Env::open_read_only(const std::string& path, std::span<const std::string_view> tables) {
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0) {
     throw_io(path + ": cannot open database: " + errno_text(errno));
@@ -547,8 +553,10 @@ Env Env::open_read_only(const std::string& path) {
 
   auto state = std::make_unique<detail::EnvState>();
   state->path = path;
+  state->tables = table_names(tables, path);
+  state->dbis.assign(state->tables.size(), 0);
   state->file_bytes = static_cast<std::uint64_t>(st.st_size);
-  const OpenCheck checked = check_before_open(path, state->file_bytes);
+  const OpenCheck checked = check_before_open(path, state->file_bytes, state->tables);
   check(mdb_env_create(&state->env), path + ": mdb_env_create");
   check(mdb_env_set_maxdbs(state->env, kMaxDbs), path + ": mdb_env_set_maxdbs");
   // Map exactly the file, whatever map size the meta page records (LMDB maps at least up to its
@@ -575,22 +583,22 @@ Env Env::open_read_only(const std::string& path) {
   }
   state->page_size = checked.page_size;
   state->pages = checked.pages;
-  std::copy(std::begin(checked.trees), std::end(checked.trees), std::begin(state->trees));
+  state->trees = checked.trees;
   state->owner = std::make_unique<std::atomic<std::uint8_t>[]>(state->pages);
 
   MDB_txn* txn = nullptr;
   check(mdb_txn_begin(state->env, nullptr, MDB_RDONLY, &txn), path + ": mdb_txn_begin");
   try {
-    for (Table table : kAllTables) {
-      const std::string name(table_name(table));
-      const int open_rc = mdb_dbi_open(txn, name.c_str(), 0, &state->dbis[index_of(table)]);
+    for (std::size_t t = 0; t < state->tables.size(); ++t) {
+      const std::string& name = state->tables[t];
+      const int open_rc = mdb_dbi_open(txn, name.c_str(), 0, &state->dbis[t]);
       if (open_rc == MDB_NOTFOUND) {
         throw_corrupt(path + ": missing table '" + name + "', not an smrdb database");
       }
       if (open_rc == MDB_INCOMPATIBLE) {
         throw_corrupt(path + ": '" + name + "' is not a table, not an smrdb database");
       }
-      check(open_rc, state->where(table));
+      check(open_rc, state->where(Table(t)));
     }
     state->map = find_mapping(txn, checked, path);
   } catch (...) {
@@ -607,6 +615,9 @@ const std::string& Env::path() const {
 }
 std::uint64_t Env::file_bytes() const {
   return state_->file_bytes;
+}
+const std::string& Env::table_name(Table table) const {
+  return state_->tables[state_->index(table)];
 }
 std::uint64_t Env::bytes_read() const {
   return state_->bytes_read.load();
@@ -648,7 +659,7 @@ std::optional<ByteView> ReadTxn::get_bytes(Table table, ByteView key,
   const std::optional<Node> node = env_->find(table, key, key_text);  // checks LMDB's way there
   MDB_val k = to_val(key);
   MDB_val v{};
-  const int rc = mdb_get(static_cast<MDB_txn*>(txn_), env_->dbis[index_of(table)], &k, &v);
+  const int rc = mdb_get(static_cast<MDB_txn*>(txn_), env_->dbi(table), &k, &v);
   if (rc == MDB_NOTFOUND && !node) return std::nullopt;
   if (rc != MDB_SUCCESS && rc != MDB_NOTFOUND) {
     throw_mdb(rc, env_->where(table) + ", key " + key_text);
@@ -678,7 +689,7 @@ void ReadTxn::for_each(Table table,
                        const std::function<void(ByteView key, ByteView value)>& visit) const {
   env_->check_tree(table);  // every page the cursor will read
   MDB_cursor* cursor = nullptr;
-  check(mdb_cursor_open(static_cast<MDB_txn*>(txn_), env_->dbis[index_of(table)], &cursor),
+  check(mdb_cursor_open(static_cast<MDB_txn*>(txn_), env_->dbi(table), &cursor),
         env_->where(table) + ": mdb_cursor_open");
   struct Closer {
     MDB_cursor* c;
@@ -700,7 +711,7 @@ void ReadTxn::for_each(Table table,
 
 std::uint64_t ReadTxn::count(Table table) const {
   MDB_stat st{};
-  check(mdb_stat(static_cast<MDB_txn*>(txn_), env_->dbis[index_of(table)], &st),
+  check(mdb_stat(static_cast<MDB_txn*>(txn_), env_->dbi(table), &st),
         env_->where(table) + ": mdb_stat");
   return st.ms_entries;
 }
@@ -732,9 +743,11 @@ std::string parent_dir(const std::string& path) {
 
 }  // namespace
 
-DatabaseWriter::DatabaseWriter(std::string path, bool force, std::uint64_t batch_bytes,
+DatabaseWriter::DatabaseWriter(std::string path, std::span<const std::string_view> tables,
+                               bool force, std::uint64_t batch_bytes,
                                std::uint64_t initial_map_bytes)
     : path_(std::move(path)),
+      tables_(table_names(tables, path_)),
       batch_bytes_(batch_bytes == 0 ? 1 : batch_bytes),
       map_bytes_(initial_map_bytes < (1u << 16) ? (1u << 16) : initial_map_bytes) {
   std::error_code ec;
@@ -744,6 +757,8 @@ DatabaseWriter::DatabaseWriter(std::string path, bool force, std::uint64_t batch
   if (std::filesystem::is_directory(path_, ec)) throw_input(path_ + ": is a directory");
   tmp_path_ = path_ + ".tmp-" + std::to_string(::getpid());
   compact_path_ = tmp_path_ + ".compact";
+  dbis_.assign(tables_.size(), 0);
+  last_key_.assign(tables_.size(), std::nullopt);
   remove_quietly(tmp_path_);
   remove_quietly(compact_path_);
 
@@ -758,9 +773,9 @@ DatabaseWriter::DatabaseWriter(std::string path, bool force, std::uint64_t batch
           tmp_path_ + ": cannot create database");
     MDB_txn* txn = nullptr;
     check(mdb_txn_begin(env, nullptr, 0, &txn), tmp_path_ + ": mdb_txn_begin");
-    for (Table table : kAllTables) {
-      const std::string name(table_name(table));
-      const int rc = mdb_dbi_open(txn, name.c_str(), MDB_CREATE, &dbis_[index_of(table)]);
+    for (std::size_t t = 0; t < tables_.size(); ++t) {  // in the caller's order
+      const std::string& name = tables_[t];
+      const int rc = mdb_dbi_open(txn, name.c_str(), MDB_CREATE, &dbis_[t]);
       if (rc != MDB_SUCCESS) {
         mdb_txn_abort(txn);
         throw_mdb(rc, tmp_path_ + ", table '" + name + "'");
@@ -789,15 +804,19 @@ void DatabaseWriter::cleanup() noexcept {
 }
 
 void DatabaseWriter::append(Table table, std::uint64_t key, ByteView value) {
-  std::optional<std::uint64_t>& last = last_key_[index_of(table)];
+  std::optional<std::uint64_t>& last = last_key_[index_of(table, tables_.size(), path_)];
   if (last && key <= *last) {
-    throw_internal(path_ + ", table '" + std::string(table_name(table)) + "': key " +
-                   std::to_string(key) + " appended after key " + std::to_string(*last) +
+    throw_internal(path_ + ", table '" + table_name(table) + "': key " + std::to_string(key) +
+                   " appended after key " + std::to_string(*last) +
                    " (keys must be strictly increasing)");
   }
   last = key;
   const Bytes k = key_u64(key);
   add(table, k, value, true);
+}
+
+const std::string& DatabaseWriter::table_name(Table table) const {
+  return tables_[index_of(table, tables_.size(), path_)];
 }
 
 void DatabaseWriter::put(Table table, std::string_view key, ByteView value) {
@@ -806,8 +825,9 @@ void DatabaseWriter::put(Table table, std::string_view key, ByteView value) {
 
 void DatabaseWriter::add(Table table, ByteView key, ByteView value, bool append) {
   if (finished_ || env_ == nullptr) throw_internal(path_ + ": write after finish()");
+  (void)index_of(table, tables_.size(), path_);
   if (key.empty() || key.size() > 511) {
-    throw_internal(path_ + ", table '" + std::string(table_name(table)) + "': key of " +
+    throw_internal(path_ + ", table '" + table_name(table) + "': key of " +
                    std::to_string(key.size()) + " bytes (LMDB keys are 1..511 bytes)");
   }
   Op op{table, append, arena_.size(), key.size(), 0, value.size()};
@@ -830,7 +850,7 @@ void DatabaseWriter::flush() {
     for (const Op& op : ops_) {
       MDB_val k{op.key_size, arena_.data() + op.key_offset};
       MDB_val v{op.value_size, arena_.data() + op.value_offset};
-      rc = mdb_put(txn, dbis_[index_of(op.table)], &k, &v, op.append ? MDB_APPEND : 0);
+      rc = mdb_put(txn, dbis_[op.table.index()], &k, &v, op.append ? MDB_APPEND : 0);
       if (rc != MDB_SUCCESS) {
         failed = &op;
         break;
@@ -850,7 +870,7 @@ void DatabaseWriter::flush() {
     }
     std::string where = path_;
     if (failed != nullptr) {
-      where += ", table '" + std::string(table_name(failed->table)) + "', key ";
+      where += ", table '" + table_name(failed->table) + "', key ";
       const ByteView key(arena_.data() + failed->key_offset, failed->key_size);
       where +=
           failed->append
@@ -875,8 +895,9 @@ const std::uint8_t* DatabaseWriter::mapping_of_written() const {
     return nullptr;
   const std::uint8_t* map = nullptr;
   try {
-    map = find_mapping(txn, check_before_open(tmp_path_, static_cast<std::uint64_t>(st.st_size)),
-                       tmp_path_);
+    map = find_mapping(
+        txn, check_before_open(tmp_path_, static_cast<std::uint64_t>(st.st_size), tables_),
+        tmp_path_);
   } catch (const Error&) {
     map = nullptr;
   }

@@ -1,25 +1,44 @@
-// The LMDB environment of one database (DESIGN.md section 3): one file, five tables, read-only
-// access for readers and an atomic, deterministic writer. LMDB types never appear here; every LMDB
-// status becomes an smr::Error carrying mdb_strerror's text and the path/table/key involved.
+// The LMDB environment of one database file (DESIGN.md section 3): one file holding the tables its
+// caller names, read-only access for readers and an atomic, deterministic writer. LMDB types
+// never appear here; every LMDB status becomes an smr::Error carrying mdb_strerror's text and the
+// path/table/key involved. Storage knows no table of its own: the caller passes the list of
+// table names (the LMDB sub-database names) to Env::open_read_only and DatabaseWriter, and
+// addresses a table by its index in that list.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
+#include <type_traits>
+#include <vector>
 
 #include "storage/bytes.h"
 
 namespace smr::storage {
 
-enum class Table : std::uint8_t { kMeta, kNodes, kPages, kRtree, kAux };
-inline constexpr Table kAllTables[] = {Table::kMeta, Table::kNodes, Table::kPages, Table::kRtree,
-                                       Table::kAux};
+// A table of an Env or a DatabaseWriter: the index of its name in the list the file was opened
+// or created with. A caller names its tables with an enum whose values are those indices; the
+// enum converts implicitly.
+class Table {
+ public:
+  constexpr explicit Table(std::size_t index) : index_(index) {}
+  template <class E>
+  requires std::is_enum_v<E>
+  constexpr Table(E table) : index_(static_cast<std::size_t>(table)) {}  // NOLINT: implicit
+  constexpr std::size_t index() const { return index_; }
+  friend constexpr bool operator==(Table, Table) = default;
 
-// "meta", "nodes", "pages", "rtree", "aux" (also the LMDB sub-database names).
-std::string_view table_name(Table table);
+ private:
+  std::size_t index_;
+};
+
+// The most tables a file may have (LMDB's maxdbs).
+inline constexpr std::size_t kMaxTables = 8;
 
 class ReadTxn;
 
@@ -32,12 +51,14 @@ class Env {
  public:
   // Opens with MDB_RDONLY|MDB_NOSUBDIR|MDB_NOTLS|MDB_NOLOCK|MDB_NORDAHEAD: database files are never
   // modified after creation, so no lock file is needed and any number of threads and processes
-  // may read. A missing file (kIo), an empty, truncated or non-LMDB file or a missing table
-  // (kCorrupt) throws smr::Error naming the path. LMDB trusts the file's structure, so each page
-  // is checked before LMDB first reads it (the meta pages and the table of tables here, the
-  // pages on the way to a key in get() and for_each()): a damaged page throws kCorrupt naming
-  // the path, the table and the page instead of crashing the process.
-  static Env open_read_only(const std::string& path);
+  // may read. `tables` names the tables to open (Table(i) is tables[i]; at most kMaxTables, no
+  // name twice, kInternal otherwise); the file may hold others. A missing file (kIo), an empty,
+  // truncated or non-LMDB file or a missing table (kCorrupt) throws smr::Error naming the path.
+  // LMDB trusts the file's structure, so each page is checked before LMDB first reads it (the meta
+  // pages and the table of tables here, the pages on the way to a key in get() and for_each()): a
+  // damaged page throws kCorrupt naming the path, the table and the page instead of crashing the
+  // process.
+  static Env open_read_only(const std::string& path, std::span<const std::string_view> tables);
 
   Env(Env&&) noexcept;
   Env& operator=(Env&&) noexcept;
@@ -45,6 +66,7 @@ class Env {
 
   const std::string& path() const;
   std::uint64_t file_bytes() const;
+  const std::string& table_name(Table table) const;
 
   // A read-only transaction (a consistent snapshot). It may be created and used on any thread
   // (MDB_NOTLS), but one transaction must not be used by two threads at the same time.
@@ -94,14 +116,17 @@ class ReadTxn {
 // caller writes the `meta` table LAST, so a reader never sees a database without its meta.
 // A kill -9 at any moment leaves <path> either as it was or complete (at worst a stale
 // "<path>.tmp-*" file remains). The same sequence of calls produces a byte-identical file.
-// All five tables always exist in the output, possibly empty.
+// Every table named at construction exists in the output, possibly empty; LMDB creates them in
+// the order of the list (part of what makes the bytes).
 class DatabaseWriter {
  public:
-  // Throws kInvalidInput "<path>: exists; pass --force to replace it" if <path> exists and !force,
-  // before touching anything. Writes are committed every `batch_bytes`; the map starts at
-  // `initial_map_bytes` and doubles whenever LMDB reports MDB_MAP_FULL (the batch is redone; the
-  // caller never sees MDB_MAP_FULL).
-  DatabaseWriter(std::string path, bool force, std::uint64_t batch_bytes = 64u << 20,
+  // `tables` names the file's tables, as Env::open_read_only takes them. Throws kInvalidInput
+  // "<path>: exists; pass --force to replace it" if <path> exists and !force, before touching
+  // anything. Writes are committed every `batch_bytes`; the map starts at `initial_map_bytes` and
+  // doubles whenever LMDB reports MDB_MAP_FULL (the batch is redone; the caller never sees
+  // MDB_MAP_FULL).
+  DatabaseWriter(std::string path, std::span<const std::string_view> tables, bool force,
+                 std::uint64_t batch_bytes = 64u << 20,
                  std::uint64_t initial_map_bytes = 64u << 20);
   DatabaseWriter(const DatabaseWriter&) = delete;
   DatabaseWriter& operator=(const DatabaseWriter&) = delete;
@@ -111,12 +136,13 @@ class DatabaseWriter {
   // Keys must be strictly increasing per table (bulk load with MDB_APPEND); a key not greater
   // than the previous one appended to that table throws kInternal.
   void append(Table table, std::uint64_t key, ByteView value);
-  // Any key, any order (meta/aux); a later put of the same key replaces the value.
+  // Any key, any order; a later put of the same key replaces the value.
   void put(Table table, std::string_view key, ByteView value);
   // Commit, compact, rename. The writer is unusable afterwards.
   void finish();
 
   const std::string& path() const { return path_; }
+  const std::string& table_name(Table table) const;
   std::uint64_t bytes_written() const { return bytes_written_; }  // value bytes accepted
   std::uint64_t commits() const { return commits_; }              // LMDB write txns committed
   std::uint64_t map_bytes() const { return map_bytes_; }          // current map size
@@ -134,13 +160,14 @@ class DatabaseWriter {
   void cleanup() noexcept;
 
   std::string path_, tmp_path_, compact_path_;
+  std::vector<std::string> tables_;  // the table names, by Table index
   std::uint64_t batch_bytes_;
   std::uint64_t map_bytes_;
-  void* env_ = nullptr;    // MDB_env*
-  unsigned dbis_[5] = {};  // MDB_dbi per Table
-  std::vector<Op> ops_;    // the pending batch
-  Bytes arena_;            // keys and values of the pending batch
-  std::optional<std::uint64_t> last_key_[5];
+  void* env_ = nullptr;                                 // MDB_env*
+  std::vector<unsigned> dbis_;                          // MDB_dbi per Table
+  std::vector<Op> ops_;                                 // the pending batch
+  Bytes arena_;                                         // keys and values of the pending batch
+  std::vector<std::optional<std::uint64_t>> last_key_;  // per Table
   std::uint64_t bytes_written_ = 0, commits_ = 0;
   bool finished_ = false;
 };

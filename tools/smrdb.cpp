@@ -27,12 +27,15 @@
 #include "smr/builders/qem_pm.h"
 #include "smr/core/invariants.h"
 #include "smr/db/database.h"
+#include "smr/db/verify.h"
+#include "smr/db/writer.h"
 #include "smr/extract/extract.h"
 #include "smr/io/dem_reader.h"
 #include "smr/io/mesh_reader.h"
 #include "smr/io/mesh_writer.h"
 #include "smr/io/render.h"
 #include "smr/io/synthetic.h"
+#include "smr/query/indexed_source.h"
 #include "smr/rcf/spec.h"
 #include "tools/progress.h"
 
@@ -541,7 +544,7 @@ nlohmann::json database_report(const smr::WriteReport& w, const IngestArgs& a,
       {"pages", w.pages},
       {"rtree_nodes", w.rtree_nodes},
       {"page_bytes", w.page_bytes},
-      {"locator_bytes", w.node_bytes},
+      {"locator_bytes", w.locator_bytes},
       {"rtree_bytes", w.rtree_bytes},
       {"file_bytes", w.file_bytes},
       {"bytes_per_vertex", double(w.file_bytes) / double(std::max<std::uint64_t>(1, vertices))},
@@ -756,8 +759,9 @@ nlohmann::json extract(const smr::Database& db, const smr::Heightfield* dem,
   if (spec.critical_level && dem == nullptr)
     throw_input("--critical-lines needs the source DEM: pass --dem");
   const smr::Rcf rcf = smr::make_rcf(spec, db.info().kind, dem);
-  const smr::Extraction e = a.algorithm == "reduced" ? smr::extract_reduced(db, rcf)
-                                                     : smr::extract_minimal_surface(db, rcf);
+  const smr::IndexedSource source(db);  // RCF questions answered by the R-tree
+  const smr::Extraction e = a.algorithm == "reduced" ? smr::extract_reduced(source, rcf)
+                                                     : smr::extract_minimal_surface(source, rcf);
   report["rcf"] = rcf.describe();
   report["extraction"] = stats_json(e.stats);
   report["extraction"]["algorithm"] = a.algorithm;

@@ -15,25 +15,6 @@ const CoarserLink* Op::coarser_link(std::uint32_t tri, std::uint8_t edge) const 
   return nullptr;
 }
 
-double error_at(const CrmrInfo& info, double res) {
-  const double span = info.err0 - info.err_final;
-  if (span <= 0.0) return info.err_final;
-  return info.err_final + (1.0 - res) * span;
-}
-
-double resolution_of(const CrmrInfo& info, double error) {
-  const double span = info.err0 - info.err_final;
-  if (span <= 0.0) return 1.0;
-  return std::clamp(1.0 - (error - info.err_final) / span, 0.0, 1.0);
-}
-
-double OpSource::error_at(double res) const {
-  return smr::error_at(info(), res);
-}
-double OpSource::resolution_of(double error) const {
-  return smr::resolution_of(info(), error);
-}
-
 std::uint64_t Crmr::triangle_count() const {
   std::uint64_t n = 0;
   for (const Op& op : ops) n += op.fragment.size();

@@ -47,7 +47,8 @@ struct ExpansionOptions {
 };
 
 /// A source that answers "which ops are not completely finer than the RCF" from an index instead
-/// of a scan of every op (smr/db: the R-tree over ROI boxes, Maheshwari 4.4).
+/// of a scan of every op (smr/query/indexed_source.h: a database's R-tree over ROI boxes,
+/// Maheshwari 4.4).
 class RcfIndexedSource {
  public:
   virtual ~RcfIndexedSource() = default;

@@ -29,11 +29,15 @@
 #include <nlohmann/json.hpp>
 
 #include "smr/db/database.h"
+#include "smr/db/tables.h"
+#include "smr/db/verify.h"
+#include "smr/extract/extract.h"
 #include "smr/io/gdal_raster.h"
 #include "smr/io/mesh_reader.h"
 #include "smr/io/mesh_writer.h"
 #include "smr/io/npy.h"
 #include "smr/io/synthetic.h"
+#include "smr/query/indexed_source.h"
 #include "smr/rcf/spec.h"
 #include "storage/lmdb_env.h"
 #include "tests/support/files.h"
@@ -246,28 +250,27 @@ TEST_F(DbCli, DamagedDatabaseIsExitCodeOneNamingTheTable) {
   const std::string bytes = read_file(good);
   // Values located through LMDB, then found in the file (contiguous in their LMDB page).
   struct Target {
-    smr::storage::Table table;
+    smr::Table table;
     std::string key;
     std::size_t offset;
   };
   std::vector<Target> targets;
   {
-    const smr::storage::Env env = smr::storage::Env::open_read_only(good);
+    const smr::storage::Env env = smr::storage::Env::open_read_only(good, smr::kTableNames);
     const smr::storage::ReadTxn txn = env.read();
-    for (smr::storage::Table t : {smr::storage::Table::kMeta, smr::storage::Table::kPages,
-                                  smr::storage::Table::kNodes, smr::storage::Table::kRtree}) {
+    for (smr::Table t :
+         {smr::Table::kMeta, smr::Table::kPages, smr::Table::kOpLocators, smr::Table::kRtree}) {
       // The first, a middle and the last page; the first value of the other tables.
       const std::uint64_t n = txn.count(t);
       std::uint64_t i = 0;
       txn.for_each(t, [&](smr::storage::ByteView key, smr::storage::ByteView value) {
         const std::uint64_t index = i++;
-        if (index != 0 && (t != smr::storage::Table::kPages || (index != n / 2 && index != n - 1)))
-          return;
+        if (index != 0 && (t != smr::Table::kPages || (index != n / 2 && index != n - 1))) return;
         const std::string v(reinterpret_cast<const char*>(value.data()), value.size());
         const std::size_t at = bytes.find(v);
         if (at == std::string::npos || bytes.find(v, at + 1) != std::string::npos) return;
         const std::string k =
-            t == smr::storage::Table::kMeta
+            t == smr::Table::kMeta
                 ? std::string(reinterpret_cast<const char*>(key.data()), key.size())
                 : std::to_string(smr::storage::parse_key_u64(key, "test"));
         targets.push_back({t, k, at + value.size() / 2});
@@ -278,8 +281,7 @@ TEST_F(DbCli, DamagedDatabaseIsExitCodeOneNamingTheTable) {
   int failed = 0, identical = 0;
   const std::string bad = path("bad.smrdb");
   for (const Target& t : targets) {
-    const std::string where =
-        "table '" + std::string(smr::storage::table_name(t.table)) + "', key " + t.key;
+    const std::string where = "table '" + std::string(smr::table_name(t.table)) + "', key " + t.key;
     SCOPED_TRACE(where);
     std::string damaged = bytes;
     damaged[t.offset] = static_cast<char>(damaged[t.offset] ^ 0x04);
@@ -299,7 +301,7 @@ TEST_F(DbCli, DamagedDatabaseIsExitCodeOneNamingTheTable) {
       EXPECT_NE(r.out.find(where), std::string::npos) << r.out;
       ++failed;
     }
-    if (t.table == smr::storage::Table::kMeta) expect_user_error("info " + bad, where);
+    if (t.table == smr::Table::kMeta) expect_user_error("info " + bad, where);
   }
   EXPECT_GT(failed, 0);
   EXPECT_GT(identical, 0);  // pages the RCF never needs do not matter
@@ -737,7 +739,7 @@ TEST_F(DbCli, RepairedMeshIngestCameraViewAndFullRefinementFromDisk) {
     spec.camera = cam;  // fov 60, 1024x768, up +z: the CLI's defaults
     spec.pixel_error = 2.0;
     const smr::Extraction e = smr::extract_minimal_surface(
-        *opened, smr::make_rcf(spec, smr::ModelKind::kMesh3d, nullptr));
+        smr::IndexedSource(*opened), smr::make_rcf(spec, smr::ModelKind::kMesh3d, nullptr));
     EXPECT_EQ(e.triangles.size(), view) << "the CLI's camera is not the one asked for";
   }
   r = smrdb("extract " + db + camera + " --pixel-error 2 --no-cull --verify --json -q -o " +

@@ -16,7 +16,11 @@
 #include "smr/core/parallel.h"
 #include "smr/db/database.h"
 #include "smr/db/page.h"
+#include "smr/db/tables.h"
+#include "smr/db/verify.h"
+#include "smr/db/writer.h"
 #include "smr/extract/extract.h"
+#include "smr/query/indexed_source.h"
 #include "tests/support/datasets.h"
 #include "tests/support/files.h"
 #include "tests/support/meshes.h"
@@ -70,6 +74,7 @@ TEST_P(PerDataset, ExtractionFromDiskEqualsExtractionInMemory) {
   // Then extract through a cache a third of that size, so pages are evicted and read again.
   const std::size_t budget = decoded / 3;
   const auto db = Database::open(path, {budget});
+  const IndexedSource source(*db);  // extraction's view: RCF questions go to the R-tree
 
   const std::vector<test::NamedSpec> spread = test::rcf_spread(m.header);
   for (std::size_t i = 0; i < spread.size(); ++i) {
@@ -80,14 +85,14 @@ TEST_P(PerDataset, ExtractionFromDiskEqualsExtractionInMemory) {
     const bool oracles = i % 3 == 0;
     const Rcf rcf = make_rcf(ns.spec, ModelKind::kTerrain, &d.dem);
     const Extraction mem = extract_minimal_surface(m, rcf);
-    const Extraction disk = extract_minimal_surface(*db, rcf);
+    const Extraction disk = extract_minimal_surface(source, rcf);
     EXPECT_EQ(disk.x, mem.x);
     EXPECT_EQ(disk.triangles, mem.triangles);
     EXPECT_EQ(disk.fan_starts, mem.fan_starts);
 
     // Reduced extraction: X from the R-tree == X from a scan of every op.
     const Extraction rmem = extract_reduced(m, rcf);
-    const Extraction rdisk = extract_reduced(*db, rcf);
+    const Extraction rdisk = extract_reduced(source, rcf);
     EXPECT_EQ(rdisk.x, rmem.x);
     EXPECT_EQ(rdisk.triangles, rmem.triangles);
 
@@ -197,6 +202,20 @@ TEST(Database, OpsOutOfRangeAreAnErrorNotACrash) {
   const auto db = Database::open(dir.file("x.smrdb"), {});
   EXPECT_THROW(db->op(OpId{m.ops.size()}), Error);
   EXPECT_THROW(db->page(db->page_count()), Error);
+}
+
+// The LMDB sub-database names and their order are part of the file format (tables.h): format 2
+// keeps "nodes" for the op locators.
+TEST(Database, TableNamesAreTheFormats) {
+  EXPECT_EQ(table_name(Table::kMeta), "meta");
+  EXPECT_EQ(table_name(Table::kOpLocators), "nodes");
+  EXPECT_EQ(table_name(Table::kPages), "pages");
+  EXPECT_EQ(table_name(Table::kRtree), "rtree");
+  EXPECT_EQ(table_name(Table::kAux), "aux");
+  EXPECT_EQ(kTableNames.size(), kAllTables.size());
+  for (std::size_t i = 0; i < kAllTables.size(); ++i) {
+    EXPECT_EQ(static_cast<std::size_t>(kAllTables[i]), i);
+  }
 }
 
 // The streaming writer (ops handed over one at a time, spooled to a scratch file) writes the same

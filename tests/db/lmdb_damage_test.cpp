@@ -38,8 +38,12 @@
 #include "base/error.h"
 #include "smr/builders/greedy_tin.h"
 #include "smr/db/database.h"
+#include "smr/db/tables.h"
+#include "smr/db/verify.h"
+#include "smr/db/writer.h"
 #include "smr/extract/extract.h"
 #include "smr/io/synthetic.h"
+#include "smr/query/indexed_source.h"
 #include "smr/rcf/spec.h"
 #include "storage/lmdb_env.h"
 #include "tests/support/extraction_result.h"
@@ -100,7 +104,8 @@ struct SmallDb {
     bytes = read_file(path);
     verified = verify_database(path, nullptr);
     const auto db = Database::open(path, {std::size_t{1} << 30});
-    for (const RcfSpec& spec : specs(db->info())) results.push_back(extract_all(*db, spec));
+    for (const RcfSpec& spec : specs(db->info()))
+      results.push_back(extract_all(IndexedSource(*db), spec));
   }
 };
 
@@ -229,9 +234,9 @@ void examine(const std::string& path, const SmallDb& clean, std::string& out) {
   line("verify", report.ok() ? "ok" : "faults");
   for (std::size_t i = 0; i < report.faults.size() && i < 3; ++i) line("fault", report.faults[i]);
   try {
-    const storage::Env env = storage::Env::open_read_only(path);
+    const storage::Env env = storage::Env::open_read_only(path, kTableNames);
     const storage::ReadTxn txn = env.read();
-    for (storage::Table table : storage::kAllTables) {
+    for (Table table : kAllTables) {
       std::uint64_t entries = 0;
       txn.for_each(table, [&](storage::ByteView, storage::ByteView) { ++entries; });
       if (entries != txn.count(table)) {
@@ -254,7 +259,7 @@ void examine(const std::string& path, const SmallDb& clean, std::string& out) {
   const std::vector<RcfSpec> s = specs(db->info());
   for (std::size_t i = 0; i < s.size() && i < clean.results.size(); ++i) {
     try {
-      if (same(extract_all(*db, s[i]), clean.results[i])) {
+      if (same(extract_all(IndexedSource(*db), s[i]), clean.results[i])) {
         line("same", std::to_string(i));
       } else {
         line("problem", "RCF " + std::to_string(i) + ": a different mesh without an error");

@@ -13,7 +13,9 @@
 #include "base/error.h"
 #include "smr/core/invariants.h"
 #include "smr/db/database.h"
+#include "smr/db/writer.h"
 #include "smr/extract/extract.h"
+#include "smr/query/indexed_source.h"
 #include "tests/support/files.h"
 #include "tests/support/meshes.h"
 #include "tests/support/sanitized.h"
@@ -49,6 +51,7 @@ TEST_P(MeshDb, ExtractionFromDiskEqualsExtractionInMemory) {
     decoded = whole->stats().cache.bytes_decoded;
   }
   const auto db = Database::open(path, {decoded / 3});
+  const IndexedSource source(*db);
   const SurfaceReport fine = [&] {
     std::vector<TriRef> finest;
     for (const Op& op : m.ops) {
@@ -62,7 +65,7 @@ TEST_P(MeshDb, ExtractionFromDiskEqualsExtractionInMemory) {
     SCOPED_TRACE(ns.name);
     const Rcf rcf = make_rcf(ns.spec, ModelKind::kMesh3d, nullptr);
     const Extraction mem = extract_minimal_surface(m, rcf);
-    const Extraction disk = extract_minimal_surface(*db, rcf);
+    const Extraction disk = extract_minimal_surface(source, rcf);
     EXPECT_EQ(disk.x, mem.x);
     EXPECT_EQ(disk.triangles, mem.triangles);
     const SurfaceReport s = check_surface(*db, disk.triangles);
@@ -74,7 +77,7 @@ TEST_P(MeshDb, ExtractionFromDiskEqualsExtractionInMemory) {
     EXPECT_EQ(out.positions, ref.positions);
     EXPECT_EQ(out.triangles, ref.triangles);
   }
-  EXPECT_THROW((void)extract_reduced(*db, make_rcf({}, ModelKind::kMesh3d, nullptr)), Error);
+  EXPECT_THROW((void)extract_reduced(source, make_rcf({}, ModelKind::kMesh3d, nullptr)), Error);
 }
 
 TEST(MeshDb, SameMeshGivesByteIdenticalFiles) {

@@ -17,7 +17,11 @@
 
 #include "base/error.h"
 #include "smr/db/database.h"
+#include "smr/db/tables.h"
+#include "smr/db/verify.h"
+#include "smr/db/writer.h"
 #include "smr/extract/extract.h"
+#include "smr/query/indexed_source.h"
 #include "smr/rcf/spec.h"
 #include "storage/lmdb_env.h"
 #include "tests/support/datasets.h"
@@ -28,7 +32,6 @@ namespace smr {
 namespace {
 
 namespace fs = std::filesystem;
-using storage::Table;
 using test::read_file;
 using test::write_file;
 
@@ -74,7 +77,8 @@ using test::same;
 std::vector<Result> clean_results() {
   const auto db = Database::open(small_db().path, {std::size_t{1} << 30});
   std::vector<Result> out;
-  for (const auto& [name, spec] : specs(db->info())) out.push_back(extract_all(*db, spec));
+  for (const auto& [name, spec] : specs(db->info()))
+    out.push_back(extract_all(IndexedSource(*db), spec));
   return out;
 }
 
@@ -88,7 +92,7 @@ struct Located {
 // The first, a middle and the last value of `table` that occur once in the file.
 std::vector<Located> locate_values(const std::string& path, Table table) {
   const std::string file = read_file(path);
-  const storage::Env env = storage::Env::open_read_only(path);
+  const storage::Env env = storage::Env::open_read_only(path, kTableNames);
   const storage::ReadTxn txn = env.read();
   std::vector<std::pair<std::string, std::string>> all;  // (key, value)
   txn.for_each(table, [&](storage::ByteView key, storage::ByteView value) {
@@ -195,7 +199,7 @@ void flip_bits_in(Table table) {
         SCOPED_TRACE(s[i].first);
         opened->clear_cache();
         try {
-          const Result got = extract_all(*opened, s[i].second);
+          const Result got = extract_all(IndexedSource(*opened), s[i].second);
           EXPECT_TRUE(same(got, expected[i])) << "a damaged database gave a different mesh";
           ++unaffected;
         } catch (const Error& e) {
@@ -213,7 +217,7 @@ TEST(Reliability, BitFlipInMetaIsCaught) {
   flip_bits_in(Table::kMeta);
 }
 TEST(Reliability, BitFlipInLocatorsIsCaught) {
-  flip_bits_in(Table::kNodes);
+  flip_bits_in(Table::kOpLocators);
 }
 TEST(Reliability, BitFlipInPagesIsCaught) {
   flip_bits_in(Table::kPages);
@@ -235,7 +239,7 @@ TEST(Reliability, FileWithoutMetaIsNotADatabase) {
   TempDir dir;
   const std::string path = dir.file("nometa.smrdb");
   {
-    storage::DatabaseWriter w(path, false);
+    storage::DatabaseWriter w(path, kTableNames, false);
     const storage::Bytes value(100, 7);
     w.append(Table::kPages, 0, value);
     w.finish();
@@ -255,7 +259,7 @@ TEST(Reliability, WritingIntoAMissingDirectoryIsAnIoError) {
   TempDir dir;
   const std::string path = dir.file("no-such-dir/x.smrdb");
   try {
-    storage::DatabaseWriter w(path, false);
+    storage::DatabaseWriter w(path, kTableNames, false);
     ADD_FAILURE() << "created a database in a missing directory";
   } catch (const Error& e) {
     EXPECT_EQ(e.kind(), ErrorKind::kIo) << e.what();
@@ -274,7 +278,7 @@ TEST(Reliability, ExtractionWithinATwentiethOfTheFile) {
   const auto s = specs(db->info());
   for (std::size_t i = 1; i < s.size(); ++i) {
     SCOPED_TRACE(s[i].first);
-    EXPECT_TRUE(same(extract_all(*db, s[i].second), expected[i]));
+    EXPECT_TRUE(same(extract_all(IndexedSource(*db), s[i].second), expected[i]));
   }
   const DatabaseStats st = db->stats();
   EXPECT_LE(st.cache.peak_held_bytes, budget);
@@ -314,7 +318,7 @@ TEST(Reliability, ConcurrentReadersWhileAnotherDatabaseIsWritten) {
       const auto s = specs(db.info());
       for (int round = 0; round < (id < 2 ? 2 : 1); ++round) {
         for (std::size_t i = 0; i < s.size(); ++i) {
-          if (!same(extract_all(db, s[i].second), expected[i]))
+          if (!same(extract_all(IndexedSource(db), s[i].second), expected[i]))
             note("reader " + std::to_string(id) + ": " + s[i].first + " differs");
         }
       }

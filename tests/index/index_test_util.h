@@ -12,7 +12,7 @@
 
 namespace smr::index::test {
 
-// The node table a caller would keep in LMDB.
+// The node table a caller would keep in LMDB, named "rtree" in the tree's messages.
 struct MemoryStore {
   std::map<std::uint64_t, Bytes> nodes;
   std::vector<std::uint64_t> put_order;
@@ -31,7 +31,7 @@ struct MemoryStore {
       return it->second;
     };
   }
-  RTree tree() const { return RTree(header, fetcher()); }
+  RTree tree() const { return RTree(header, fetcher(), "rtree"); }
 };
 
 struct Built {

@@ -85,10 +85,13 @@ struct Cost {
 
 Cost measure(const test::Built& built, Visitor& v, std::uint32_t leaf_weight) {
   std::set<std::uint64_t> leaves_fetched;
-  const RTree tree(built.store.header, [&](std::uint64_t id) {
-    if (id < built.plan.leaves.size()) leaves_fetched.insert(id);
-    return built.store.nodes.at(id);
-  });
+  const RTree tree(
+      built.store.header,
+      [&](std::uint64_t id) {
+        if (id < built.plan.leaves.size()) leaves_fetched.insert(id);
+        return built.store.nodes.at(id);
+      },
+      "rtree");
   QueryStats stats;
   const auto hits = tree.query(v, &stats);
   EXPECT_EQ(stats.leaves_read, leaves_fetched.size());

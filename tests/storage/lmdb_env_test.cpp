@@ -6,7 +6,9 @@
 #include <map>
 #include <random>
 #include <string>
+#include <string_view>
 #include <thread>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -19,14 +21,23 @@ namespace {
 using test::expect_error;
 using test::TempDir;
 
+// The tables of these tests, by their index in kNames (storage knows no table of its own).
+enum class T : std::uint8_t { kMeta, kNodes, kPages, kRtree, kAux };
+constexpr std::string_view kNames[] = {"meta", "nodes", "pages", "rtree", "aux"};
+constexpr T kAllT[] = {T::kMeta, T::kNodes, T::kPages, T::kRtree, T::kAux};
+
+Env open_env(const std::string& path) {
+  return Env::open_read_only(path, kNames);
+}
+
 // Deterministic value of (table, key): sizes 0 .. ~12 KiB, so many values exceed a 4 KiB page.
-Bytes value_for(Table table, std::uint64_t key) {
+Bytes value_for(T table, std::uint64_t key) {
   std::mt19937_64 rng(key * 31 + static_cast<std::uint64_t>(table));
   const std::size_t size = key % 97 == 0 ? 0 : (key % 5 == 0 ? 4000 + rng() % 8000 : rng() % 600);
   return test::random_bytes(rng, size);
 }
 
-constexpr std::uint64_t kKeys[] = {0, 0, 3000, 200, 300};  // keys per table, indexed by Table
+constexpr std::uint64_t kKeys[] = {0, 0, 3000, 200, 300};  // keys per table, indexed by T
 
 std::uint64_t key_of(std::uint64_t i) {
   return i * 3 + 5;
@@ -35,21 +46,21 @@ std::uint64_t key_of(std::uint64_t i) {
 // Writes the standard content: u64 keys in nodes/pages/rtree/aux, string keys in aux and meta
 // (meta last, as the contract asks).
 void write_standard(DatabaseWriter& w) {
-  for (Table t : {Table::kNodes, Table::kPages, Table::kRtree, Table::kAux}) {
+  for (T t : {T::kNodes, T::kPages, T::kRtree, T::kAux}) {
     for (std::uint64_t i = 0; i < kKeys[static_cast<int>(t)]; ++i) {
       const std::uint64_t k = key_of(i);
       w.append(t, k, value_for(t, k));
     }
   }
-  w.put(Table::kAux, "zz-string-key", as_bytes("aux value"));
-  w.put(Table::kMeta, "version", as_bytes("1"));
-  w.put(Table::kMeta, "bounds", Bytes(5000, 0xab));
-  w.put(Table::kMeta, "version", as_bytes("2"));  // replaces
+  w.put(T::kAux, "zz-string-key", as_bytes("aux value"));
+  w.put(T::kMeta, "version", as_bytes("1"));
+  w.put(T::kMeta, "bounds", Bytes(5000, 0xab));
+  w.put(T::kMeta, "version", as_bytes("2"));  // replaces
 }
 
 std::uint64_t standard_value_bytes() {
   std::uint64_t total = 9 + 1 + 5000 + 1;
-  for (Table t : {Table::kNodes, Table::kPages, Table::kRtree, Table::kAux}) {
+  for (T t : {T::kNodes, T::kPages, T::kRtree, T::kAux}) {
     for (std::uint64_t i = 0; i < kKeys[static_cast<int>(t)]; ++i) {
       total += value_for(t, key_of(i)).size();
     }
@@ -57,12 +68,34 @@ std::uint64_t standard_value_bytes() {
   return total;
 }
 
+// Tables are the caller's: named at creation and at opening, addressed by index.
 TEST(LmdbEnv, TableNames) {
-  EXPECT_EQ(table_name(Table::kMeta), "meta");
-  EXPECT_EQ(table_name(Table::kNodes), "nodes");
-  EXPECT_EQ(table_name(Table::kPages), "pages");
-  EXPECT_EQ(table_name(Table::kRtree), "rtree");
-  EXPECT_EQ(table_name(Table::kAux), "aux");
+  TempDir dir;
+  const std::string path = dir.file("db.smrdb");
+  DatabaseWriter w(path, kNames, false);
+  EXPECT_EQ(w.table_name(T::kMeta), "meta");
+  EXPECT_EQ(w.table_name(T::kNodes), "nodes");
+  EXPECT_EQ(w.table_name(T::kPages), "pages");
+  EXPECT_EQ(w.table_name(T::kRtree), "rtree");
+  EXPECT_EQ(w.table_name(T::kAux), "aux");
+  w.finish();
+  const Env env = open_env(path);
+  for (T t : kAllT) EXPECT_EQ(env.table_name(t), w.table_name(t));
+  // A table beyond the list, more tables than LMDB is set up for, or a name given twice are
+  // the caller's bugs.
+  expect_error([&] { (void)env.table_name(Table(5)); }, ErrorKind::kInternal, "table 5 of 5");
+  const std::vector<std::string_view> nine(9, "t");
+  expect_error([&] { DatabaseWriter x(dir.file("nine"), nine, false); }, ErrorKind::kInternal,
+               "9 tables");
+  const std::string_view twice[] = {"meta", "meta"};
+  expect_error([&] { DatabaseWriter x(dir.file("twice"), twice, false); }, ErrorKind::kInternal,
+               "table 'meta' named twice");
+  // Opened with fewer tables than the file has, it reads those; with one it lacks, it fails.
+  const std::string_view some[] = {"pages"};
+  EXPECT_EQ(Env::open_read_only(path, some).read().count(Table(0)), 0u);
+  const std::string_view more[] = {"meta", "extra"};
+  expect_error([&] { Env::open_read_only(path, more); }, ErrorKind::kCorrupt,
+               "missing table 'extra'");
 }
 
 TEST(LmdbEnv, WriterReaderRoundTripWithMapGrowthAndManyBatches) {
@@ -70,7 +103,8 @@ TEST(LmdbEnv, WriterReaderRoundTripWithMapGrowthAndManyBatches) {
   const std::string path = dir.file("db.smrdb");
   std::uint64_t commits = 0, map_bytes = 0, written = 0;
   {
-    DatabaseWriter w(path, false, /*batch_bytes=*/256 << 10, /*initial_map_bytes=*/64 << 10);
+    DatabaseWriter w(path, kNames, false, /*batch_bytes=*/256 << 10,
+                     /*initial_map_bytes=*/64 << 10);
     write_standard(w);
     w.finish();
     commits = w.commits();
@@ -81,48 +115,48 @@ TEST(LmdbEnv, WriterReaderRoundTripWithMapGrowthAndManyBatches) {
   EXPECT_GT(map_bytes, 64u << 10);                                 // the map grew on MDB_MAP_FULL
   EXPECT_EQ(dir.entries(), std::vector<std::string>{"db.smrdb"});  // no temporaries left
 
-  const Env env = Env::open_read_only(path);
+  const Env env = open_env(path);
   EXPECT_EQ(env.path(), path);
   EXPECT_EQ(env.file_bytes(), std::filesystem::file_size(path));
   EXPECT_EQ(env.bytes_read(), 0u);
   std::uint64_t expected_read = 0;
   {
     const ReadTxn txn = env.read();
-    for (Table t : {Table::kNodes, Table::kPages, Table::kRtree}) {
-      ASSERT_EQ(txn.count(t), kKeys[static_cast<int>(t)]) << table_name(t);
+    for (T t : {T::kNodes, T::kPages, T::kRtree}) {
+      ASSERT_EQ(txn.count(t), kKeys[static_cast<int>(t)]) << env.table_name(t);
       for (std::uint64_t i = 0; i < kKeys[static_cast<int>(t)]; ++i) {
         const std::uint64_t k = key_of(i);
         const auto v = txn.get(t, k);
-        ASSERT_TRUE(v.has_value()) << table_name(t) << " " << k;
+        ASSERT_TRUE(v.has_value()) << env.table_name(t) << " " << k;
         const Bytes expected = value_for(t, k);
-        ASSERT_EQ(Bytes(v->begin(), v->end()), expected) << table_name(t) << " " << k;
+        ASSERT_EQ(Bytes(v->begin(), v->end()), expected) << env.table_name(t) << " " << k;
         expected_read += expected.size();
       }
       EXPECT_FALSE(txn.get(t, key_of(kKeys[static_cast<int>(t)]) + 1).has_value());
       EXPECT_FALSE(txn.get(t, std::uint64_t{1}).has_value());
     }
-    EXPECT_EQ(txn.count(Table::kAux), kKeys[static_cast<int>(Table::kAux)] + 1);
-    EXPECT_EQ(txn.count(Table::kMeta), 2u);
-    const auto version = txn.get(Table::kMeta, std::string_view("version"));
+    EXPECT_EQ(txn.count(T::kAux), kKeys[static_cast<int>(T::kAux)] + 1);
+    EXPECT_EQ(txn.count(T::kMeta), 2u);
+    const auto version = txn.get(T::kMeta, std::string_view("version"));
     ASSERT_TRUE(version.has_value());
     EXPECT_EQ(std::string(version->begin(), version->end()), "2");
-    EXPECT_EQ(txn.get(Table::kMeta, std::string_view("bounds"))->size(), 5000u);
-    EXPECT_FALSE(txn.get(Table::kMeta, std::string_view("nope")).has_value());
+    EXPECT_EQ(txn.get(T::kMeta, std::string_view("bounds"))->size(), 5000u);
+    EXPECT_FALSE(txn.get(T::kMeta, std::string_view("nope")).has_value());
     expected_read += 1 + 5000;
     EXPECT_EQ(env.bytes_read(), expected_read);
 
     // for_each visits in key order.
     std::vector<std::uint64_t> seen;
-    txn.for_each(Table::kRtree, [&](ByteView key, ByteView value) {
+    txn.for_each(T::kRtree, [&](ByteView key, ByteView value) {
       const std::uint64_t k = parse_key_u64(key, "rtree");
       seen.push_back(k);
-      const Bytes expected = value_for(Table::kRtree, k);
+      const Bytes expected = value_for(T::kRtree, k);
       EXPECT_EQ(Bytes(value.begin(), value.end()), expected);
     });
-    ASSERT_EQ(seen.size(), kKeys[static_cast<int>(Table::kRtree)]);
+    ASSERT_EQ(seen.size(), kKeys[static_cast<int>(T::kRtree)]);
     EXPECT_TRUE(std::is_sorted(seen.begin(), seen.end()));
     std::vector<std::string> meta_keys;
-    txn.for_each(Table::kMeta,
+    txn.for_each(T::kMeta,
                  [&](ByteView key, ByteView) { meta_keys.emplace_back(key.begin(), key.end()); });
     EXPECT_EQ(meta_keys, (std::vector<std::string>{"bounds", "version"}));
   }
@@ -130,31 +164,31 @@ TEST(LmdbEnv, WriterReaderRoundTripWithMapGrowthAndManyBatches) {
   // After dropping the mapping, reads still work.
   env.release_mapped_pages();
   const ReadTxn txn = env.read();
-  const auto v = txn.get(Table::kPages, key_of(1234));
+  const auto v = txn.get(T::kPages, key_of(1234));
   ASSERT_TRUE(v.has_value());
-  EXPECT_EQ(Bytes(v->begin(), v->end()), value_for(Table::kPages, key_of(1234)));
+  EXPECT_EQ(Bytes(v->begin(), v->end()), value_for(T::kPages, key_of(1234)));
 }
 
 TEST(LmdbEnv, EmptyDatabaseHasAllTables) {
   TempDir dir;
   const std::string path = dir.file("empty.smrdb");
   {
-    DatabaseWriter w(path, false);
+    DatabaseWriter w(path, kNames, false);
     w.finish();
   }
-  const Env env = Env::open_read_only(path);
+  const Env env = open_env(path);
   const ReadTxn txn = env.read();
-  for (Table t : kAllTables) EXPECT_EQ(txn.count(t), 0u);
+  for (T t : kAllT) EXPECT_EQ(txn.count(t), 0u);
 }
 
 TEST(LmdbEnv, AppendOutOfOrderIsAnInternalError) {
   TempDir dir;
-  DatabaseWriter w(dir.file("db"), false);
-  w.append(Table::kNodes, 10, as_bytes("a"));
-  w.append(Table::kPages, 5, as_bytes("b"));  // other tables are independent
-  expect_error([&] { w.append(Table::kNodes, 10, as_bytes("c")); }, ErrorKind::kInternal,
+  DatabaseWriter w(dir.file("db"), kNames, false);
+  w.append(T::kNodes, 10, as_bytes("a"));
+  w.append(T::kPages, 5, as_bytes("b"));  // other tables are independent
+  expect_error([&] { w.append(T::kNodes, 10, as_bytes("c")); }, ErrorKind::kInternal,
                "table 'nodes': key 10 appended after key 10");
-  expect_error([&] { w.append(Table::kNodes, 9, as_bytes("c")); }, ErrorKind::kInternal,
+  expect_error([&] { w.append(T::kNodes, 9, as_bytes("c")); }, ErrorKind::kInternal,
                "strictly increasing");
 }
 
@@ -163,20 +197,20 @@ TEST(LmdbEnv, ExistingPathWithoutForceIsRejectedAndUntouched) {
   const std::string path = dir.file("db.smrdb");
   const Bytes original = {'o', 'l', 'd'};
   test::write_file(path, original);
-  expect_error([&] { DatabaseWriter w(path, false); }, ErrorKind::kInvalidInput,
+  expect_error([&] { DatabaseWriter w(path, kNames, false); }, ErrorKind::kInvalidInput,
                path + ": exists; pass --force to replace it");
   EXPECT_EQ(test::read_file(path), original);
   EXPECT_EQ(dir.entries(), std::vector<std::string>{"db.smrdb"});
 
   {
-    DatabaseWriter w(path, true);
-    w.put(Table::kMeta, "version", as_bytes("1"));
+    DatabaseWriter w(path, kNames, true);
+    w.put(T::kMeta, "version", as_bytes("1"));
     // Until finish(), the old file is still there.
     EXPECT_EQ(test::read_file(path), original);
     w.finish();
   }
-  const Env env = Env::open_read_only(path);
-  EXPECT_EQ(env.read().count(Table::kMeta), 1u);
+  const Env env = open_env(path);
+  EXPECT_EQ(env.read().count(T::kMeta), 1u);
   EXPECT_EQ(dir.entries(), std::vector<std::string>{"db.smrdb"});
 }
 
@@ -187,11 +221,11 @@ TEST(LmdbEnv, WriterWithoutFinishLeavesNothingBehind) {
   const Bytes original = {'k', 'e', 'e', 'p'};
   test::write_file(existing, original);
   {
-    DatabaseWriter a(fresh, false, 1 << 10);
-    DatabaseWriter b(existing, true, 1 << 10);
+    DatabaseWriter a(fresh, kNames, false, 1 << 10);
+    DatabaseWriter b(existing, kNames, true, 1 << 10);
     for (std::uint64_t k = 0; k < 200; ++k) {
-      a.append(Table::kPages, k, value_for(Table::kPages, k));
-      b.append(Table::kPages, k, value_for(Table::kPages, k));
+      a.append(T::kPages, k, value_for(T::kPages, k));
+      b.append(T::kPages, k, value_for(T::kPages, k));
     }
     EXPECT_GT(a.commits(), 0u);
     EXPECT_GT(dir.entries().size(), 1u);  // temporaries exist while writing
@@ -201,9 +235,9 @@ TEST(LmdbEnv, WriterWithoutFinishLeavesNothingBehind) {
 
   // Same when an exception unwinds through the writer.
   try {
-    DatabaseWriter w(fresh, false);
-    w.append(Table::kNodes, 2, as_bytes("x"));
-    w.append(Table::kNodes, 1, as_bytes("y"));  // throws
+    DatabaseWriter w(fresh, kNames, false);
+    w.append(T::kNodes, 2, as_bytes("x"));
+    w.append(T::kNodes, 1, as_bytes("y"));  // throws
     FAIL() << "out-of-order append did not throw";
   } catch (const Error&) {
   }
@@ -213,7 +247,7 @@ TEST(LmdbEnv, WriterWithoutFinishLeavesNothingBehind) {
 TEST(LmdbEnv, SameWritesGiveByteIdenticalFiles) {
   TempDir dir;
   for (const char* name : {"a.smrdb", "b.smrdb"}) {
-    DatabaseWriter w(dir.file(name), false, 100 << 10, 64 << 10);
+    DatabaseWriter w(dir.file(name), kNames, false, 100 << 10, 64 << 10);
     write_standard(w);
     w.finish();
   }
@@ -223,9 +257,9 @@ TEST(LmdbEnv, SameWritesGiveByteIdenticalFiles) {
   EXPECT_TRUE(a == b) << "files differ";
   // And a different write gives a different file (the comparison can fail).
   {
-    DatabaseWriter w(dir.file("c.smrdb"), false, 100 << 10, 64 << 10);
+    DatabaseWriter w(dir.file("c.smrdb"), kNames, false, 100 << 10, 64 << 10);
     write_standard(w);
-    w.put(Table::kMeta, "extra", as_bytes("!"));
+    w.put(T::kMeta, "extra", as_bytes("!"));
     w.finish();
   }
   EXPECT_FALSE(a == test::read_file(dir.file("c.smrdb")));
@@ -234,29 +268,28 @@ TEST(LmdbEnv, SameWritesGiveByteIdenticalFiles) {
 TEST(LmdbEnv, OpenRejectsMissingEmptyGarbageAndTruncatedFiles) {
   TempDir dir;
   const std::string missing = dir.file("missing.smrdb");
-  expect_error([&] { Env::open_read_only(missing); }, ErrorKind::kIo, missing);
+  expect_error([&] { open_env(missing); }, ErrorKind::kIo, missing);
 
   const std::string empty = dir.file("empty.smrdb");
   test::write_file(empty, {});
-  expect_error([&] { Env::open_read_only(empty); }, ErrorKind::kCorrupt, empty + ": empty file");
+  expect_error([&] { open_env(empty); }, ErrorKind::kCorrupt, empty + ": empty file");
 
   std::mt19937_64 rng(9);
   const std::string garbage = dir.file("garbage.smrdb");
   for (std::size_t size : {1u, 100u, 4096u, 65536u}) {
     test::write_file(garbage, test::random_bytes(rng, size));
-    expect_error([&] { Env::open_read_only(garbage); }, ErrorKind::kCorrupt, garbage);
+    expect_error([&] { open_env(garbage); }, ErrorKind::kCorrupt, garbage);
   }
-  expect_error([&] { Env::open_read_only(dir.file("")); }, ErrorKind::kInvalidInput,
-               "not a regular file");
+  expect_error([&] { open_env(dir.file("")); }, ErrorKind::kInvalidInput, "not a regular file");
 
   const std::string real = dir.file("real.smrdb");
   {
-    DatabaseWriter w(real, false);
+    DatabaseWriter w(real, kNames, false);
     write_standard(w);
     w.finish();
   }
   const Bytes bytes = test::read_file(real);
-  ASSERT_NO_THROW(Env::open_read_only(real));
+  ASSERT_NO_THROW(open_env(real));
   const std::string cut = dir.file("cut.smrdb");
   std::vector<std::size_t> lengths = {1,
                                       16,
@@ -274,7 +307,7 @@ TEST(LmdbEnv, OpenRejectsMissingEmptyGarbageAndTruncatedFiles) {
   for (std::size_t n : lengths) {
     test::write_file(cut, Bytes(bytes.begin(), bytes.begin() + static_cast<std::ptrdiff_t>(n)));
     try {
-      Env::open_read_only(cut);
+      open_env(cut);
       ADD_FAILURE() << "truncated to " << n << " of " << bytes.size() << " bytes opened";
     } catch (const Error& e) {
       EXPECT_NE(std::string(e.what()).find(cut), std::string::npos) << e.what();
@@ -287,11 +320,11 @@ TEST(LmdbEnv, ConcurrentReadersFromFourThreads) {
   TempDir dir;
   const std::string path = dir.file("db.smrdb");
   {
-    DatabaseWriter w(path, false);
+    DatabaseWriter w(path, kNames, false);
     write_standard(w);
     w.finish();
   }
-  const Env env = Env::open_read_only(path);
+  const Env env = open_env(path);
   std::atomic<int> mismatches{0};
   std::vector<std::thread> threads;
   for (int t = 0; t < 4; ++t) {
@@ -300,9 +333,9 @@ TEST(LmdbEnv, ConcurrentReadersFromFourThreads) {
       for (int round = 0; round < 5; ++round) {
         const ReadTxn txn = env.read();
         for (int i = 0; i < 400; ++i) {
-          const std::uint64_t k = key_of(rng() % kKeys[static_cast<int>(Table::kPages)]);
-          const auto v = txn.get(Table::kPages, k);
-          if (!v || Bytes(v->begin(), v->end()) != value_for(Table::kPages, k)) ++mismatches;
+          const std::uint64_t k = key_of(rng() % kKeys[static_cast<int>(T::kPages)]);
+          const auto v = txn.get(T::kPages, k);
+          if (!v || Bytes(v->begin(), v->end()) != value_for(T::kPages, k)) ++mismatches;
         }
       }
     });
@@ -316,15 +349,15 @@ TEST(LmdbEnv, MovedEnvAndTxnStayUsable) {
   TempDir dir;
   const std::string path = dir.file("db.smrdb");
   {
-    DatabaseWriter w(path, false);
-    w.append(Table::kNodes, 1, seal(as_bytes("payload")));
+    DatabaseWriter w(path, kNames, false);
+    w.append(T::kNodes, 1, seal(as_bytes("payload")));
     w.finish();
   }
-  Env env = Env::open_read_only(path);
+  Env env = open_env(path);
   ReadTxn txn = env.read();
   Env moved = std::move(env);
   ReadTxn txn2 = std::move(txn);
-  const auto v = txn2.get(Table::kNodes, std::uint64_t{1});
+  const auto v = txn2.get(T::kNodes, std::uint64_t{1});
   ASSERT_TRUE(v.has_value());
   const ByteView payload = unseal(*v, "nodes", "1");
   EXPECT_EQ(std::string(payload.begin(), payload.end()), "payload");
