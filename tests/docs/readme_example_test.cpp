@@ -15,6 +15,7 @@
 
 #include "smr/builders/greedy_tin.h"
 #include "smr/core/invariants.h"
+#include "smr/db/writer.h"
 #include "smr/io/dem_reader.h"
 #include "smr/io/mesh_reader.h"
 #include "tests/support/files.h"
@@ -25,6 +26,7 @@
 #include "smr/db/database.h"
 #include "smr/extract/extract.h"
 #include "smr/io/mesh_writer.h"
+#include "smr/query/indexed_source.h"
 #include "smr/rcf/spec.h"
 // [readme-includes-end]
 
@@ -62,14 +64,16 @@ TEST(ReadmeExample, ExtractsAViewThatTilesAndMeetsItsRcf) {
   // [readme-example]
   // Open the database read-only, its pages read through a 16 MiB cache.
   const auto db = smr::Database::open("out/jacksboro.smrdb", {.cache_bytes = 16 << 20});
+  // Extraction reads it with its R-tree answering RCF queries (Maheshwari 4.4).
+  const smr::IndexedSource source(*db);
   // The RCF (Brown 4.6): resolution 0.2 everywhere, up to 0.98 around a point of interest.
   smr::RcfSpec spec;
   spec.floor = 0.2;
   spec.aois.push_back({.x = -84.20, .y = 36.50, .radius = 0.03, .level = 0.98});
   const smr::Rcf rcf = smr::make_rcf(spec, db->info().kind, nullptr);
   // The smallest mesh that satisfies it (Brown 5.1), as vertices and triangles.
-  const smr::Extraction e = smr::extract_minimal_surface(*db, rcf);
-  const smr::TriangleMesh mesh = smr::to_mesh(*db, e.triangles);
+  const smr::Extraction e = smr::extract_minimal_surface(source, rcf);
+  const smr::TriangleMesh mesh = smr::to_mesh(source, e.triangles);
   smr::write_mesh("out/view.obj", mesh);
   // [readme-example-end]
 
