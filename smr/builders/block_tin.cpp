@@ -465,8 +465,6 @@ class Builder {
     }
     B_ = opt.block_cells;
     exact_window_samples_ = opt.exact_window_samples;
-    if (opt.memory_bytes != 0)
-      exact_window_samples_ = std::min(exact_window_samples_, opt.memory_bytes / 40);
     bw_ = (W_ - 2) / B_ + 1;
     bh_ = (H_ - 2) / B_ + 1;
     int span = 1;
@@ -506,14 +504,14 @@ class Builder {
     // them decodes each tile once (a 64 MiB cache re-decoded them up to 9 times on a 32769-wide
     // raster: reads took 116 s of a 193 s ingest).
     const std::uint64_t cache_before =
-        opt_.memory_bytes != 0 ? dem_.set_cache_bytes(opt_.memory_bytes / 8) : 0;
+        opt_.raster_cache_bytes != 0 ? dem_.set_cache_bytes(opt_.raster_cache_bytes) : 0;
     repair_tiles_.capacity = std::min<std::size_t>(2 * std::size_t(bw_) + 4, 64);
     leaf_pass();
     lap(stats_.seconds_leaves);
     if (valid_samples_ == 0) throw_input(dem_.source() + ": every sample is no data");
     // Nothing reads the source from here on: hand its cache back, and the leaf pass's maps.
     const std::uint64_t cap = dem_.set_cache_bytes(0);
-    dem_.set_cache_bytes(opt_.memory_bytes != 0 ? cache_before : cap);
+    dem_.set_cache_bytes(opt_.raster_cache_bytes != 0 ? cache_before : cap);
     shared_ = IdMap<std::uint32_t>();
     if (!level0_done_) {
       make_borders_delaunay();
@@ -1952,12 +1950,7 @@ class Builder {
   void make_assembler() {
     AssemblyOptions ao;
     ao.tmp_dir = opt_.tmp_dir;
-    ao.memory_bytes = opt_.assembly_memory_bytes;
-    if (ao.memory_bytes == 0) {
-      ao.memory_bytes = opt_.memory_bytes != 0 ? std::max<std::uint64_t>(opt_.memory_bytes / 2,
-                                                                         std::uint64_t{16} << 20)
-                                               : std::uint64_t{256} << 20;
-    }
+    ao.sort_bytes = opt_.assembly_sort_bytes;
     ao.threads = opt_.threads;
     ao.progress = [this](double f) { report(0.9 + 0.1 * f); };
     assembler_ = std::make_unique<OpAssembler>(ao);

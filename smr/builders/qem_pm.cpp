@@ -908,11 +908,11 @@ class Builder {
   // Whether collapsing from -> to would make a new triangle cross another triangle of the mesh
   // (one that stays, or another new one) anywhere but in the corners and edges they share
   // (exact_intersection.h), unless a triangle of the old star crossed it already. Such a
-  // collapse is refused (QemPmOptions::no_self_intersections): a source that does not cross
+  // collapse is refused (QemPmOptions::allow_self_intersections): a source that does not cross
   // itself gives no level that does, and one that does can still simplify around its crossings
   // (refusing every collapse near them stalled the repaired pig at 258 base triangles).
   bool crosses_after(std::uint32_t from, std::uint32_t to, double error) {
-    if (!options_.no_self_intersections) return false;
+    if (options_.allow_self_intersections) return false;
     if (!grid_ready_) build_grid();
     made_.clear();
     for (std::uint32_t id : star_[from]) {
@@ -1400,7 +1400,7 @@ class Builder {
     const auto current = [&](const Candidate& c) {
       return !removed_[c.from] && c.stamp == stamp_[c.from];
     };
-    track_dead_ = options_.no_self_intersections;
+    track_dead_ = !options_.allow_self_intersections;
     while (alive > floor_vertices) {
       if (heap_.empty()) {
         double least = std::numeric_limits<double>::infinity();
@@ -1790,7 +1790,7 @@ class Builder {
                 " base-vertices=" + std::to_string(options_.base_vertices) +
                 " max-base-error=" + std::to_string(options_.max_base_error) +
                 " bound-band=" + std::to_string(options_.bound_band) +
-                " no-self-intersections=" + (options_.no_self_intersections ? "yes" : "no");
+                " no-self-intersections=" + (options_.allow_self_intersections ? "no" : "yes");
 
     const std::vector<std::vector<std::uint32_t>> groups = coalesce(split_order());
     const std::size_t nt = tris_.size();
@@ -1955,7 +1955,7 @@ class Builder {
   // cuts' triangle counts move by under 1.2 % either way. Returns the rounds that made a collapse.
   std::uint64_t simplify_rounds(double tolerance) {
     const std::size_t n = pos_.size();
-    track_dead_ = options_.no_self_intersections;
+    track_dead_ = !options_.allow_self_intersections;
     if (grid_ready_) retire_dead(last_tolerance_);  // the rounds of the last call
     last_tolerance_ = tolerance;
     if (best_.size() != n) {
@@ -2175,10 +2175,9 @@ class BlockPmBuilder {
       throw_input("block PM: the tolerance fraction must be positive");
     if (options.leaf_triangles < 16)
       throw_input("block PM: leaf blocks need at least 16 triangles");
-    budget_ = options.memory_bytes != 0 ? options.memory_bytes : std::uint64_t{256} << 20;
     qem_.max_normal_turn_degrees = options.max_normal_turn_degrees;
     qem_.boundary_weight = options.boundary_weight;
-    qem_.no_self_intersections = options.no_self_intersections;
+    qem_.allow_self_intersections = options.allow_self_intersections;
     qem_.spawn_components = false;
     qem_.threads = 1;  // leaves run on several threads, each block on one
     if (!(qem_.max_normal_turn_degrees > 0.0 && qem_.max_normal_turn_degrees <= 180.0))
@@ -2194,11 +2193,12 @@ class BlockPmBuilder {
     read_vertices();
     AssemblyOptions ao;
     ao.tmp_dir = opt_.tmp_dir;
-    ao.memory_bytes = budget_ / 2;
+    ao.sort_bytes = opt_.assembly_sort_bytes;
     ao.threads = opt_.threads;
     ao.progress = [this](double f) { report(0.9 + 0.1 * f); };
     assembler_ = std::make_unique<OpAssembler>(ao);
-    auto faces = std::make_unique<storage::ExternalSorter<FaceRecord>>(opt_.tmp_dir, budget_ / 2);
+    auto faces =
+        std::make_unique<storage::ExternalSorter<FaceRecord>>(opt_.tmp_dir, opt_.face_sort_bytes);
     sort_faces(*faces);
     stats_.seconds_sort = since(t0);
     const auto t1 = Clock::now();
@@ -2559,7 +2559,6 @@ class BlockPmBuilder {
   const BlockPmOptions& opt_;
   BlockPmStats& stats_;
   QemPmOptions qem_;
-  std::uint64_t budget_ = 0;
   std::vector<Vec3> pos_;
   Box3 box_;
   double side_ = 1.0;

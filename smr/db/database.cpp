@@ -165,7 +165,7 @@ auto naming_file(const std::string& path, F&& f) -> decltype(f()) {
 // ------------------------------------------------------------------------------------ writing
 //
 // Both writers end in write_tables, which takes the ops' index records through external sorts
-// (storage/external_sort.h) under WriteOptions::memory_bytes: the R-tree order (index::EntryOrder)
+// (storage/external_sort.h) under WriteOptions::sort_bytes: the R-tree order (index::EntryOrder)
 // and the locators' id order. The stream writer derives ROIs and subtree cones by a backward
 // sweep over its records on disk, children sending theirs to their parents through an
 // ExternalQueue (time-forward processing, Chiang et al. 1995). What stays in memory is the
@@ -211,13 +211,13 @@ index::BuildOptions rtree_options(const CrmrInfo& header, const WriteOptions& op
   return bo;
 }
 
-// Shares of WriteOptions::memory_bytes: the entry sort holds half, the backward sweep's queue and
+// Shares of WriteOptions::sort_bytes: the entry sort holds half, the backward sweep's queue and
 // the locator sort (never alive together) a quarter each.
 std::uint64_t entry_sort_bytes(const WriteOptions& o) {
-  return o.memory_bytes / 2;
+  return o.sort_bytes / 2;
 }
 std::uint64_t side_sort_bytes(const WriteOptions& o) {
-  return o.memory_bytes / 4;
+  return o.sort_bytes / 4;
 }
 
 // Writes pages (in R-tree leaf order, with the R-tree's leaves), locators, the R-tree's upper
@@ -383,7 +383,7 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
   const auto t0 = std::chrono::steady_clock::now();
   // Opening the writer first checks the path (exists without --force) before any work.
   storage::DatabaseWriter writer(path, options.force, options.batch_bytes);
-  const QuantGrid grid = choose_grid(crmr.header, options.z_step);
+  const QuantGrid grid = choose_grid(crmr.header, options.z_quantum);
   const double shift = quantize(crmr, grid);  // ROIs and subtree cones derived too
   const std::string tmp_dir = storage::scratch_dir("");
   TableCounts counts;
@@ -788,7 +788,7 @@ void DatabaseStreamWriter::begin(const CrmrInfo& header, std::uint64_t /*op_coun
   if (s_->begun) throw_internal("database writer: begin() called twice");
   s_->begun = true;
   s_->header = header;
-  s_->grid = choose_grid(header, s_->options.z_step);
+  s_->grid = choose_grid(header, s_->options.z_quantum);
   s_->header.bounds = Box3{};  // of the snapped vertices, as quantize() does
   s_->order = std::make_unique<index::EntryOrder>(rtree_options(header, s_->options));
   s_->spooler = std::thread([s = s_.get()] { s->run(); });
