@@ -1,7 +1,6 @@
 // smrdb ingest and smrdb build: the flags, their checks, and the report of smr::ingest().
 #include <cstdio>
 #include <filesystem>
-#include <iostream>
 #include <optional>
 
 #include <CLI/CLI.hpp>
