@@ -52,6 +52,7 @@
 #include "storage/checksum.h"
 #include "storage/codec.h"
 #include "storage/lmdb_env.h"
+#include "tools/report_json.h"
 
 namespace {
 
@@ -215,20 +216,6 @@ Timed fresh_run(const ExtractArgs& a, const smr::Rcf& rcf, bool reduced) {
   return t;
 }
 
-json stats_json(const smr::DatabaseStats& s) {
-  return {{"pages_read", s.pages_read},
-          {"page_bytes_read", s.page_bytes_read},
-          {"rtree_nodes_read", s.rtree_nodes_read},
-          {"rtree_bytes_read", s.rtree_bytes_read},
-          {"locator_bytes_read", s.locator_bytes_read},
-          {"lmdb_bytes_read", s.lmdb_bytes_read},
-          {"cache_hits", s.cache.hits},
-          {"cache_misses", s.cache.misses},
-          {"cache_evictions", s.cache.evictions},
-          {"cache_peak_bytes", s.cache.peak_held_bytes},
-          {"bytes_decoded", s.cache.bytes_decoded}};
-}
-
 // Reads the given data pages from LMDB and touches every byte, without decoding. Seconds.
 double raw_read(const std::string& path, const std::vector<std::uint64_t>& pages,
                 std::uint64_t* bytes) {
@@ -387,9 +374,9 @@ json mode_extract(const ExtractArgs& a) {
                      {"ops_visited", s.ops_visited},
                      {"held_ops_peak", s.held_ops_peak},
                      {"held_bytes_peak", s.held_bytes_peak}};
-      c["io"] = stats_json(first->stats);
+      c["io"] = json(first->stats);
       c["io"]["pages_read_to_mesh"] = first->pages_read_to_mesh;
-      c["io_unbounded_cache"] = stats_json(unbounded);
+      c["io_unbounded_cache"] = json(unbounded);
       c["pages"] = {{"needed", needed.size()},
                     {"needed_bytes", needed_bytes},
                     {"touched", touched_order.size()},

@@ -1,4 +1,5 @@
-// GDAL-style progress on a terminal: "0...10...20...30...40...50...60...70...80...90...100 - done."
+// The progress bar every smrdb command draws on stderr, in GDAL's style:
+// "0...10...20...30...40...50...60...70...80...90...100 - done."
 // A dot every 2.5 %, the percentage every 10 %, printed as the fraction crosses each tick. Once a
 // run has taken 5 s, each percentage is followed by an estimate of the time left, from the rate
 // so far: "0...10...20 (eta 1:05)...30 (eta 0:52)...".
@@ -10,9 +11,10 @@
 
 namespace smr::tools {
 
-class GdalProgress {
+class ProgressBar {
  public:
-  explicit GdalProgress(std::FILE* out) : out_(out) {}
+  /// Draws on `out`; nullptr draws nothing (-q, --json).
+  explicit ProgressBar(std::FILE* out) : out_(out) {}
   void update(double fraction) {
     if (out_ == nullptr) return;
     if (!started_) {

@@ -81,10 +81,9 @@ BlockPmBuilder::BlockPmBuilder(const MeshStream& mesh, const BlockPmOptions& opt
   if (!(options.tolerance_fraction > 0.0) || !std::isfinite(options.tolerance_fraction))
     throw_input("block PM: the tolerance fraction must be positive");
   if (options.leaf_triangles < 16) throw_input("block PM: leaf blocks need at least 16 triangles");
-  budget_ = options.memory_bytes != 0 ? options.memory_bytes : std::uint64_t{256} << 20;
   qem_.max_normal_turn_degrees = options.max_normal_turn_degrees;
   qem_.boundary_weight = options.boundary_weight;
-  qem_.no_self_intersections = options.no_self_intersections;
+  qem_.allow_self_intersections = options.allow_self_intersections;
   qem_.spawn_components = false;
   qem_.threads = 1;  // leaves run on several threads, each block on one
   if (!(qem_.max_normal_turn_degrees > 0.0 && qem_.max_normal_turn_degrees <= 180.0))
@@ -100,11 +99,12 @@ void BlockPmBuilder::run(OpSink& sink) {
   read_vertices();
   AssemblyOptions ao;
   ao.tmp_dir = opt_.tmp_dir;
-  ao.memory_bytes = budget_ / 2;
+  ao.sort_bytes = opt_.assembly_sort_bytes;
   ao.threads = opt_.threads;
   ao.progress = [this](double f) { report(0.9 + 0.1 * f); };
   assembler_ = std::make_unique<OpAssembler>(ao);
-  auto faces = std::make_unique<storage::ExternalSorter<FaceRecord>>(opt_.tmp_dir, budget_ / 2);
+  auto faces =
+      std::make_unique<storage::ExternalSorter<FaceRecord>>(opt_.tmp_dir, opt_.face_sort_bytes);
   sort_faces(*faces);
   stats_.seconds_sort = since(t0);
   const auto t1 = Clock::now();

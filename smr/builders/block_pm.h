@@ -75,7 +75,6 @@ class BlockPmBuilder {
   const BlockPmOptions& opt_;
   BlockPmStats& stats_;
   QemPmOptions qem_;  // the options of each block's simplification
-  std::uint64_t budget_ = 0;
   std::vector<Vec3> pos_;
   Box3 box_;
   double side_ = 1.0;

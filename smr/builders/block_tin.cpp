@@ -71,8 +71,6 @@ Setup make_setup(const RasterWindows& dem, const BlockTinOptions& opt) {
   }
   g.B = opt.block_cells;
   s.exact_window_samples = opt.exact_window_samples;
-  if (opt.memory_bytes != 0)
-    s.exact_window_samples = std::min(s.exact_window_samples, opt.memory_bytes / 40);
   g.bw = (g.W - 2) / g.B + 1;
   g.bh = (g.H - 2) / g.B + 1;
   int span = 1;
@@ -128,12 +126,7 @@ class Feeder {
   explicit Feeder(const BlockTinOptions& opt) {
     AssemblyOptions ao;
     ao.tmp_dir = opt.tmp_dir;
-    ao.memory_bytes = opt.assembly_memory_bytes;
-    if (ao.memory_bytes == 0) {
-      ao.memory_bytes = opt.memory_bytes != 0
-                            ? std::max<std::uint64_t>(opt.memory_bytes / 2, std::uint64_t{16} << 20)
-                            : std::uint64_t{256} << 20;
-    }
+    ao.sort_bytes = opt.assembly_sort_bytes;
     ao.threads = opt.threads;
     ao.progress = [&opt](double f) { report(opt, 0.9 + 0.1 * f); };
     assembler_ = std::make_unique<OpAssembler>(ao);
@@ -262,7 +255,7 @@ void build(const RasterWindows& dem, const BlockTinOptions& opt, BlockTinStats& 
   // them decodes each tile once (a 64 MiB cache re-decoded them up to 9 times on a 32769-wide
   // raster: reads took 116 s of a 193 s ingest).
   const std::uint64_t cache_before =
-      opt.memory_bytes != 0 ? dem.set_cache_bytes(opt.memory_bytes / 8) : 0;
+      opt.raster_cache_bytes != 0 ? dem.set_cache_bytes(opt.raster_cache_bytes) : 0;
   SampleSpill::Cache repair_tiles(std::min<std::size_t>(2 * std::size_t(grid.bw) + 4, 64));
   auto feed = [&] { feeder->feed(mesh); };
   bool level0_done = false;
@@ -276,7 +269,7 @@ void build(const RasterWindows& dem, const BlockTinOptions& opt, BlockTinStats& 
   if (valid_samples == 0) throw_input(dem.source() + ": every sample is no data");
   // Nothing reads the source from here on: hand its cache back.
   const std::uint64_t cap = dem.set_cache_bytes(0);
-  dem.set_cache_bytes(opt.memory_bytes != 0 ? cache_before : cap);
+  dem.set_cache_bytes(opt.raster_cache_bytes != 0 ? cache_before : cap);
   DecimationScratch scratch;  // the overlay levels', on the whole mesh
   if (!level0_done) {
     LawsonRepair(setup, mesh, spill, repair_tiles, nullptr, stats).make_borders_delaunay();

@@ -63,15 +63,15 @@ struct BlockTinOptions {
   std::uint32_t max_degree = 12;
   /// Levels above the leaves whose blocks hold at most this many samples are decimated block by
   /// block with exact error bounds, re-reading each block's window; larger blocks use the
-  /// conservative overlay bound. Sizes the largest window held in memory (4 + 1 bytes a sample).
+  /// conservative overlay bound. Sizes the largest window held in memory (4 + 1 bytes a sample,
+  /// and as much again for its copy). smr/ingest/memory_budget.h caps it by a share of a budget,
+  /// as it does the two byte counts below.
   std::uint64_t exact_window_samples = std::uint64_t{16} << 20;
-  /// Memory budget in bytes (0 = none): caps exact_window_samples at a 40th of it (a window
-  /// costs 5 bytes a sample, and its copy) and sets the reader's block cache to an 8th, which
-  /// is emptied once the leaf blocks are read.
-  std::uint64_t memory_bytes = 0;
-  /// Budget of the final assembly's external sorts (op_assembly.h; 0 = half of
-  /// memory_bytes, at least 16 MiB, or 256 MiB when there is no budget).
-  std::uint64_t assembly_memory_bytes = 0;
+  /// The reader's cache of decoded source blocks during the leaf pass (RasterWindows::
+  /// set_cache_bytes), emptied once the leaf blocks are read; 0 = the reader's own.
+  std::uint64_t raster_cache_bytes = 0;
+  /// Memory of the final assembly's external sorts (AssemblyOptions::sort_bytes).
+  std::uint64_t assembly_sort_bytes = std::uint64_t{256} << 20;
   /// Directory of the scratch file holding the samples for the later passes' re-reads (the
   /// Delaunay repair, level 0, the exact upper levels; empty = the system's temporary directory).
   /// Checked for room before any work.
@@ -112,8 +112,8 @@ struct BlockTinStats {
   std::uint64_t plans = 0;                // removals planned (evaluated)
   std::uint64_t temp_bytes = 0;           // written to the scratch file
   // Triangles ever made, and the bytes of the build records (triangles, vertices, removals)
-  // before the assembly: they stay in memory, outside `memory_bytes`, and grow with the
-  // finest mesh (~64 bytes a triangle made, ~3 triangles made per finest-mesh triangle).
+  // before the assembly: they stay in memory, outside every share BlockTinOptions sizes, and grow
+  // with the finest mesh (~64 bytes a triangle made, ~3 triangles made per finest-mesh triangle).
   std::uint64_t triangles_made = 0, record_bytes = 0;
   // Seconds: survey pass, leaf windows read, leaf greedy TINs, the Delaunay repair, level 0,
   // upper levels (with their reads), assembling the CRMR.

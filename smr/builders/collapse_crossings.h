@@ -1,4 +1,4 @@
-// The self-intersection rule of the QEM builders (QemPmOptions::no_self_intersections): a
+// The self-intersection rule of the QEM builders (unless QemPmOptions::allow_self_intersections): a
 // collapse may not make a new triangle cross another triangle, exactly (exact_intersection.h),
 // neither in any state of the simplification nor in any cut at one error, which mixes states
 // (Brown 4.6.2's object-space criterion at one error selects such a cut; 5.1 extracts it). Live
@@ -30,7 +30,7 @@ struct CrossingScratch {
 // collapse may still need (crosses_dead in collapse_crossings.cpp): they stay in `grid` while
 // bounds near theirs are still to come (`dead`), then move to `archive` (retire_dead).
 struct Crossings {
-  bool enabled = false;  // QemPmOptions::no_self_intersections
+  bool enabled = false;  // !QemPmOptions::allow_self_intersections
   double ratio = 0.0;    // QemPmOptions::coalesce_error_ratio (r in crosses_dead)
   TriangleGrid grid;
   bool grid_ready = false;

@@ -632,7 +632,7 @@ struct OpAssembler::State {
   bool finished = false;
 
   std::uint64_t budget(int parts) const {
-    return std::max<std::uint64_t>(options.memory_bytes / parts, 16 << 10);
+    return std::max<std::uint64_t>(options.sort_bytes / parts, 16 << 10);
   }
 };
 

@@ -37,9 +37,10 @@ namespace smr {
 struct AssemblyOptions {
   /// Scratch files' directory (empty = the system's temporary directory).
   std::string tmp_dir;
-  /// Budget of the external sorts and the records' chunks, in bytes (tests use a few KiB to
-  /// force spills).
-  std::uint64_t memory_bytes = std::uint64_t{64} << 20;
+  /// Memory of the external sorts, in bytes (tests use a few KiB to force spills). Two sorts are
+  /// filled at a time, each holding a quarter of it; the records read back while the ops are made
+  /// come in chunks of an eighth of it.
+  std::uint64_t sort_bytes = std::uint64_t{64} << 20;
   /// Threads making the ops in finish() (0 = one per core); the ops do not depend on it. The
   /// `position` given to finish() is then called from several threads at once.
   unsigned threads = 1;

@@ -56,7 +56,7 @@ CrmrInfo header_of(const qem::PmMesh& m, const std::string& name, const QemPmOpt
               " base-vertices=" + std::to_string(o.base_vertices) +
               " max-base-error=" + std::to_string(o.max_base_error) +
               " bound-band=" + std::to_string(o.bound_band) +
-              " no-self-intersections=" + (o.no_self_intersections ? "yes" : "no");
+              " no-self-intersections=" + (o.allow_self_intersections ? "no" : "yes");
   return h;
 }
 

@@ -59,17 +59,19 @@ struct QemPmOptions {
   /// Collapses go in bands of their bound: the next band's tolerance is this many times the
   /// least bound that waited (at least 1). 0 = no bands, cheapest quadric cost first only: 1.3x
   /// fewer instructions, and 5-12 % more triangles in a 1 px view of the dragon and the
-  /// armadillo (benchmarks/README.md).
+  /// armadillo (bench_mesh_build --bound-band 0; benchmarks/README.md).
   double bound_band = 2.0;
   /// Once simplification has run to its end, remove every component but one (the one whose
   /// removal would cost most): refinement then spawns them (Brown Fig. 4.9d), each inside the op
   /// that follows it in the split order, at the error its absence costs.
   bool spawn_components = true;
-  /// Refuse a collapse that would make a new triangle cross another triangle (exactly, anywhere
-  /// but in shared corners and edges), so that simplification introduces no self-intersection:
-  /// neither in any state of it nor in any cut at one error, which mixes states (the triangles a
-  /// collapse is checked against include recently dead ones; collapse_crossings.cpp).
-  bool no_self_intersections = true;
+  /// false (the default): refuse a collapse that would make a new triangle cross another
+  /// triangle (exactly, anywhere but in shared corners and edges), so that simplification
+  /// introduces no self-intersection: neither in any state of it nor in any cut at one error,
+  /// which mixes states (the triangles a collapse is checked against include recently dead ones;
+  /// collapse_crossings.cpp). true: skip that test (faster; coarse levels may then cross
+  /// themselves).
+  bool allow_self_intersections = false;
   /// Threads computing the bounds of the candidates that come next (0 = one per core). The
   /// result does not depend on it.
   unsigned threads = 0;
@@ -123,10 +125,13 @@ struct BlockPmOptions {
   double tolerance_fraction = 1.0 / 1024.0;
   double max_normal_turn_degrees = 75.0;
   double boundary_weight = 100.0;
-  /// QemPmOptions::no_self_intersections, within each block (blocks meet at locked borders).
-  bool no_self_intersections = true;
-  /// Budget of the external sorts (triangle order, assembly); 0 = 256 MiB.
-  std::uint64_t memory_bytes = 0;
+  /// QemPmOptions::allow_self_intersections, within each block (blocks meet at locked borders).
+  bool allow_self_intersections = false;
+  /// Memory of the external sort of the triangles by octree leaf cell (beyond it, sorted runs
+  /// spill to scratch files). smr/ingest/memory_budget.h gives it its share of a budget.
+  std::uint64_t face_sort_bytes = std::uint64_t{128} << 20;
+  /// Memory of the assembly's external sorts (AssemblyOptions::sort_bytes).
+  std::uint64_t assembly_sort_bytes = std::uint64_t{128} << 20;
   /// Scratch files' directory (empty = the system's temporary directory).
   std::string tmp_dir;
   /// Threads simplifying leaf blocks (0 = one per core); the database does not depend on it.

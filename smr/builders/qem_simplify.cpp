@@ -114,7 +114,7 @@ bool take(Simplification& s, Bands& b, AheadState& ahead, const QemPmOptions& o,
 
 void init_simplification(Simplification& s, const QemPmOptions& options) {
   init_candidates(s.cand, s.mesh.pos.size(), options.max_normal_turn_degrees);
-  s.cross.enabled = options.no_self_intersections;
+  s.cross.enabled = !options.allow_self_intersections;
   s.cross.ratio = options.coalesce_error_ratio;
 }
 

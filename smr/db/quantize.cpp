@@ -51,25 +51,26 @@ QuantGrid choose_mesh_grid(const CrmrInfo& info, double step) {
 
 }  // namespace
 
-QuantGrid choose_grid(const CrmrInfo& info, double z_step) {
-  if (info.kind == ModelKind::kMesh3d) return choose_mesh_grid(info, z_step);
+QuantGrid choose_grid(const CrmrInfo& info, double z_quantum) {
+  if (info.kind == ModelKind::kMesh3d) return choose_mesh_grid(info, z_quantum);
   QuantGrid g;
   g.origin = {info.georef.x0, info.georef.y0, 0.0};
   g.step = {info.georef.dx, info.georef.dy, 1.0};
   const double lo = info.bounds.empty() ? 0.0 : info.bounds.lo.z;
   const double hi = info.bounds.empty() ? 0.0 : info.bounds.hi.z;
   if (!(std::isfinite(lo) && std::isfinite(hi))) throw_input("model heights are not finite");
-  if (z_step < 0.0 || !std::isfinite(z_step)) throw_input("z quantum must be a positive number");
-  if (z_step == 0.0) {
+  if (z_quantum < 0.0 || !std::isfinite(z_quantum))
+    throw_input("z quantum must be a positive number");
+  if (z_quantum == 0.0) {
     const double range = std::max(hi - lo, 1e-3);
-    z_step = std::exp2(std::floor(std::log2(range / double(1 << 24))));
+    z_quantum = std::exp2(std::floor(std::log2(range / double(1 << 24))));
   }
-  if ((hi - lo) / z_step > double(1 << 30)) {
-    throw_input("z quantum " + std::to_string(z_step) + " is too fine for a height range of " +
+  if ((hi - lo) / z_quantum > double(1 << 30)) {
+    throw_input("z quantum " + std::to_string(z_quantum) + " is too fine for a height range of " +
                 std::to_string(hi - lo) + " (at most 2^30 steps)");
   }
-  g.step.z = z_step;
-  g.origin.z = std::floor(lo / z_step) * z_step;
+  g.step.z = z_quantum;
+  g.origin.z = std::floor(lo / z_quantum) * z_quantum;
   return g;
 }
 

@@ -31,9 +31,9 @@ struct QuantGrid {
 /// 3-D meshes: one power-of-two step on all three axes, 2^-28 of the largest extent (rounded up
 /// to a power of two) unless given; the error bounds grow by the largest vertex shift as above.
 ///
-/// The grid for a model; z_step 0 = automatic, otherwise a positive step in data units (for a
+/// The grid for a model; z_quantum 0 = automatic, otherwise a positive step in data units (for a
 /// 3-D mesh, the step of every axis).
-QuantGrid choose_grid(const CrmrInfo& info, double z_step);
+QuantGrid choose_grid(const CrmrInfo& info, double z_quantum);
 
 /// Snaps the vertices of `op` to `grid` and returns the largest move; bounds are left to the
 /// caller.

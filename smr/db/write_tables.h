@@ -1,8 +1,8 @@
 // What the two writers (writer.h) share, internal to smr/db: the ops' index records, the shares
-// of WriteOptions::memory_bytes, and write_tables, where both end.
+// of WriteOptions::sort_bytes, and write_tables, where both end.
 //
 // write_tables takes the ops' index records through external sorts (storage/external_sort.h)
-// under WriteOptions::memory_bytes: the R-tree order (index::EntryOrder) and the locators' id
+// under WriteOptions::sort_bytes: the R-tree order (index::EntryOrder) and the locators' id
 // order. The stream writer derives ROIs and subtree cones by a backward sweep over its records on
 // disk, children sending theirs to their parents through an ExternalQueue (time-forward
 // processing, Chiang et al. 1995). What stays in memory is the budget, one summary per data page
@@ -51,13 +51,13 @@ inline double seconds_since(std::chrono::steady_clock::time_point t) {
 
 index::BuildOptions rtree_options(const CrmrInfo& header, const WriteOptions& options);
 
-// Shares of WriteOptions::memory_bytes: the entry sort holds half, the backward sweep's queue and
+// Shares of WriteOptions::sort_bytes: the entry sort holds half, the backward sweep's queue and
 // the locator sort (never alive together) a quarter each.
 inline std::uint64_t entry_sort_bytes(const WriteOptions& o) {
-  return o.memory_bytes / 2;
+  return o.sort_bytes / 2;
 }
 inline std::uint64_t side_sort_bytes(const WriteOptions& o) {
-  return o.memory_bytes / 4;
+  return o.sort_bytes / 4;
 }
 
 // The op's entry with the given ROI and subtree cone.

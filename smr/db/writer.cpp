@@ -247,7 +247,7 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
   const auto t0 = std::chrono::steady_clock::now();
   // Opening the writer first checks the path (exists without --force) before any work.
   storage::DatabaseWriter writer = open_writer(path, options);
-  const QuantGrid grid = choose_grid(crmr.header, options.z_step);
+  const QuantGrid grid = choose_grid(crmr.header, options.z_quantum);
   const double shift = quantize(crmr, grid);  // ROIs and subtree cones derived too
   const std::string tmp_dir = storage::scratch_dir("");
   TableCounts counts;

@@ -22,8 +22,8 @@ struct WriteOptions {
   // zstd: on real pages it is ~2x smaller than order-preserving Draco and decodes faster
   // (benchmarks/results/db_codecs.json); Draco stays available for glTF-minded users.
   storage::CodecId codec = storage::CodecId::kZstd;
-  bool force = false;   // replace an existing database at the path
-  double z_step = 0.0;  // quantization step of heights; 0 = automatic (quantize.h)
+  bool force = false;      // replace an existing database at the path
+  double z_quantum = 0.0;  // quantization step of heights (grid.step.z); 0 = automatic (quantize.h)
   std::uint32_t page_bytes = 16 * 1024 - 16;  // target payload of a data page
   // Children per internal R-tree node. A view enters internal nodes that each contribute one or
   // two leaves, so small nodes read fewer unused bytes: 16 read 8 % fewer index bytes than 64 on
@@ -34,8 +34,9 @@ struct WriteOptions {
   // Bytes of values buffered before each LMDB commit (memory held while writing).
   std::uint64_t batch_bytes = std::uint64_t{64} << 20;
   // Memory for the writer's external sorts (the R-tree order, the locators) and, in
-  // DatabaseStreamWriter, the queue deriving ROIs: beyond it they spill to scratch files.
-  std::uint64_t memory_bytes = std::uint64_t{128} << 20;
+  // DatabaseStreamWriter, the queue deriving ROIs: beyond it they spill to scratch files. The
+  // entry sort holds half of it, the queue and the locator sort (never alive together) a quarter.
+  std::uint64_t sort_bytes = std::uint64_t{128} << 20;
   std::string parameters;                // free text recorded in meta (the command line, say)
   std::function<void(double)> progress;  // fraction done, from 0 to 1
 };
@@ -72,7 +73,7 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
 /// parents through an external queue), orders the R-tree entries by an external sort, writes the
 /// pages in leaf order (re-reading their ops from the spool) with the R-tree's leaves, then the
 /// locators (another external sort), the R-tree's upper levels and the meta record, last; the
-/// sorts and the queue stay within options.memory_bytes and spill beyond. The same ops give the
+/// sorts and the queue stay within options.sort_bytes and spill beyond. The same ops give the
 /// same bytes as write_database on the Crmr they make up. Ops are spooled on a thread of the
 /// writer's own, handed over in batches of 256 (up to 8 waiting), so the builder goes on making
 /// the next ones meanwhile.

@@ -214,7 +214,7 @@ TEST_P(PerDataset, AssemblyThatSpillsGivesTheSameOps) {
   }
   const test::Dataset& d = data();
   BlockTinOptions opt = options(d, false);
-  opt.assembly_memory_bytes = 64 << 10;
+  opt.assembly_sort_bytes = 64 << 10;
   const HeightfieldWindows windows(d.dem);
   const Crmr tiny = build_block_tin(windows, opt);
   const Crmr& b = build().crmr;

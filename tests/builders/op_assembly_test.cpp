@@ -760,7 +760,7 @@ TEST(OpAssembly, SpillsToScratchFilesChangeNoOpAndGoWithTheAssembler) {
   const test::TempDir tmp("op-assembly");
   AssemblyOptions large, tiny;
   large.tmp_dir = tiny.tmp_dir = tmp.path().string();
-  tiny.memory_bytes = 4 << 10;  // the sorts spill every few hundred records
+  tiny.sort_bytes = 4 << 10;  // the sorts spill every few hundred records
   int open_large = 0, open_tiny = 0;
   const Assembled a = assemble(d, large, false, [&] { open_large = open_files_in(tmp.path()); });
   EXPECT_EQ(open_files_in(tmp.path()), 0) << "scratch files outlive the assembler";
@@ -792,7 +792,7 @@ TEST(OpAssembly, ThreadCountAndAnEncodingSinkChangeNoOp) {
         Variant{1, true, 64 << 20}, Variant{3, true, 4 << 10}}) {
     AssemblyOptions opt;
     opt.threads = v.threads;
-    opt.memory_bytes = v.memory;
+    opt.sort_bytes = v.memory;
     const Assembled run = assemble(d, opt, v.encoding);
     const std::string what = std::to_string(v.threads) + " threads" +
                              (v.encoding ? ", encoding sink" : "") + ", budget " +

@@ -60,7 +60,7 @@ std::vector<std::array<Vec3, 3>> corners_of(const Crmr& crmr, const std::vector<
 }
 
 // A collapse whose new triangles would cross a triangle of the mesh that no triangle of the old
-// star crossed is refused (QemPmOptions::no_self_intersections). So a source that does not
+// star crossed is refused (QemPmOptions::allow_self_intersections off). So a source that does not
 // cross itself gives a base mesh R^0, the last state of the simplification, that does not
 // either (CGAL's self_intersections counts crossing pairs, independently of the builder's own
 // test); a source that does is only reported. The in-core builder also checks each collapse
@@ -625,7 +625,7 @@ TEST(QemPmOptions, ATighterNormalTurnLimitIsKept) {
 TEST(QemPmOptions, WithoutTheIntersectionTestTheBaseMeshCrossesItself) {
   const char* name = "elephant-with-holes.off";
   QemPmOptions o;
-  o.no_self_intersections = false;
+  o.allow_self_intersections = true;
   QemPmStats stats;
   const Crmr plain = build_qem_pm(built(name).source, name, o, &stats);
   EXPECT_EQ(stats.rejected_intersection, 0u);
@@ -726,7 +726,7 @@ TEST(QemPmOptions, TheIntersectionTestDoesNotStallWhereTheSourceTouchesItself) {
   QemPmOptions o;
   QemPmStats with, without;
   (void)build_qem_pm(pig, "pig.stl", o, &with);
-  o.no_self_intersections = false;
+  o.allow_self_intersections = true;
   (void)build_qem_pm(pig, "pig.stl", o, &without);
   EXPECT_GT(with.rejected_intersection, 0u);
   EXPECT_LE(with.base_triangles, 2 * without.base_triangles + 8);
@@ -743,7 +743,7 @@ struct BlockBuilt {
 BlockPmOptions tiny_blocks() {
   BlockPmOptions o;
   o.leaf_triangles = 300;
-  o.memory_bytes = 256 << 10;  // the sorts spill
+  o.face_sort_bytes = o.assembly_sort_bytes = 128 << 10;  // the sorts spill
   return o;
 }
 
@@ -801,7 +801,7 @@ TEST(BlockPmBuild, DeterministicWhateverTheBudgetAndTheThreads) {
   one.threads = 1;
   const Crmr a = build_block_pm(MemoryMeshStream(mesh, "e"), one);
   BlockPmOptions roomy = tiny_blocks();
-  roomy.memory_bytes = 512 << 20;
+  roomy.face_sort_bytes = roomy.assembly_sort_bytes = 256 << 20;
   roomy.threads = 3;  // more workers than cores: leaves finish out of order
   BlockPmOptions two = tiny_blocks();
   two.threads = 2;

@@ -389,6 +389,8 @@ TEST_F(DbCli, BadInputsNameTheFileOrOption) {
   const std::string e = "extract " + good + " ";
   expect_user_error(e + "--floor 0.5 --cache-mb 0" + out, "--cache-mb");
   expect_user_error(e + "--floor 0.5 --cache-mb=-5" + out, "--cache-mb");
+  expect_user_error(e + "--floor 0.5 --held-mb 2000000" + out, "--held-mb");
+  expect_user_error(e + "--floor 0.5 --held-mb=-1" + out, "--held-mb");
   expect_user_error(e + "--floor 0.5 -o " + path("o.stl"), "o.stl");
   expect_user_error(e + "--floor 0.5 -o " + path("o"), path("o"));
   expect_user_error(e + "--floor 0.5 --png " + path("p.jpg") + out, "p.jpg");
@@ -429,6 +431,22 @@ Measured measure_smrdb(std::vector<std::string> args, const std::string& out) {
 
 // ASan's shadow memory and quarantine make RSS meaningless: the RSS checks need a plain build.
 using smr::test::kSanitized;
+
+// --held-mb bounds the ops of X copied out of pages while they wait for the expansion
+// (ExpansionOptions::max_held_bytes): with none held beyond the first page the mesh is the same,
+// and fewer bytes were held.
+TEST_F(DbCli, HeldMbChangesTheReadsNotTheMesh) {
+  const std::string e = "extract " + db() + " --floor 1 -q --json ";
+  const CliRun none = smrdb(e + "--held-mb 0 -o " + path("none.obj"));
+  ASSERT_EQ(none.code, 0) << none.out;
+  const CliRun held = smrdb(e + "-o " + path("held.obj"));
+  ASSERT_EQ(held.code, 0) << held.out;
+  EXPECT_EQ(read_file(path("none.obj")), read_file(path("held.obj")));
+  const auto n = nlohmann::json::parse(none.out)["extraction"]["held_bytes_peak"];
+  const auto h = nlohmann::json::parse(held.out)["extraction"]["held_bytes_peak"];
+  EXPECT_LT(n.get<std::uint64_t>(), h.get<std::uint64_t>());
+  EXPECT_NE(smrdb("extract --help").out.find("--held-mb"), std::string::npos);
+}
 
 // --cache-mb 4 on a database over 20 times larger (lossless, raw pages): the same output as with
 // a cache that holds everything, a tiling output, a cache that never held more than 4 MiB, and a

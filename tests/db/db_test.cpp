@@ -298,7 +298,7 @@ TEST(DatabaseStreamWriter, SpillingSortsGiveTheSameBytes) {
   std::uint64_t scratch[2] = {0, 0};
   for (int tight = 0; tight < 2; ++tight) {
     WriteOptions o;
-    o.memory_bytes = tight ? 0 : std::uint64_t{1} << 30;
+    o.sort_bytes = tight ? 0 : std::uint64_t{1} << 30;
     const std::string path = dir.file(tight ? "tight.smrdb" : "roomy.smrdb");
     DatabaseStreamWriter w(path, o, dir.path().string());
     w.begin(crmr.header, crmr.ops.size());

@@ -1,0 +1,68 @@
+// One memory budget (`smrdb ingest --memory`), divided in one place into the shares each builder
+// and the database writer are given, each an option field of one meaning (a byte count, or for
+// the exact windows a sample count derived from bytes). Out-of-core construction holds a few
+// blocks and the sorts' buffers, never the whole input (DESIGN.md section 4; Hoppe 1998's block
+// construction; external sorts in the manner of Aggarwal & Vitter's I/O model).
+#pragma once
+
+#include <cstdint>
+
+namespace smr {
+
+/// The four ways ingest() builds a CRMR (smr/ingest/ingest.h).
+enum class IngestPath {
+  kQemPm,      // a mesh read, validated and simplified in memory (qem_pm.h, build_qem_pm)
+  kBlockPm,    // a PLY streamed through octree blocks (qem_pm.h, build_block_pm)
+  kGreedyTin,  // a DEM read whole, greedy Delaunay insertion (greedy_tin.h)
+  kBlockTin,   // a DEM read one block at a time, hierarchical decimation (block_tin.h)
+};
+
+/// What an ingest may hold besides the builder's own records (0 = no budget: each share is the
+/// default of the option field it sets). Only the streamed paths (kBlockPm, kBlockTin) take one.
+struct MemoryBudget {
+  std::uint64_t total_bytes = 0;
+};
+
+/// The named shares of a MemoryBudget: each is the value of the option field named beside it.
+struct MemoryShares {
+  std::uint64_t writer_batch_bytes = 0;    // WriteOptions::batch_bytes
+  std::uint64_t writer_sort_bytes = 0;     // WriteOptions::sort_bytes
+  std::uint64_t assembly_sort_bytes = 0;   // BlockTinOptions / BlockPmOptions::assembly_sort_bytes
+  std::uint64_t face_sort_bytes = 0;       // BlockPmOptions::face_sort_bytes
+  std::uint64_t exact_window_samples = 0;  // BlockTinOptions::exact_window_samples
+  std::uint64_t raster_cache_bytes = 0;    // BlockTinOptions::raster_cache_bytes
+  /// The block TIN builder's records (BlockTinStats::record_bytes) are expected to stay within
+  /// this; they are not paged out yet, so beyond it ingest() reports an overrun (0 = no check).
+  std::uint64_t record_bytes = 0;
+};
+
+/// Bytes an exact window costs a sample: 4 (height) + 1 (validity), and as much for its copy.
+inline constexpr std::uint64_t kExactWindowBytesPerSample = 10;
+
+/// Divides `budget` among the parts `path` runs. With a budget M (the shares of one path; they are
+/// not all alive at once, and M is at least 32 MiB for the CLI):
+///
+///   the database writer (both streamed paths)
+///     writer_batch_bytes   M/16  values buffered before each LMDB commit, while the builder runs
+///     writer_sort_bytes    M/4   the writer's finish(), which runs once the builder has freed
+///                                its records: half to the R-tree entry sort, a quarter each to
+///                                the ROI queue and the locator sort (smr/db/writer.h,
+///                                WriteOptions)
+///   kBlockTin (a DEM by blocks)
+///     raster_cache_bytes   M/8   the reader's decoded source blocks, during the leaf pass only
+///     exact_window_samples (M/4) / kExactWindowBytesPerSample, capped by the option's default:
+///                                the largest window decimated with exact bounds
+///     assembly_sort_bytes  M/2, at least 16 MiB: the final assembly's sorts (op_assembly.h:
+///                                two at a time, a quarter of it each; record chunks an eighth)
+///     record_bytes         M/2   what the build records (~64 bytes a triangle made) may take
+///   kBlockPm (a PLY by octree blocks; the rest of M holds the vertices, 32 bytes each, the
+///   assembler's 16 bytes a collapse, the blocks being simplified and the writer's batch)
+///     face_sort_bytes      M/8   the triangles' sort by octree leaf cell
+///     assembly_sort_bytes  M/8   the assembly's sorts, as above
+///
+/// Without a budget every share is its option's default (for kBlockTin the raster cache is left
+/// as the reader has it, 0, and there is no record check). The in-core paths take only the
+/// writer's defaults (they hold the whole input, so a budget would not bound them).
+MemoryShares divide(const MemoryBudget& budget, IngestPath path);
+
+}  // namespace smr

@@ -1,0 +1,108 @@
+// smrdb's subcommands: each one's flags (a struct that adds them to its CLI11 subcommand and
+// checks what was typed) and its entry point. main.cpp parses and dispatches; the commands call
+// the library (smr/ingest, smr/extract, smr/db), print progress and summaries on stderr and, with
+// --json, their report on stdout (report_json.h). Errors arrive at main() as smr::Error.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json_fwd.hpp>
+
+#include "smr/db/database.h"
+#include "smr/ingest/ingest.h"
+#include "smr/rcf/spec.h"
+
+namespace CLI {
+class App;
+}
+
+namespace smr::tools {
+
+/// The flags every command shares.
+struct CommonFlags {
+  bool json = false;    // the report as JSON on stdout
+  bool quiet = false;   // no progress or summary on stderr
+  bool verify = false;  // check invariants (slow)
+};
+
+/// `ingest` and `build`: what to read and how to build and store it (smr::IngestOptions).
+struct IngestArgs {
+  std::string input;  // a DEM or a mesh
+  double max_error = 0.0;
+  std::uint64_t max_vertices = 0, base_vertices = 4;
+  std::string codec = "zstd";
+  double z_quantum = 0.0;
+  std::uint32_t page_kb = 16;
+  bool force = false;
+  bool repair = false;
+  bool allow_self_intersections = false;
+  std::uint32_t coalesce = 32;
+  double coalesce_ratio = 0.7;
+  std::string builder;  // as typed; empty: blocks with --memory, else greedy
+  int block_cells = 256;
+  std::string tmp_dir;
+  std::string memory;  // --memory as typed
+  unsigned threads = 0;
+
+  bool is_mesh() const;
+  std::string effective_builder() const;
+  std::uint64_t memory_bytes() const;  // --memory parsed (0 = none)
+  void add_to(CLI::App& app);
+  /// Checks everything the user typed before any long work.
+  void validate() const;
+  IngestOptions options(bool verify) const;
+};
+
+/// `extract` and `build`: the output and how to extract it.
+struct ExtractArgs {
+  std::string algorithm = "minimal", out, png, dem;
+  std::uint64_t cache_mb = 64;
+  std::uint64_t held_mb = 512;  // ExpansionOptions::max_held_bytes, in MiB
+
+  void add_to(CLI::App& app, bool with_budgets);
+  void validate() const;
+};
+
+/// The refinement condition (an RcfSpec, smr/rcf/spec.h) as flags.
+struct RcfOptions {
+  std::string eye, target, up, viewport = "1024x768", screen_aoi, centre_cone;
+  double fov = 60.0, near = 0.0, far = 0.0;
+  std::optional<double> pixel_error, floor, frustum_level, critical_level;
+  double critical_relief = 0.0;
+  std::vector<std::string> aois, discs, volumes, balls;
+  bool no_cull = false;
+
+  void add_to(CLI::App& app);
+  RcfSpec spec() const;
+};
+
+struct SynthArgs {
+  int width = 1025, height = 0;  // height 0: = width
+  std::uint64_t seed = 1;
+  double range = 1600.0, spacing = 1.0;
+  std::string out;
+
+  void add_to(CLI::App& app);
+};
+
+/// Ingests a.input into db_path, drawing the progress bar unless quiet; returns the report.
+nlohmann::json run_ingest(const IngestArgs& a, const std::string& db_path, bool quiet, bool verify);
+/// Extracts the mesh `spec` asks of `db` into a.out (and a.png); returns the report. `dem`: the
+/// source DEM, for --critical-lines (nullptr: none).
+nlohmann::json run_extract(const Database& db, const Heightfield* dem, const RcfSpec& spec,
+                           const ExtractArgs& a, bool verify);
+
+int cmd_ingest(const IngestArgs& a, const std::string& db_path, const CommonFlags& f);
+int cmd_extract(const std::string& db_path, const RcfOptions& rcf, const ExtractArgs& a,
+                const CommonFlags& f);
+/// Ingest, then extract; without a db_path the database is a scratch file removed afterwards.
+int cmd_build(IngestArgs a, std::string db_path, const RcfOptions& rcf, const ExtractArgs& e,
+              const CommonFlags& f);
+int cmd_info(const std::string& db_path, bool json);
+int cmd_verify(const std::string& db_path, const CommonFlags& f);
+int cmd_synth(const SynthArgs& a, bool quiet);
+
+}  // namespace smr::tools

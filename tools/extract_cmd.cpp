@@ -1,0 +1,194 @@
+// smrdb extract: the refinement condition's flags, the extraction and its report.
+#include <cstdio>
+#include <optional>
+#include <sstream>
+#include <utility>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "base/error.h"
+#include "smr/core/invariants.h"
+#include "smr/db/database.h"
+#include "smr/extract/extract.h"
+#include "smr/io/dem_reader.h"
+#include "smr/io/mesh_writer.h"
+#include "smr/io/render.h"
+#include "smr/query/indexed_source.h"
+#include "tools/commands.h"
+#include "tools/parse.h"
+#include "tools/report_json.h"
+
+namespace smr::tools {
+
+namespace {
+
+Vec3 parse_vec3(const std::string& text, const std::string& option) {
+  const auto v = parse_numbers(text, 3, option, "x,y,z");
+  return {v[0], v[1], v[2]};
+}
+
+AoiSpec parse_aoi(const std::string& text, const std::string& option) {
+  const auto v = parse_numbers(text, 4, option, "x,y,radius,level");
+  return {v[0], v[1], v[2], v[3]};
+}
+
+}  // namespace
+
+void RcfOptions::add_to(CLI::App& app) {
+  app.add_option("--eye", eye, "Camera position x,y,z (model coordinates)");
+  app.add_option("--target", target, "Point the camera looks at x,y,z");
+  app.add_option("--up", up, "Camera up vector x,y,z (default 0,0,1)");
+  app.add_option("--fov", fov, "Vertical field of view in degrees")->capture_default_str();
+  app.add_option("--viewport", viewport, "Viewport size WxH in pixels")->capture_default_str();
+  app.add_option("--near", near, "Near plane distance (0 = at the eye)");
+  app.add_option("--far", far, "Far plane distance (0 = none)");
+  app.add_flag("--no-cull", no_cull, "Disable view-frustum and back-face culling");
+  app.add_option("--pixel-error", pixel_error, "Screen-space tolerance in pixels (needs a camera)");
+  app.add_option("--screen-aoi", screen_aoi,
+                 "Screen area of interest u,v,radius_px,pixel_error: lower tolerance inside");
+  app.add_option("--floor", floor, "Constant object-space resolution level in [0,1]");
+  app.add_option("--aoi", aois, "Gaussian area of interest x,y,radius,level (repeatable)");
+  app.add_option("--disc", discs, "Thresholded disc x,y,radius,level (repeatable)");
+  app.add_option("--volume", volumes,
+                 "3-D Gaussian volume of significance x,y,z,radius,level (repeatable)");
+  app.add_option("--ball", balls, "3-D thresholded ball x,y,z,radius,level (repeatable)");
+  app.add_option("--frustum-level", frustum_level,
+                 "Object-space level inside the view frustum's footprint");
+  app.add_option("--centre-cone", centre_cone, "Screen-centre cone half_angle_deg,level");
+  app.add_option("--critical-lines", critical_level,
+                 "Level on Peucker-Douglas ridge/channel samples");
+  app.add_option("--critical-relief", critical_relief,
+                 "Keep critical samples with 3x3 relief >= this");
+}
+
+RcfSpec RcfOptions::spec() const {
+  RcfSpec s;
+  if (!eye.empty() || !target.empty()) {
+    if (eye.empty() || target.empty()) throw_input("a camera needs both --eye and --target");
+    Camera cam;
+    cam.eye = parse_vec3(eye, "--eye");
+    cam.target = parse_vec3(target, "--target");
+    if (!up.empty()) cam.up = parse_vec3(up, "--up");
+    cam.fov_y_deg = fov;
+    int w = 0, h = 0;
+    char x = 0, extra = 0;
+    std::stringstream vs(viewport);
+    if (!(vs >> w >> x >> h) || x != 'x' || (vs >> extra)) {
+      throw_input("--viewport expects WxH (e.g. 1920x1080), got '" + viewport + "'");
+    }
+    cam.viewport_w = w;
+    cam.viewport_h = h;
+    cam.near_distance = near;
+    cam.far_distance = far;
+    s.camera = cam;
+  }
+  s.cull = !no_cull;
+  s.pixel_error = pixel_error;
+  if (!screen_aoi.empty()) {
+    const auto v = parse_numbers(screen_aoi, 4, "--screen-aoi", "u,v,radius_px,pixel_error");
+    s.screen_aoi = ScreenAoi{{v[0], v[1]}, v[2], v[3]};
+  }
+  s.floor = floor;
+  for (const auto& a : aois) s.aois.push_back(parse_aoi(a, "--aoi"));
+  for (const auto& a : discs) s.discs.push_back(parse_aoi(a, "--disc"));
+  for (const auto& [list, gaussian] : {std::pair{&volumes, true}, std::pair{&balls, false}}) {
+    for (const auto& text : *list) {
+      const auto v = parse_numbers(text, 5, gaussian ? "--volume" : "--ball", "x,y,z,radius,level");
+      s.volumes.push_back({v[0], v[1], v[2], v[3], v[4], gaussian});
+    }
+  }
+  s.frustum_level = frustum_level;
+  if (!centre_cone.empty()) {
+    const auto v = parse_numbers(centre_cone, 2, "--centre-cone", "half_angle_deg,level");
+    s.centre_cone = std::pair{v[0], v[1]};
+  }
+  s.critical_level = critical_level;
+  s.critical_relief = critical_relief;
+  validate(s);
+  return s;
+}
+
+void ExtractArgs::add_to(CLI::App& app, bool with_budgets) {
+  app.add_option("--algorithm", algorithm, "minimal (Brown 5.1) or reduced (Brown 5.2)")
+      ->capture_default_str();
+  app.add_option("-o,--output", out, "Output mesh (.obj or .ply)")->required();
+  app.add_option("--png", png, "Also write a top-down picture of the mesh (.png)");
+  if (with_budgets) {
+    app.add_option("--cache-mb", cache_mb, "Page cache budget in MiB")->capture_default_str();
+    app.add_option("--held-mb", held_mb,
+                   "Budget in MiB of the ops copied out of pages while they wait for the "
+                   "expansion; beyond it, ops are read through the page cache one by one")
+        ->capture_default_str();
+    app.add_option("--dem", dem, "The source DEM (needed by --critical-lines)");
+  }
+}
+
+void ExtractArgs::validate() const {
+  if (algorithm != "minimal" && algorithm != "reduced")
+    throw_input("--algorithm must be 'minimal' or 'reduced', got '" + algorithm + "'");
+  const std::string ext = extension_of(out);
+  if (ext != ".obj" && ext != ".ply")
+    throw_input("-o " + out + ": the output must end in .obj or .ply");
+  if (!png.empty() && extension_of(png) != ".png")
+    throw_input("--png " + png + ": must end in .png");
+  if (cache_mb < 1 || cache_mb > (std::uint64_t{1} << 20))
+    throw_input("--cache-mb must be in [1, 1048576]");
+  if (held_mb > (std::uint64_t{1} << 20)) throw_input("--held-mb must be in [0, 1048576]");
+}
+
+nlohmann::json run_extract(const Database& db, const Heightfield* dem, const RcfSpec& spec,
+                           const ExtractArgs& a, bool verify) {
+  nlohmann::json report;
+  if (spec.critical_level && dem == nullptr)
+    throw_input("--critical-lines needs the source DEM: pass --dem");
+  const Rcf rcf = make_rcf(spec, db.info().kind, dem);
+  ExpansionOptions expansion;
+  expansion.max_held_bytes = a.held_mb << 20;
+  const IndexedSource source(db);  // the R-tree answers the RCF's queries
+  const Extraction e = a.algorithm == "reduced" ? extract_reduced(source, rcf, expansion)
+                                                : extract_minimal_surface(source, rcf, expansion);
+  report["rcf"] = rcf.describe();
+  report["extraction"] = e.stats;
+  report["extraction"]["algorithm"] = a.algorithm;
+  if (verify && db.info().kind == ModelKind::kTerrain) {
+    const InvariantReport r = check_tiling(db, e.triangles);
+    if (!r.ok()) throw_internal("output does not tile the domain: " + r.summary());
+  } else if (verify) {
+    const SurfaceReport r = check_surface(db, e.triangles);
+    if (!r.report.ok()) throw_internal("output is not a manifold surface: " + r.report.summary());
+  }
+  const TriangleMesh mesh = to_mesh(db, e.triangles);
+  report["io"] = db.stats();
+  write_mesh(a.out, mesh);
+  report["output"] = {
+      {"path", a.out}, {"vertices", mesh.positions.size()}, {"triangles", mesh.triangles.size()}};
+  if (!a.png.empty()) {
+    RenderOptions ro;
+    ro.geographic = db.info().georef.geographic;
+    render_png(a.png, mesh, ro);
+    report["output"]["png"] = a.png;
+  }
+  return report;
+}
+
+int cmd_extract(const std::string& db_path, const RcfOptions& rcf, const ExtractArgs& a,
+                const CommonFlags& f) {
+  a.validate();
+  const RcfSpec spec = rcf.spec();
+  std::optional<Heightfield> dem;
+  if (!a.dem.empty()) dem = read_dem(a.dem);
+  const auto db = Database::open(db_path, {std::size_t(a.cache_mb) << 20});
+  const nlohmann::json r = run_extract(*db, dem ? &*dem : nullptr, spec, a, f.verify);
+  print_report(r, f.json);
+  if (!f.json && !f.quiet) {
+    std::fprintf(
+        stderr, "%s: %llu output triangles (|X| = %llu, %llu pages read) -> %s\n", db_path.c_str(),
+        static_cast<unsigned long long>(r["output"]["triangles"].get<std::uint64_t>()),
+        static_cast<unsigned long long>(r["extraction"]["x"].get<std::uint64_t>()),
+        static_cast<unsigned long long>(r["io"]["pages_read"].get<std::uint64_t>()), a.out.c_str());
+  }
+  return 0;
+}
+
+}  // namespace smr::tools
