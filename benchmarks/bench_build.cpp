@@ -15,7 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "benchmarks/bench_common.h"
-#include "smr/builders/greedy_tin.h"
+#include "smr/builders/terrain/greedy_tin.h"
 #include "smr/extract/extract.h"
 #include "smr/io/mesh_writer.h"
 #include "smr/io/npy.h"

@@ -41,7 +41,7 @@
 
 #include "base/error.h"
 #include "benchmarks/bench_common.h"
-#include "smr/builders/greedy_tin.h"
+#include "smr/builders/terrain/greedy_tin.h"
 #include "smr/db/database.h"
 #include "smr/db/page.h"
 #include "smr/db/tables.h"

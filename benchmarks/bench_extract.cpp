@@ -25,7 +25,7 @@
 #include <nlohmann/json.hpp>
 
 #include "benchmarks/bench_common.h"
-#include "smr/builders/greedy_tin.h"
+#include "smr/builders/terrain/greedy_tin.h"
 #include "smr/core/invariants.h"
 #include "smr/extract/extract.h"
 #include "smr/rcf/spec.h"

@@ -65,7 +65,7 @@
 #include <nlohmann/json.hpp>
 
 #include "benchmarks/bench_common.h"
-#include "smr/builders/qem_pm.h"
+#include "smr/builders/mesh/qem_pm.h"
 #include "smr/core/mesh.h"
 #include "smr/core/parallel.h"
 #include "smr/db/database.h"

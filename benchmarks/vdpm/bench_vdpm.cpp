@@ -54,7 +54,7 @@
 
 #include "base/error.h"
 #include "benchmarks/bench_common.h"
-#include "smr/builders/qem_pm.h"
+#include "smr/builders/mesh/qem_pm.h"
 #include "smr/extract/extract.h"
 #include "smr/io/mesh_reader.h"
 #include "smr/rcf/spec.h"

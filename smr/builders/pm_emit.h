@@ -11,7 +11,7 @@
 #include <functional>
 #include <span>
 
-#include "smr/builders/pm_mesh.h"
+#include "smr/builders/mesh/pm_mesh.h"
 #include "smr/core/crmr.h"
 
 namespace smr::qem {

@@ -77,8 +77,8 @@ inline Heightfield window_header(const Georef& georef, const std::string& source
 }
 
 /// Read access to a DEM one window at a time, so that a builder never needs the whole grid in
-/// memory (smr/builders/block_tin.h). Windows follow the Heightfield conventions: row 0 is the
-/// south.
+/// memory (smr/builders/terrain/block_tin.h). Windows follow the Heightfield conventions: row 0 is
+/// the south.
 class RasterWindows {
  public:
   virtual ~RasterWindows() = default;
@@ -96,7 +96,7 @@ class RasterWindows {
   virtual std::uint64_t set_cache_bytes(std::uint64_t /*bytes*/) const { return 0; }
   /// True when `read` may be called from several threads at once and costs about the bytes it
   /// returns (memory, or a file read in place): a builder may then read samples again from the
-  /// source instead of keeping a copy of its own (smr/builders/block_tin.cpp).
+  /// source instead of keeping a copy of its own (smr/builders/terrain/block_tin.cpp).
   virtual bool random_access() const { return false; }
   /// `read` into `out`, reusing its buffers where the reader can.
   virtual void read_into(Heightfield& out, int col0, int row0, int w, int h) const {

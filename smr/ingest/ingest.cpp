@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "base/error.h"
-#include "smr/builders/greedy_tin.h"
+#include "smr/builders/terrain/greedy_tin.h"
 #include "smr/core/invariants.h"
 #include "smr/db/verify.h"
 #include "smr/io/dem_reader.h"

@@ -17,8 +17,8 @@
 #include <string>
 #include <variant>
 
-#include "smr/builders/block_tin.h"
-#include "smr/builders/qem_pm.h"
+#include "smr/builders/mesh/qem_pm.h"
+#include "smr/builders/terrain/block_tin.h"
 #include "smr/db/writer.h"
 #include "smr/ingest/memory_budget.h"
 #include "smr/io/mesh_reader.h"

@@ -2,8 +2,8 @@
 
 #include <algorithm>
 
-#include "smr/builders/block_tin.h"
-#include "smr/builders/qem_pm.h"
+#include "smr/builders/mesh/qem_pm.h"
+#include "smr/builders/terrain/block_tin.h"
 #include "smr/db/writer.h"
 
 namespace smr {

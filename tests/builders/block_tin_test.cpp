@@ -1,6 +1,6 @@
-// Hierarchical block decimation (smr/builders/block_tin.h) with tiny blocks, so that the hierarchy
-// has several levels: CRMR invariants, the error bound of every fragment triangle against the
-// source samples, cuts that mix resolutions across block borders (tiling, RCF, set formula ==
+// Hierarchical block decimation (smr/builders/terrain/block_tin.h) with tiny blocks, so that the
+// hierarchy has several levels: CRMR invariants, the error bound of every fragment triangle against
+// the source samples, cuts that mix resolutions across block borders (tiling, RCF, set formula ==
 // advancing front), lossless reproduction, determinism and the DAG height bound.
 #include <gtest/gtest.h>
 
@@ -12,7 +12,7 @@
 #include <tuple>
 
 #include "base/error.h"
-#include "smr/builders/block_tin.h"
+#include "smr/builders/terrain/block_tin.h"
 #include "smr/core/invariants.h"
 #include "smr/extract/extract.h"
 #include "smr/io/synthetic.h"

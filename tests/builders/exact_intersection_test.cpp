@@ -1,6 +1,6 @@
-// The builder's exact triangle-triangle test (smr/builders/exact_intersection.h): what two
+// The builder's exact triangle-triangle test (smr/builders/mesh/exact_intersection.h): what two
 // triangles of a mesh may share (corners and edges by vertex id) and what counts as crossing.
-#include "smr/builders/exact_intersection.h"
+#include "smr/builders/mesh/exact_intersection.h"
 
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/intersections.h>

@@ -1,12 +1,12 @@
-// The greedy Delaunay-insertion terrain builder (Brown 4.4, 7.1.1; smr/builders/greedy_tin.h):
-// the invariant checker on every build, lossless reproduction, the error bound on the finest mesh,
-// determinism, budgets and no-data holes.
+// The greedy Delaunay-insertion terrain builder (Brown 4.4, 7.1.1;
+// smr/builders/terrain/greedy_tin.h): the invariant checker on every build, lossless reproduction,
+// the error bound on the finest mesh, determinism, budgets and no-data holes.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 
 #include "base/error.h"
-#include "smr/builders/greedy_tin.h"
+#include "smr/builders/terrain/greedy_tin.h"
 #include "smr/core/invariants.h"
 #include "smr/extract/extract.h"
 #include "smr/io/synthetic.h"

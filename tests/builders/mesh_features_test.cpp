@@ -1,4 +1,4 @@
-// Feature preservation by the QEM progressive-mesh builder (smr/builders/qem_pm.h) on CGAL's
+// Feature preservation by the QEM progressive-mesh builder (smr/builders/mesh/qem_pm.h) on CGAL's
 // fandisk.off, the CAD part with sharp creases that Hoppe's progressive meshes were shown on.
 // The builder has no crease rule of its own: every collapse waits for the band of its guaranteed
 // error bound, so one that would cut a crease comes after the flat collapses around it. The
@@ -17,7 +17,7 @@
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
 
-#include "smr/builders/qem_pm.h"
+#include "smr/builders/mesh/qem_pm.h"
 #include "smr/extract/extract.h"
 #include "smr/io/mesh_reader.h"
 #include "smr/rcf/spec.h"

@@ -1,12 +1,12 @@
-// The QEM progressive-mesh builder (smr/builders/qem_pm.h) on real meshes no one here made (CGAL's
-// demo data, all eight: pig.stl read with the repairs): the CRMR invariants, exact reproduction
-// of the source when fully refined, coalescing and DAG depth, no collapse turning a normal past
-// the limit, and, for a spread of 3-D RCFs (object-space levels, cameras around and close to the
-// model with pixel tolerances, with culling), the outputs of minimal-surface extraction: an
-// oriented manifold surface with the source's topology (components, boundary loops, Euler
-// characteristic), the set formula equal to the advancing front, Theorem 5.1.1, X's definition,
-// the screen-space rule pointwise with culling off, culling saving triangles, and the stored
-// error bound checked against the source by sampled distances in both directions (source to
+// The QEM progressive-mesh builder (smr/builders/mesh/qem_pm.h) on real meshes no one here made
+// (CGAL's demo data, all eight: pig.stl read with the repairs): the CRMR invariants, exact
+// reproduction of the source when fully refined, coalescing and DAG depth, no collapse turning a
+// normal past the limit, and, for a spread of 3-D RCFs (object-space levels, cameras around and
+// close to the model with pixel tolerances, with culling), the outputs of minimal-surface
+// extraction: an oriented manifold surface with the source's topology (components, boundary loops,
+// Euler characteristic), the set formula equal to the advancing front, Theorem 5.1.1, X's
+// definition, the screen-space rule pointwise with culling off, culling saving triangles, and the
+// stored error bound checked against the source by sampled distances in both directions (source to
 // output view-locally: within the bound of the output triangles near each point).
 #include <algorithm>
 #include <cmath>
@@ -18,7 +18,7 @@
 #include <glm/geometric.hpp>
 
 #include "base/error.h"
-#include "smr/builders/qem_pm.h"
+#include "smr/builders/mesh/qem_pm.h"
 #include "smr/core/invariants.h"
 #include "smr/extract/extract.h"
 #include "smr/io/mesh_reader.h"
@@ -495,8 +495,8 @@ TEST_P(QemPm, MostNormalConesAreNarrow) {
 }
 
 // Normal turns, per collapse, exactly as the builder guarantees them (valid() in
-// smr/builders/qem_pm.cpp): a half-edge collapse v' -> u turns each triangle of the star of v' that
-// does not hold u into the same triangle with u in place of v'; that triangle must not be
+// smr/builders/mesh/qem_pm.cpp): a half-edge collapse v' -> u turns each triangle of the star of v'
+// that does not hold u into the same triangle with u in place of v'; that triangle must not be
 // degenerate, and when the old one was not, the angle between their normals is at most
 // max_normal_turn_degrees. Coalescing hides the triangles between the splits of one op, so this
 // runs on a CRMR built without it (the same collapses: coalescing only groups the splits), where

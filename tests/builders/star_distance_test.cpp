@@ -1,5 +1,5 @@
-// The mesh builder's star distance bounds (smr/builders/star_distance.h) against brute force: dense
-// samples of each triangle, each measured against every target. On random stars (a hub and a
+// The mesh builder's star distance bounds (smr/builders/mesh/star_distance.h) against brute force:
+// dense samples of each triangle, each measured against every target. On random stars (a hub and a
 // ring of 5-8 corners at random heights, the targets with random offsets) a half-edge collapse of
 // the hub onto a ring corner gives the new star:
 //  - backward, bound() over a new triangle (and over random triangles near the star) is at least
@@ -11,7 +11,7 @@
 //    is the same as without one (the builder passes the collapse's bound so far as the floor);
 //  - forward, charge() of every old triangle leaves each of its samples within some new triangle's
 //    charge, less the old triangle's offset.
-#include "smr/builders/star_distance.h"
+#include "smr/builders/mesh/star_distance.h"
 
 #include <gtest/gtest.h>
 

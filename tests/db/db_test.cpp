@@ -11,7 +11,7 @@
 #include <unordered_map>
 
 #include "base/error.h"
-#include "smr/builders/block_tin.h"
+#include "smr/builders/terrain/block_tin.h"
 #include "smr/core/invariants.h"
 #include "smr/core/parallel.h"
 #include "smr/db/database.h"

@@ -36,7 +36,7 @@
 #include <vector>
 
 #include "base/error.h"
-#include "smr/builders/greedy_tin.h"
+#include "smr/builders/terrain/greedy_tin.h"
 #include "smr/db/database.h"
 #include "smr/db/tables.h"
 #include "smr/db/verify.h"

@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "smr/builders/greedy_tin.h"
+#include "smr/builders/terrain/greedy_tin.h"
 #include "smr/core/invariants.h"
 #include "smr/db/writer.h"
 #include "smr/io/dem_reader.h"

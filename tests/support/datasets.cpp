@@ -4,7 +4,7 @@
 #include <memory>
 #include <mutex>
 
-#include "smr/builders/greedy_tin.h"
+#include "smr/builders/terrain/greedy_tin.h"
 #include "smr/io/dem_reader.h"
 #include "smr/io/synthetic.h"
 #include "tests/support/sanitized.h"

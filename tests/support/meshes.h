@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "smr/builders/qem_pm.h"
+#include "smr/builders/mesh/qem_pm.h"
 #include "smr/core/invariants.h"
 #include "smr/core/mesh.h"
 #include "tests/support/rcf_spread.h"

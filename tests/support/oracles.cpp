@@ -9,7 +9,7 @@
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
 
-#include "smr/builders/greedy_tin.h"
+#include "smr/builders/terrain/greedy_tin.h"
 #include "smr/core/invariants.h"
 
 namespace smr::test {

@@ -1,6 +1,6 @@
 // An independent oracle for self-intersections of a triangle mesh: CGAL's
 // Polygon_mesh_processing::self_intersections (pairs of faces that meet anywhere but in a shared
-// vertex or edge), not the builder's own test (smr/builders/exact_intersection.h).
+// vertex or edge), not the builder's own test (smr/builders/mesh/exact_intersection.h).
 #pragma once
 
 #include <array>
