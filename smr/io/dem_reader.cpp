@@ -1,22 +1,16 @@
 // read_dem: dispatch on the file extension.
 #include "smr/io/dem_reader.h"
 
-#include <algorithm>
-#include <cctype>
-#include <filesystem>
 #include <memory>
 #include <utility>
+
+#include "smr/io/io_util.h"
 
 namespace smr {
 
 namespace {
 
-std::string lower_extension(const std::string& path) {
-  std::string ext = std::filesystem::path(path).extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return ext;
-}
+using io_util::lower_extension;
 
 /// A Heightfield read whole, served by windows.
 class OwnedWindows final : public RasterWindows {

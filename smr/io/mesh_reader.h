@@ -32,6 +32,10 @@
 // file, the element (vertex / face number, 0-based in file order except for OBJ's 1-based
 // vertex numbers, plus the line for text formats) and what was expected, and say which repair, if
 // any, would fix it.
+//
+// Implementation: smr/io/mesh/ holds one reader per format (ply_reader.cpp with the streamed path
+// in ply_stream.cpp, obj_reader.cpp, off_reader.cpp, stl_reader.cpp), their shared tokenizer
+// (text.h) and face sink (source.h), and the validator's steps (validator.cpp).
 #pragma once
 
 #include <cstddef>

@@ -3,25 +3,19 @@
 
 #include <algorithm>
 #include <bit>
-#include <cctype>
 #include <cerrno>
 #include <charconv>
 #include <cstring>
-#include <filesystem>
 #include <string_view>
 
 #include "base/error.h"
+#include "smr/io/io_util.h"
 
 namespace smr {
 
 namespace {
 
-std::string lower_extension(const std::string& path) {
-  std::string ext = std::filesystem::path(path).extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return ext;
-}
+using io_util::lower_extension;
 
 void validate_mesh(const std::string& path, const TriangleMesh& mesh) {
   const std::size_t n = mesh.positions.size();

@@ -8,6 +8,10 @@
 // Supported dtypes: bool (|b1), signed and unsigned integers of 1, 2, 4 and 8 bytes (i1 .. u8),
 // float32 and float64, little or big endian; C or Fortran order; any number of dimensions.
 // Structured, string, object, float16 and complex dtypes are rejected with a message.
+//
+// Implementation: smr/io/npy/ (npy_format.cpp: the .npy format and writer; npz_zip.cpp: the zip
+// container and inflate; npy_grid.cpp: elevation grids and .npz georeferencing; npy_windows.cpp:
+// windowed reads of a plain .npy).
 #pragma once
 
 #include <cstddef>
