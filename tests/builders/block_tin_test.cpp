@@ -132,17 +132,7 @@ TEST_P(PerDataset, CutsAcrossBlockBordersTileAndMeetTheRcf) {
     const Rcf rcf = make_rcf(ns.spec, ModelKind::kTerrain, &d.dem);
     const Extraction e = extract_minimal_surface(m, rcf);
     ++cases;
-    const InvariantReport tiling = check_tiling(m, e.triangles);
-    EXPECT_TRUE(tiling.ok()) << tiling.summary();
-    std::vector<TriRef> front = e.triangles;
-    std::sort(front.begin(), front.end());
-    EXPECT_EQ(front, set_formula(m, e.x));
-    const test::OracleResult opwise = test::check_rcf_opwise(m, e.triangles, rcf);
-    EXPECT_TRUE(opwise.ok()) << opwise.first_failure;
-    const test::OracleResult pointwise = test::check_rcf_pointwise(m, e.triangles, ns.spec, d.dem);
-    EXPECT_TRUE(pointwise.ok()) << pointwise.first_failure;
-    const test::OracleResult bound = test::check_error_bound(m, e.triangles, d.dem);
-    EXPECT_TRUE(bound.ok()) << bound.first_failure;
+    test::expect_terrain_cut_invariants(m, e, rcf, ns.spec, d.dem);
     const Extraction r = extract_reduced(m, rcf);
     const InvariantReport rt = check_tiling(m, r.triangles);
     EXPECT_TRUE(rt.ok()) << rt.summary();

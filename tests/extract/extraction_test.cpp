@@ -34,30 +34,14 @@ TEST_P(Spread, MinimalSurfaceAndReducedExtractionMeetEveryInvariant) {
     const Extraction e = extract_minimal_surface(m, rcf);
     ++sum.cases;
 
-    // Tiling: the output is a valid triangulation of the whole domain.
-    const InvariantReport tiling = check_tiling(m, e.triangles);
-    EXPECT_TRUE(tiling.ok()) << tiling.summary();
+    // Tiling (8.1), Lemma 5.1.1 (advancing front == set formula), Theorem 5.1.1 as stated and
+    // independently from the RCF's point definitions, and the error bound against the source.
+    test::expect_terrain_cut_invariants(m, e, rcf, ns.spec, d.dem);
     EXPECT_EQ(e.stats.triangles, e.triangles.size());
 
     // X is exactly Brown 5.1.1's set.
     const test::OracleResult xdef = test::check_x_definition(m, e.x, rcf, true);
     EXPECT_TRUE(xdef.ok()) << xdef.first_failure;
-
-    // Lemma 5.1.1: advancing front == set formula, triangle for triangle.
-    std::vector<TriRef> front = e.triangles;
-    std::sort(front.begin(), front.end());
-    EXPECT_EQ(front, set_formula(m, e.x));
-
-    // Theorem 5.1.1, as stated and independently from the RCF's point definitions.
-    const test::OracleResult opwise = test::check_rcf_opwise(m, e.triangles, rcf);
-    EXPECT_TRUE(opwise.ok()) << opwise.first_failure;
-    const test::OracleResult pointwise = test::check_rcf_pointwise(m, e.triangles, ns.spec, d.dem);
-    EXPECT_TRUE(pointwise.ok()) << pointwise.failures
-                                << " failures; first: " << pointwise.first_failure;
-
-    // The stored error of every output triangle bounds its deviation from the source.
-    const test::OracleResult bound = test::check_error_bound(m, e.triangles, d.dem);
-    EXPECT_TRUE(bound.ok()) << bound.first_failure;
 
     // Theorem 5.1.4: Delaunay.
     const DelaunayReport del = check_delaunay(m, e.triangles);

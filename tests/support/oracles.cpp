@@ -303,4 +303,20 @@ void expect_links_of_a_replay(const Crmr& m) {
   EXPECT_EQ(wrong, 0u) << "ops whose links differ from the replay's";
 }
 
+void expect_terrain_cut_invariants(const OpSource& source, const Extraction& e, const Rcf& rcf,
+                                   const RcfSpec& spec, const Heightfield& dem) {
+  const InvariantReport tiling = check_tiling(source, e.triangles);
+  EXPECT_TRUE(tiling.ok()) << tiling.summary();
+  std::vector<TriRef> front = e.triangles;
+  std::sort(front.begin(), front.end());
+  EXPECT_EQ(front, set_formula(source, e.x));
+  const OracleResult opwise = check_rcf_opwise(source, e.triangles, rcf);
+  EXPECT_TRUE(opwise.ok()) << opwise.first_failure;
+  const OracleResult pointwise = check_rcf_pointwise(source, e.triangles, spec, dem);
+  EXPECT_TRUE(pointwise.ok()) << pointwise.failures
+                              << " failures; first: " << pointwise.first_failure;
+  const OracleResult bound = check_error_bound(source, e.triangles, dem);
+  EXPECT_TRUE(bound.ok()) << bound.first_failure;
+}
+
 }  // namespace smr::test
