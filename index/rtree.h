@@ -1,13 +1,13 @@
 // Packed R-tree over regions of influence (Maheshwari et al. section 4.4: "build a packed R-tree
 // on the list of vertex splits, where the box associated with a vertex split v is roi(v)";
-// DESIGN.md section 5). Bulk-loaded once from a static set of entries, stored as sealed byte
+// docs/design.md section 5). Bulk-loaded once from a static set of entries, stored as sealed byte
 // nodes that the caller keeps wherever it likes (a table of its own, named in RTree's error
 // messages); this module never touches LMDB. A query retrieves every entry a Visitor accepts,
 // pruning subtrees whose summary it rejects (Maheshwari 3.2: GET-SPLITS over roi boxes, here over
 // tree nodes).
 //
-// Leaf order (the design point). One leaf is one data page (DESIGN.md section 3), so the order of
-// entries decides what an extraction reads. Entries are refinement ops: coarse ops have big
+// Leaf order (the design point). One leaf is one data page (docs/design.md section 3), so the order
+// of entries decides what an extraction reads. Entries are refinement ops: coarse ops have big
 // boxes and low resolution, fine ops small boxes and high resolution. A view-dependent query
 // (Brown 5.2, reduced extraction) needs, at each place, the ops coarser than a threshold that
 // varies smoothly with distance; a distant view needs few coarse ops spread over the whole
@@ -94,7 +94,7 @@ struct BuildOptions {
     kSpatial,          // one class: plain Hilbert packing (a baseline for benchmarks)
   };
   // Max total weight of a leaf (= its data page payload; LMDB values of k*4096-16 bytes fill
-  // k pages, DESIGN.md section 3). A single heavier entry gets a leaf of its own.
+  // k pages, docs/design.md section 3). A single heavier entry gets a leaf of its own.
   std::uint32_t leaf_weight = 64 * 1024 - 16;
   std::uint32_t max_leaf_entries = 512;  // >= 1
   std::uint32_t fanout = 64;             // children per internal node, >= 2

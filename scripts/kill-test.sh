@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Crash safety of `smrdb ingest` (DESIGN.md section 3: a killed ingest leaves either the previous
+# Crash safety of `smrdb ingest` (docs/design.md section 3: a killed ingest leaves either the previous
 # database or nothing): kills an ingest with SIGKILL N times (default 200) at deterministic moments
 # spread from 0 to ~110 % of a full ingest's duration, half of the runs over an existing database
 # (ingest --force), half to a fresh path. After each kill the path must be absent (fresh path) or

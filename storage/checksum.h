@@ -1,5 +1,5 @@
-// Checksums of stored values (xxhash XXH3, 64 bits; DESIGN.md section 3: "every page and record
-// carries a checksum"). A sealed value is its payload followed by the payload's 8-byte
+// Checksums of stored values (xxhash XXH3, 64 bits; docs/design.md section 3: "every page and
+// record carries a checksum"). A sealed value is its payload followed by the payload's 8-byte
 // little-endian checksum.
 #pragma once
 

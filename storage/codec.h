@@ -1,7 +1,7 @@
-// Geometry page codecs (DESIGN.md section 3, "Geometry codec"): a triangle-mesh chunk on a GLOBAL
-// integer grid chosen by the caller, stored raw, as a zstd-compressed integer stream or with Draco.
-// Coordinates are integers, so every codec is lossless and a vertex shared by two blobs decodes
-// to the same integers: no cracks by construction.
+// Geometry page codecs (docs/design.md section 3, "Geometry codec"): a triangle-mesh chunk on a
+// GLOBAL integer grid chosen by the caller, stored raw, as a zstd-compressed integer stream or with
+// Draco. Coordinates are integers, so every codec is lossless and a vertex shared by two blobs
+// decodes to the same integers: no cracks by construction.
 //
 // CONTRACT: decode_geometry(c, encode_geometry(c, b)) == b exactly, for every codec: the same
 // positions in the same order and the same faces in the same order and rotation (callers refer

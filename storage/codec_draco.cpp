@@ -1,4 +1,4 @@
-// The one place Draco is used (DESIGN.md section 3, "Geometry codec").
+// The one place Draco is used (docs/design.md section 3, "Geometry codec").
 //
 // Layout: varint position count, varint face count; if there are positions, the per-axis minimum
 // (3 svarints), a shift s (u8) and a Draco geometry with the "DRACO" magic stripped: a mesh, or a

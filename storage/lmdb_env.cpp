@@ -1,5 +1,5 @@
-// The one place LMDB is used (DESIGN.md section 3). Bulk loads use sorted keys with MDB_APPEND;
-// every status code goes through one mapping to smr::Error.
+// The one place LMDB is used (docs/design.md section 3). Bulk loads use sorted keys with
+// MDB_APPEND; every status code goes through one mapping to smr::Error.
 #include "storage/lmdb_env.h"
 
 #include <algorithm>

@@ -1,5 +1,5 @@
-// The LMDB environment of one database file (DESIGN.md section 3): one file holding the tables its
-// caller names, read-only access for readers and an atomic, deterministic writer. LMDB types
+// The LMDB environment of one database file (docs/design.md section 3): one file holding the tables
+// its caller names, read-only access for readers and an atomic, deterministic writer. LMDB types
 // never appear here; every LMDB status becomes an smr::Error carrying mdb_strerror's text and the
 // path/table/key involved. Storage knows no table of its own: the caller passes the list of
 // table names (the LMDB sub-database names) to Env::open_read_only and DatabaseWriter, and

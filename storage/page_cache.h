@@ -1,6 +1,6 @@
-// A least-recently-used cache of decoded pages under a byte budget (DESIGN.md section 3: reads go
-// through a page cache; section 8.7: extraction stays within its memory budget). Generic over the
-// decoded value; thread-safe (one mutex; loads run outside it).
+// A least-recently-used cache of decoded pages under a byte budget (docs/design.md section 3: reads
+// go through a page cache; section 8.7: extraction stays within its memory budget). Generic over
+// the decoded value; thread-safe (one mutex; loads run outside it).
 #pragma once
 
 #include <algorithm>

@@ -1,4 +1,4 @@
-// The CRMR of a decimation, assembled out of core (DESIGN.md section 4; Brown 4.4.3.3, 4.5).
+// The CRMR of a decimation, assembled out of core (docs/design.md section 4; Brown 4.4.3.3, 4.5).
 //
 // A decimating builder (vertex removal, edge collapse) hands over each removal as it makes it,
 // in the order it makes them: the vertices it removes, the triangles it destroys (its star,

@@ -4,7 +4,7 @@
 // is monotone; optionally coalesced into the op of their parents (Brown Fig. 4.12b, bounded
 // fragment size); then replayed from the base mesh to give each op its fragment F, its PreF and
 // each fragment boundary edge's closest coarser version (Brown 4.5.1). A build stage any builder
-// whose steps are local replacements of triangles can hand its log to (DESIGN.md section 4).
+// whose steps are local replacements of triangles can hand its log to (docs/design.md section 4).
 #pragma once
 
 #include <cstdint>

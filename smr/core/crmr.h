@@ -26,7 +26,7 @@ class Crmr final : public OpSource {
   std::uint64_t triangle_count() const;  // over all fragments
 };
 
-/// Receives a CRMR op by op, so that a builder never holds the whole DAG (DESIGN.md section 4;
+/// Receives a CRMR op by op, so that a builder never holds the whole DAG (docs/design.md section 4;
 /// STYLE.md, tippecanoe: "the builder streams ops to the writer"). begin() is called once with
 /// the model's header (bounds, err0 and err_final final) and the number of ops to come (0 if not
 /// known; sinks size their records with it), then add() with ops 0 (R^0), 1, 2, ...

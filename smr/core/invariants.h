@@ -1,5 +1,5 @@
 // Executable forms of the CRMR definitions (Brown 4.4.1, 4.5) and of the output properties of
-// selective refinement (Brown 5.1.4, 5.2.2; DESIGN.md section 8). Used by tests and `verify`.
+// selective refinement (Brown 5.1.4, 5.2.2; docs/design.md section 8). Used by tests and `verify`.
 #pragma once
 
 #include <array>

@@ -2,7 +2,7 @@
 //
 // An Op is self-contained: it names other ops only by OpId and other triangles only by TriRef,
 // and carries the positions of every vertex its fragment uses, so one op can be serialised and
-// paged in on its own (DESIGN.md section 3).
+// paged in on its own (docs/design.md section 3).
 #pragma once
 
 #include <array>

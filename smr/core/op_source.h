@@ -5,7 +5,7 @@
 // Resolution. Brown defines r(M^m) = 1 for the finest mesh. We keep that and tie resolution to
 // absolute error against the SOURCE data: r = 1 - (err - err_final) / (err0 - err_final), where
 // err0 is the base mesh's error and err_final the finest mesh's (0 for a lossless build, in which
-// case r = 1 - err/err0 as in DESIGN.md). So error_at(death_res(t)) bounds t's true deviation.
+// case r = 1 - err/err0 as in docs/design.md). So error_at(death_res(t)) bounds t's true deviation.
 #pragma once
 
 #include <cstdint>

@@ -1,4 +1,4 @@
-// Data pages (DESIGN.md section 3): the ops of one R-tree leaf, stored together. A page holds
+// Data pages (docs/design.md section 3): the ops of one R-tree leaf, stored together. A page holds
 // their geometry — the page's distinct vertices on the global quantization grid and every
 // fragment triangle, in op order — through a storage codec (Draco, zstd or raw), and their
 // compact records (ids, resolutions, PreF, DAG and Hypermesh links, ROI, subtree normal cone)

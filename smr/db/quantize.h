@@ -1,4 +1,4 @@
-// The database's one global quantization grid (DESIGN.md section 3): every vertex position is
+// The database's one global quantization grid (docs/design.md section 3): every vertex position is
 // stored as integers q on the grid origin + q * step, so a vertex shared by fragments in
 // different pages decodes to bit-identical coordinates (no cracks by construction).
 //

@@ -1,4 +1,4 @@
-// The tables of a database file (DESIGN.md sections 3, 5, 6): a CRMR in one LMDB file.
+// The tables of a database file (docs/design.md sections 3, 5, 6): a CRMR in one LMDB file.
 //
 //   meta         "meta" -> JSON (format, model info, grid, counts, build parameters), sealed
 //   pages        u64 leaf -> data page (smr/db/page.h): the ops of R-tree leaf `leaf`, sealed

@@ -1,5 +1,5 @@
-// Ingest: a DEM or a 3-D mesh in, an on-disk LOD database out, in one call (DESIGN.md sections 4
-// and 5). Four builders sit behind it (Brown 7.1; memory_budget.h lists them):
+// Ingest: a DEM or a 3-D mesh in, an on-disk LOD database out, in one call (docs/design.md sections
+// 4 and 5). Four builders sit behind it (Brown 7.1; memory_budget.h lists them):
 //  - a mesh in memory: read, validated (and repaired), simplified by quadric edge collapse into a
 //    progressive mesh (Hoppe 1997; Garland & Heckbert), written whole;
 //  - a mesh by blocks: a PLY streamed through octree blocks, its ops assembled on disk and

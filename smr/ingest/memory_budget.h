@@ -1,8 +1,8 @@
 // One memory budget (`smrdb ingest --memory`), divided in one place into the shares each builder
 // and the database writer are given, each an option field of one meaning (a byte count, or for
 // the exact windows a sample count derived from bytes). Out-of-core construction holds a few
-// blocks and the sorts' buffers, never the whole input (DESIGN.md section 4; Hoppe 1998's block
-// construction; external sorts in the manner of Aggarwal & Vitter's I/O model).
+// blocks and the sorts' buffers, never the whole input (docs/design.md section 4; Hoppe 1998's
+// block construction; external sorts in the manner of Aggarwal & Vitter's I/O model).
 #pragma once
 
 #include <cstdint>

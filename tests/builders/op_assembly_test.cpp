@@ -7,7 +7,7 @@
 // ops are compared field by field with an in-memory replay of the same removals (the brute-force
 // oracle below: the order by falling error, each PreF triangle's owner, the killers and
 // death_res, parents and children from PreF and F, the coarser-edge links from the mesh alive
-// just before each op), then checked with check_crmr (DESIGN.md section 8). Also: spills to
+// just before each op), then checked with check_crmr (docs/design.md section 8). Also: spills to
 // scratch files (a tiny budget), the thread count and an encoding sink change no op, the scratch
 // files go with the assembler, and the malformed input it validates is rejected with smr::Error.
 #include <gtest/gtest.h>

@@ -1,7 +1,7 @@
 // The database subcommands from the outside: kill -9 during ingest leaves the previous database or
-// the complete new one (DESIGN.md section 3), damaged files are exit code 1 with a message naming
-// the table, parallel extract processes agree while an ingest runs next to them, every bad input
-// is exit code 1 naming the file or option, and extraction stays inside --cache-mb.
+// the complete new one (docs/design.md section 3), damaged files are exit code 1 with a message
+// naming the table, parallel extract processes agree while an ingest runs next to them, every bad
+// input is exit code 1 naming the file or option, and extraction stays inside --cache-mb.
 #include <gtest/gtest.h>
 
 #include <fcntl.h>

@@ -1,5 +1,5 @@
-// The invariant checker (smr/core/invariants.h, DESIGN.md section 8) notices what it is meant to:
-// a CRMR damaged on purpose fails the check.
+// The invariant checker (smr/core/invariants.h, docs/design.md section 8) notices what it is meant
+// to: a CRMR damaged on purpose fails the check.
 #include <gtest/gtest.h>
 
 #include <utility>

@@ -1,4 +1,4 @@
-// The on-disk database (DESIGN.md sections 3, 5, 6; invariant 6): ops read back equal the ops
+// The on-disk database (docs/design.md sections 3, 5, 6; invariant 6): ops read back equal the ops
 // built, extraction from disk equals extraction in memory triangle for triangle and meets every
 // invariant, no cracks across pages, byte-identical files, atomic creation, the cache budget.
 #include <gtest/gtest.h>

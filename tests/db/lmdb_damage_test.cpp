@@ -1,4 +1,4 @@
-// Damage to LMDB's own structure (DESIGN.md section 3). reliability_test flips bits inside the
+// Damage to LMDB's own structure (docs/design.md section 3). reliability_test flips bits inside the
 // sealed values; here the file is truncated at every page boundary and single bits are flipped in
 // every 4 KiB page of a small database: the two meta pages byte by byte, and in every other page
 // its header (page number, flags, lower/upper bounds or overflow page count), its node offsets,

@@ -1,4 +1,4 @@
-// Reliability of the on-disk database (DESIGN.md section 3): a damaged file — truncated, or a
+// Reliability of the on-disk database (docs/design.md section 3): a damaged file — truncated, or a
 // single bit flipped inside any value of any table — is a clear error naming the table and key,
 // never a crash and never a different mesh; extraction stays within its cache budget; threads
 // read one database while another is being written next to it.
@@ -267,9 +267,9 @@ TEST(Reliability, WritingIntoAMissingDirectoryIsAnIoError) {
   }
 }
 
-// DESIGN.md section 6, memory bound: a budget a twentieth of the file still gives the same mesh.
-// (Not the full-resolution RCF: with a budget far below its working set, the expansion re-decodes
-// pages many times over, which is slow, not wrong.)
+// docs/design.md section 6, memory bound: a budget a twentieth of the file still gives the same
+// mesh. (Not the full-resolution RCF: with a budget far below its working set, the expansion
+// re-decodes pages many times over, which is slow, not wrong.)
 TEST(Reliability, ExtractionWithinATwentiethOfTheFile) {
   const SmallDb& small = small_db();
   const std::vector<Result> expected = clean_results();

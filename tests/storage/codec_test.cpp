@@ -226,7 +226,7 @@ TEST(Codec, ZstdFramesAreBoundedAndValidated) {
 }
 
 // Not an assertion of sizes (they depend on library versions): prints bytes per face so that
-// the codec choice can be revisited (DESIGN.md section 3: "measure Draco against plain/zstd").
+// the codec choice can be revisited (docs/design.md section 3: "measure Draco against plain/zstd").
 TEST(Codec, CodecSizes) {
   for (int n : {12, 23}) {  // 242 and 968 faces
     for (int variant = 0; variant < 3; ++variant) {

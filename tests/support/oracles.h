@@ -1,4 +1,4 @@
-// Independent oracles for the invariants of DESIGN.md section 8. They re-derive each property
+// Independent oracles for the invariants of docs/design.md section 8. They re-derive each property
 // from first principles (grid samples, point evaluations of the RCF's definitions) instead of
 // calling the code under test's own decision functions.
 #pragma once
@@ -58,11 +58,11 @@ OracleResult check_x_definition(const OpSource& source, std::span<const OpId> x,
 /// with b->a across each fragment boundary edge a->b (none on the model boundary).
 void expect_links_of_a_replay(const Crmr& crmr);
 
-/// The invariants every terrain cut is held to (DESIGN.md section 8): it tiles the domain (8.1),
-/// the advancing front equals the set formula triangle for triangle (Brown Lemma 5.1.1, 8.3),
-/// every triangle meets the RCF op-wise and, independently, point-wise (Brown Theorem 5.1.1,
-/// 8.2), and its stored error bounds its deviation from every DEM sample under it (8.5).
-/// Failures are reported through EXPECT_*.
+/// The invariants every terrain cut is held to (docs/design.md section 8): it tiles the domain
+/// (8.1), the advancing front equals the set formula triangle for triangle (Brown
+/// Lemma 5.1.1, 8.3), every triangle meets the RCF op-wise and, independently, point-wise (Brown
+/// Theorem 5.1.1, 8.2), and its stored error bounds its deviation from every DEM sample under it
+/// (8.5). Failures are reported through EXPECT_*.
 void expect_terrain_cut_invariants(const OpSource& source, const Extraction& e, const Rcf& rcf,
                                    const RcfSpec& spec, const Heightfield& dem);
 

@@ -95,10 +95,10 @@ struct QemPmStats {
   std::uint64_t bounds_ahead = 0, bounds_ahead_used = 0;
 };
 
-// Out of core (DESIGN.md section 4; Hoppe 1998's block construction, in 3-D): the triangles are
-// sorted by the octree leaf cell of their centroid (an external sort), so each leaf block is read
-// on its own. A block is simplified by the collapses above with its locked vertices -- those with
-// triangles in another block of its level -- kept, up to a bound of tolerance_fraction of the
+// Out of core (docs/design.md section 4; Hoppe 1998's block construction, in 3-D): the triangles
+// are sorted by the octree leaf cell of their centroid (an external sort), so each leaf block is
+// read on its own. A block is simplified by the collapses above with its locked vertices -- those
+// with triangles in another block of its level -- kept, up to a bound of tolerance_fraction of the
 // block's side (doubling per level as blocks do; within a block it rises in steps of 2 from an 8th
 // of it, and the root's on to the model's size; past it while the block still has more than
 // leaf_triangles triangles, so that a block above the leaves holds at most 8 times that), cheapest

@@ -1,4 +1,4 @@
-// Terrain CRMR by hierarchical block decimation (DESIGN.md section 4; Hoppe 1998, "Smooth
+// Terrain CRMR by hierarchical block decimation (docs/design.md section 4; Hoppe 1998, "Smooth
 // view-dependent level-of-detail control and its application to terrain rendering", section 4;
 // De Floriani et al., LOD part two, "construction through simplification": independent-set
 // decimation).
