@@ -852,7 +852,8 @@ TEST(BlockPmBuild, CutsAcrossBlockBordersAreNoLargerThanInCore) {
               static_cast<unsigned long long>(stats.leaf_blocks),
               static_cast<unsigned long long>(reference));
   // 1.15: the unsubdivided shark under the sanitizers gave 19 558 against 17 684 (1.106) once
-  // the in-core builder's waits changed at stop 23 (the blocks' cuts did not change).
+  // the in-core builder's bound bands (QemPmOptions::bound_band) changed when it waits (the blocks'
+  // cuts did not change).
   EXPECT_LE(double(ours), 1.15 * double(reference));
 }
 
