@@ -43,6 +43,23 @@ double seconds_since(std::uint64_t start_ns) {
   return double(now_ns() - start_ns) * 1e-9;
 }
 
+std::vector<std::string> split_list(const std::string& text, char sep) {
+  std::vector<std::string> items;
+  std::stringstream ss(text);
+  for (std::string item; std::getline(ss, item, sep);) items.push_back(item);
+  return items;
+}
+
+std::vector<double> parse_doubles(const std::string& text) {
+  std::vector<double> v;
+  for (const std::string& item : split_list(text)) v.push_back(std::stod(item));
+  return v;
+}
+
+nlohmann::json vec3_json(const Vec3& v) {
+  return nlohmann::json::array({v.x, v.y, v.z});
+}
+
 std::pair<double, double> z_range(const Heightfield& dem) {
   double lo = std::numeric_limits<double>::infinity(), hi = -lo;
   for (std::size_t i = 0; i < dem.z.size(); ++i) {

@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "smr/core/crmr.h"
+#include "smr/core/geometry.h"
 #include "smr/core/heightfield.h"
 
 namespace smr::bench {
@@ -62,6 +63,15 @@ double current_rss_mb();
 double median(std::vector<double> v);
 double seconds_since(std::uint64_t start_ns);
 std::uint64_t now_ns();
+
+// ---- command lines and JSON -----------------------------------------------------------------
+
+/// The items of a `sep`-separated list ("a,b,c"), empty items kept, none for an empty text.
+std::vector<std::string> split_list(const std::string& text, char sep = ',');
+/// A comma-separated list of numbers ("1,2.5,4"; std::stod each).
+std::vector<double> parse_doubles(const std::string& text);
+/// [x, y, z].
+nlohmann::json vec3_json(const Vec3& v);
 
 // ---- triangulations on the grid -------------------------------------------------------------
 

@@ -29,9 +29,9 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <memory>
 #include <optional>
 #include <set>
-#include <sstream>
 #include <string>
 #include <unordered_set>
 #include <vector>
@@ -60,6 +60,7 @@ using nlohmann::json;
 using smr::bench::median;
 using smr::bench::now_ns;
 using smr::bench::seconds_since;
+using smr::bench::vec3_json;
 
 // ---- the OS page cache ----------------------------------------------------------------------
 
@@ -98,17 +99,15 @@ std::uint64_t drop_from_page_cache(const std::string& path) {
 // ---- views ----------------------------------------------------------------------------------
 
 json camera_json(const smr::Camera& c) {
-  return {{"eye", {c.eye.x, c.eye.y, c.eye.z}},
-          {"target", {c.target.x, c.target.y, c.target.z}},
+  return {{"eye", vec3_json(c.eye)},
+          {"target", vec3_json(c.target)},
           {"fov_y_deg", c.fov_y_deg},
           {"viewport", {c.viewport_w, c.viewport_h}},
           {"far", c.far_distance}};
 }
 
 smr::Vec3 parse_vec3(const std::string& text, const char* what) {
-  std::vector<double> v;
-  std::stringstream ss(text);
-  for (std::string item; std::getline(ss, item, ',');) v.push_back(std::stod(item));
+  const std::vector<double> v = smr::bench::parse_doubles(text);
   if (v.size() != 3) smr::throw_input(std::string(what) + " expects x,y,z, got '" + text + "'");
   return {v[0], v[1], v[2]};
 }
@@ -207,12 +206,15 @@ Timed run_extraction(const smr::Database& db, const smr::Rcf& rcf, bool reduced)
   return t;
 }
 
-Timed fresh_run(const ExtractArgs& a, const smr::Rcf& rcf, bool reduced) {
+// One run on a fresh Database (opening it timed); `keep`, when given, receives that Database.
+Timed fresh_run(const ExtractArgs& a, const smr::Rcf& rcf, bool reduced,
+                std::unique_ptr<smr::Database>* keep = nullptr) {
   const std::uint64_t t0 = now_ns();
-  const auto db = smr::Database::open(a.db, {std::size_t(a.cache_mb) << 20});
+  auto db = smr::Database::open(a.db, {std::size_t(a.cache_mb) << 20});
   const double open = seconds_since(t0);
   Timed t = run_extraction(*db, rcf, reduced);
   t.open_seconds = open;
+  if (keep) *keep = std::move(db);
   return t;
 }
 
@@ -236,60 +238,70 @@ double raw_read(const std::string& path, const std::vector<std::uint64_t>& pages
   return s;
 }
 
-json mode_extract(const ExtractArgs& a) {
-  std::fprintf(stderr, "bench_db extract %s\n", a.db.c_str());
-  // The op -> page map, page sizes and counts, from a separate instance (its reads do not count;
-  // it is closed before any measurement so that it maps nothing the cold runs must drop).
-  auto index_db = smr::Database::open(a.db, {std::size_t{256} << 20});
-  const smr::CrmrInfo info = index_db->info();
-  std::vector<std::uint32_t> page_of(index_db->op_count(), ~0u);
-  {
-    AllVisitor all;
-    for (const smr::index::Hit& h : index_db->rtree().query(all)) page_of.at(h.id) = h.leaf;
-  }
-  std::vector<std::uint64_t> page_size(index_db->page_count(), 0);
+// Where each op lives and how large each page is.
+struct PageIndex {
+  smr::CrmrInfo info;
+  std::vector<std::uint32_t> page_of;    // op id -> page
+  std::vector<std::uint64_t> page_size;  // page -> bytes
   std::uint64_t all_page_bytes = 0;
-  {
-    const smr::storage::Env env = smr::storage::Env::open_read_only(a.db, smr::kTableNames);
-    const smr::storage::ReadTxn txn = env.read();
-    for (std::uint64_t p = 0; p < page_size.size(); ++p) {
-      page_size[p] = txn.get(smr::Table::kPages, p)->size();
-      all_page_bytes += page_size[p];
-    }
-  }
-  const json meta = json::parse(index_db->meta_json());
-  json out = {{"mode", "extract"},
-              {"db",
-               {{"path", a.db},
-                {"file_bytes", index_db->file_bytes()},
-                {"samples", std::uint64_t(info.grid_width) * std::uint64_t(info.grid_height)},
-                {"grid", {info.grid_width, info.grid_height}},
-                {"spacing", info.georef.dx},
-                {"vertices", info.vertex_count},
-                {"ops", index_db->op_count()},
-                {"triangles", meta["counts"]["triangles"]},
-                {"pages", index_db->page_count()},
-                {"page_bytes", all_page_bytes},
-                {"mean_page_bytes", double(all_page_bytes) / double(page_size.size())},
-                {"rtree_height", index_db->rtree().height()},
-                {"codec", meta["codec"]},
-                {"err0", info.err0},
-                {"err_final", info.err_final},
-                {"bounds",
-                 {{info.bounds.lo.x, info.bounds.lo.y, info.bounds.lo.z},
-                  {info.bounds.hi.x, info.bounds.hi.y, info.bounds.hi.z}}}}},
-              {"cache_mb", a.cache_mb},
-              {"repeat", a.repeat},
-              {"machine", smr::bench::machine_json()}};
-  index_db.reset();
+};
 
+PageIndex read_page_index(const smr::Database& db, const std::string& path) {
+  PageIndex index;
+  index.info = db.info();
+  index.page_of.assign(db.op_count(), ~0u);
+  AllVisitor all;
+  for (const smr::index::Hit& h : db.rtree().query(all)) index.page_of.at(h.id) = h.leaf;
+  index.page_size.assign(db.page_count(), 0);
+  const smr::storage::Env env = smr::storage::Env::open_read_only(path, smr::kTableNames);
+  const smr::storage::ReadTxn txn = env.read();
+  for (std::uint64_t p = 0; p < index.page_size.size(); ++p) {
+    index.page_size[p] = txn.get(smr::Table::kPages, p)->size();
+    index.all_page_bytes += index.page_size[p];
+  }
+  return index;
+}
+
+json database_json(const smr::Database& db, const std::string& path, const PageIndex& index) {
+  const smr::CrmrInfo& info = index.info;
+  const json meta = json::parse(db.meta_json());
+  return {{"path", path},
+          {"file_bytes", db.file_bytes()},
+          {"samples", std::uint64_t(info.grid_width) * std::uint64_t(info.grid_height)},
+          {"grid", {info.grid_width, info.grid_height}},
+          {"spacing", info.georef.dx},
+          {"vertices", info.vertex_count},
+          {"ops", db.op_count()},
+          {"triangles", meta["counts"]["triangles"]},
+          {"pages", db.page_count()},
+          {"page_bytes", index.all_page_bytes},
+          {"mean_page_bytes", double(index.all_page_bytes) / double(index.page_size.size())},
+          {"rtree_height", db.rtree().height()},
+          {"codec", meta["codec"]},
+          {"err0", info.err0},
+          {"err_final", info.err_final},
+          {"bounds", {vec3_json(info.bounds.lo), vec3_json(info.bounds.hi)}}};
+}
+
+// The op -> page map, page sizes and counts (out["db"]), from a separate instance: its reads do
+// not count, and it is closed before any measurement so that it maps nothing the cold runs must
+// drop.
+PageIndex index_database(const ExtractArgs& a, json& out) {
+  const auto db = smr::Database::open(a.db, {std::size_t{256} << 20});
+  PageIndex index = read_page_index(*db, a.db);
+  out["db"] = database_json(*db, a.db, index);
+  return index;
+}
+
+// The named view, or the explicit --eye/--target (out["view"], out["camera"]).
+smr::Camera view_camera(const ExtractArgs& a, const smr::Box3& bounds, json& out) {
   smr::Camera cam;
   if (!a.eye.empty() || !a.target.empty()) {
     cam.eye = parse_vec3(a.eye, "--eye");
     cam.target = parse_vec3(a.target, "--target");
     out["view"] = "explicit";
   } else {
-    cam = named_camera(a.view, info.bounds);
+    cam = named_camera(a.view, bounds);
     out["view"] = a.view;
   }
   cam.fov_y_deg = a.fov;
@@ -297,147 +309,196 @@ json mode_extract(const ExtractArgs& a) {
   cam.viewport_h = a.vh;
   cam.far_distance = a.far;
   out["camera"] = camera_json(cam);
+  return cam;
+}
 
+// The timed runs of one case.
+struct CaseTimes {
+  std::optional<Timed> cold;
+  Timed first;  // the first warm run: its statistics are the ones reported
+  std::vector<double> warm_extract, warm_total, hot_extract;
+};
+
+// Cold (the file dropped from the OS page cache first, then a fresh process-like Database), warm
+// (a fresh Database each time, the file in the OS page cache) and hot (the last warm Database
+// again: its cache holds what fits of the pages it decoded).
+CaseTimes time_case(const ExtractArgs& a, const smr::Rcf& rcf, bool reduced, json& c) {
+  CaseTimes t;
+  if (a.cold) {
+    c["resident_bytes_after_drop"] = drop_from_page_cache(a.db);
+    t.cold = fresh_run(a, rcf, reduced);
+    c["resident_bytes_after_cold_run"] = resident_bytes(a.db);
+  }
+  std::unique_ptr<smr::Database> keep;
+  for (int i = 0; i < a.repeat; ++i) {
+    Timed run = fresh_run(a, rcf, reduced, i + 1 == a.repeat ? &keep : nullptr);
+    t.warm_extract.push_back(run.extract_seconds);
+    t.warm_total.push_back(run.open_seconds + run.extract_seconds + run.mesh_seconds);
+    if (i == 0) t.first = std::move(run);
+  }
+  for (int i = 0; i < a.repeat; ++i)
+    t.hot_extract.push_back(run_extraction(*keep, rcf, reduced).extract_seconds);
+  return t;
+}
+
+// Needed pages (those holding an op of an output triangle) against touched pages (every page the
+// extraction fetched, recorded through RecordingSource on a Database with an unbounded cache).
+struct PageUse {
+  std::set<std::uint64_t> needed;
+  std::uint64_t needed_bytes = 0;
+  std::vector<std::uint64_t> touched;  // in the order first fetched
+  std::uint64_t touched_bytes = 0;
+  smr::DatabaseStats unbounded;  // the recorded run's statistics
+};
+
+PageUse page_use(const ExtractArgs& a, const PageIndex& index, const smr::Rcf& rcf, bool reduced,
+                 const smr::Extraction& e) {
+  PageUse u;
+  for (const smr::TriRef& t : e.triangles) u.needed.insert(index.page_of.at(t.op.value));
+  for (std::uint64_t p : u.needed) u.needed_bytes += index.page_size[p];
+  const auto big = smr::Database::open(a.db, {std::size_t{1} << 40});
+  RecordingSource rec(*big);
+  const smr::Extraction re =
+      reduced ? smr::extract_reduced(rec, rcf) : smr::extract_minimal_surface(rec, rcf);
+  (void)smr::to_mesh(rec, re.triangles);
+  std::unordered_set<std::uint64_t> seen;
+  auto touch = [&](std::uint64_t p) {
+    if (seen.insert(p).second) u.touched.push_back(p);
+  };
+  // not_completely_finer reads its leaves before any op is fetched through op().
+  for (std::uint64_t l : rec.leaves) touch(l);
+  for (std::uint64_t id : rec.ops) touch(index.page_of.at(id));
+  for (std::uint64_t p : u.touched) u.touched_bytes += index.page_size[p];
+  u.unbounded = big->stats();
+  return u;
+}
+
+std::uint64_t output_triangles(const smr::ExtractStats& s) {
+  return s.triangles - s.void_triangles;
+}
+
+// The output's size; the extraction's counters as tools/report_json.h writes them.
+json output_json(const Timed& first) {
+  const json stats = first.e.stats;
+  json j = {{"triangles", output_triangles(first.e.stats)},
+            {"mesh_vertices", first.mesh_vertices},
+            {"mesh_triangles", first.mesh_triangles}};
+  for (const char* key :
+       {"void_triangles", "x", "x_plus", "ops_visited", "held_ops_peak", "held_bytes_peak"})
+    j[key] = stats.at(key);
+  return j;
+}
+
+json pages_json(const PageUse& u, const Timed& first, const PageIndex& index) {
+  return {{"needed", u.needed.size()},
+          {"needed_bytes", u.needed_bytes},
+          {"touched", u.touched.size()},
+          {"touched_bytes", u.touched_bytes},
+          {"touched_check_ok", u.touched.size() == u.unbounded.pages_read},
+          {"read", first.stats.pages_read},
+          {"of_database", index.page_size.size()}};
+}
+
+// Every byte fetched from LMDB over the bytes of the needed pages (the target).
+double lmdb_over_needed(const PageUse& u, const Timed& first) {
+  return double(first.stats.lmdb_bytes_read) / double(std::max<std::uint64_t>(1, u.needed_bytes));
+}
+
+json amplification_json(const PageUse& u, const Timed& first) {
+  const double needed_bytes = double(std::max<std::uint64_t>(1, u.needed_bytes));
+  return {{"lmdb_bytes_over_needed", lmdb_over_needed(u, first)},
+          {"page_bytes_over_needed", double(first.stats.page_bytes_read) / needed_bytes},
+          {"touched_over_needed_pages",
+           double(u.touched.size()) / double(std::max<std::size_t>(1, u.needed.size()))},
+          {"touched_over_needed_bytes", double(u.touched_bytes) / needed_bytes},
+          {"index_and_locator_bytes", first.stats.lmdb_bytes_read - first.stats.page_bytes_read}};
+}
+
+json seconds_json(const CaseTimes& t) {
+  const smr::ExtractStats& s = t.first.e.stats;
+  json j = {{"warm_extract", median(t.warm_extract)}, {"warm_extract_all", t.warm_extract},
+            {"warm_total", median(t.warm_total)},     {"open", t.first.open_seconds},
+            {"to_mesh", t.first.mesh_seconds},        {"extraction_phase", s.extract_seconds},
+            {"expansion_phase", s.expand_seconds},    {"hot_extract", median(t.hot_extract)}};
+  if (t.cold) {
+    j["cold_extract"] = t.cold->extract_seconds;
+    j["cold_total"] = t.cold->open_seconds + t.cold->extract_seconds + t.cold->mesh_seconds;
+    j["cold_over_warm"] = t.cold->extract_seconds / median(t.warm_extract);
+  }
+  return j;
+}
+
+// The physical limit: the touched pages read from LMDB without decoding, cold and warm.
+json raw_read_json(const ExtractArgs& a, const std::vector<std::uint64_t>& pages,
+                   const CaseTimes& t) {
+  std::uint64_t bytes = 0;
+  json r;
+  if (a.cold) {
+    r["resident_bytes_after_drop"] = drop_from_page_cache(a.db);
+    r["cold_seconds"] = raw_read(a.db, pages, &bytes);
+  }
+  std::vector<double> warm;
+  for (int i = 0; i < a.repeat; ++i) warm.push_back(raw_read(a.db, pages, &bytes));
+  r["warm_seconds"] = median(warm);
+  r["pages"] = pages.size();
+  r["bytes"] = bytes;
+  r["warm_mb_per_s"] = double(bytes) / 1e6 / std::max(1e-12, median(warm));
+  r["warm_extract_over_raw"] = median(t.warm_extract) / std::max(1e-12, median(warm));
+  if (a.cold) {
+    const double cold = r["cold_seconds"].get<double>();
+    r["cold_mb_per_s"] = double(bytes) / 1e6 / std::max(1e-12, cold);
+    r["cold_extract_over_raw"] = t.cold->extract_seconds / std::max(1e-12, cold);
+  }
+  return r;
+}
+
+void print_case(const CaseTimes& t, const PageUse& u) {
+  std::fprintf(stderr,
+               "    |F| %llu  pages needed %zu touched %zu read %llu  lmdb/needed %.2f  warm "
+               "%.3fs%s\n",
+               static_cast<unsigned long long>(output_triangles(t.first.e.stats)), u.needed.size(),
+               u.touched.size(), static_cast<unsigned long long>(t.first.stats.pages_read),
+               lmdb_over_needed(u, t.first), median(t.warm_extract),
+               t.cold ? (", cold " + std::to_string(t.cold->extract_seconds) + "s").c_str() : "");
+}
+
+// One view x pixel error x algorithm: times, page use, amplification, raw read.
+json run_case(const ExtractArgs& a, const PageIndex& index, const smr::Rcf& rcf, double px,
+              const std::string& alg, const std::string& view) {
+  const bool reduced = alg == "reduced";
+  std::fprintf(stderr, "  %s %gpx %s\n", view.c_str(), px, alg.c_str());
+  json c = {{"pixel_error", px}, {"algorithm", alg}};
+  const CaseTimes t = time_case(a, rcf, reduced, c);
+  const PageUse u = page_use(a, index, rcf, reduced, t.first.e);
+  c["output"] = output_json(t.first);
+  c["io"] = json(t.first.stats);
+  c["io"]["pages_read_to_mesh"] = t.first.pages_read_to_mesh;
+  c["io_unbounded_cache"] = json(u.unbounded);
+  c["pages"] = pages_json(u, t.first, index);
+  c["amplification"] = amplification_json(u, t.first);
+  c["seconds"] = seconds_json(t);
+  c["triangles_per_second_warm"] =
+      double(output_triangles(t.first.e.stats)) / std::max(1e-12, median(t.warm_extract));
+  if (a.raw) c["raw_read"] = raw_read_json(a, u.touched, t);
+  print_case(t, u);
+  return c;
+}
+
+json mode_extract(const ExtractArgs& a) {
+  std::fprintf(stderr, "bench_db extract %s\n", a.db.c_str());
+  json out = {{"mode", "extract"}, {"cache_mb", a.cache_mb}, {"repeat", a.repeat}};
+  const PageIndex index = index_database(a, out);
+  out["machine"] = smr::bench::machine_json();
+  const smr::Camera cam = view_camera(a, index.info.bounds, out);
   json cases = json::array();
   for (double px : a.pixel_errors) {
     smr::RcfSpec spec;
     spec.camera = cam;
     spec.pixel_error = px;
     smr::validate(spec);
-    const smr::Rcf rcf = smr::make_rcf(spec, info.kind, nullptr);
-    for (const std::string& alg : a.algorithms) {
-      const bool reduced = alg == "reduced";
-      std::fprintf(stderr, "  %s %gpx %s\n", out["view"].get<std::string>().c_str(), px,
-                   alg.c_str());
-      json c = {{"pixel_error", px}, {"algorithm", alg}};
-      // Cold: the file dropped from the OS page cache first, then a fresh process-like Database.
-      std::optional<Timed> cold;
-      if (a.cold) {
-        c["resident_bytes_after_drop"] = drop_from_page_cache(a.db);
-        cold = fresh_run(a, rcf, reduced);
-        c["resident_bytes_after_cold_run"] = resident_bytes(a.db);
-      }
-      // Warm: fresh Database each time, file in the OS page cache.
-      std::vector<double> warm_extract, warm_total;
-      std::optional<Timed> first;
-      std::unique_ptr<smr::Database> keep;
-      for (int i = 0; i < a.repeat; ++i) {
-        const std::uint64_t t0 = now_ns();
-        auto db = smr::Database::open(a.db, {std::size_t(a.cache_mb) << 20});
-        const double open = seconds_since(t0);
-        Timed t = run_extraction(*db, rcf, reduced);
-        t.open_seconds = open;
-        warm_extract.push_back(t.extract_seconds);
-        warm_total.push_back(open + t.extract_seconds + t.mesh_seconds);
-        if (!first) first = std::move(t);
-        if (i + 1 == a.repeat) keep = std::move(db);
-      }
-      // Hot: the same Database again (its cache holds what fits of the pages it decoded).
-      std::vector<double> hot_extract;
-      for (int i = 0; i < a.repeat; ++i)
-        hot_extract.push_back(run_extraction(*keep, rcf, reduced).extract_seconds);
-      keep.reset();
-
-      const smr::Extraction& e = first->e;
-      const smr::ExtractStats& s = e.stats;
-      // Needed pages: those holding an op of an output triangle.
-      std::set<std::uint64_t> needed;
-      for (const smr::TriRef& t : e.triangles) needed.insert(page_of.at(t.op.value));
-      std::uint64_t needed_bytes = 0;
-      for (std::uint64_t p : needed) needed_bytes += page_size[p];
-      // Touched pages: every page the extraction fetched (recorded; unbounded cache).
-      auto big = smr::Database::open(a.db, {std::size_t{1} << 40});
-      RecordingSource rec(*big);
-      const smr::Extraction re =
-          reduced ? smr::extract_reduced(rec, rcf) : smr::extract_minimal_surface(rec, rcf);
-      (void)smr::to_mesh(rec, re.triangles);
-      std::vector<std::uint64_t> touched_order;
-      std::unordered_set<std::uint64_t> touched;
-      auto touch = [&](std::uint64_t p) {
-        if (touched.insert(p).second) touched_order.push_back(p);
-      };
-      // not_completely_finer reads its leaves before any op is fetched through op().
-      for (std::uint64_t l : rec.leaves) touch(l);
-      for (std::uint64_t id : rec.ops) touch(page_of.at(id));
-      std::uint64_t touched_bytes = 0;
-      for (std::uint64_t p : touched_order) touched_bytes += page_size[p];
-      const smr::DatabaseStats unbounded = big->stats();
-      big.reset();
-      const double lmdb = double(first->stats.lmdb_bytes_read);
-
-      c["output"] = {{"triangles", s.triangles - s.void_triangles},
-                     {"void_triangles", s.void_triangles},
-                     {"mesh_vertices", first->mesh_vertices},
-                     {"mesh_triangles", first->mesh_triangles},
-                     {"x", s.x},
-                     {"x_plus", s.x_plus},
-                     {"ops_visited", s.ops_visited},
-                     {"held_ops_peak", s.held_ops_peak},
-                     {"held_bytes_peak", s.held_bytes_peak}};
-      c["io"] = json(first->stats);
-      c["io"]["pages_read_to_mesh"] = first->pages_read_to_mesh;
-      c["io_unbounded_cache"] = json(unbounded);
-      c["pages"] = {{"needed", needed.size()},
-                    {"needed_bytes", needed_bytes},
-                    {"touched", touched_order.size()},
-                    {"touched_bytes", touched_bytes},
-                    {"touched_check_ok", touched_order.size() == unbounded.pages_read},
-                    {"read", first->stats.pages_read},
-                    {"of_database", page_size.size()}};
-      c["amplification"] = {
-          // The target: every byte fetched from LMDB over the bytes of the needed pages.
-          {"lmdb_bytes_over_needed", lmdb / double(std::max<std::uint64_t>(1, needed_bytes))},
-          {"page_bytes_over_needed",
-           double(first->stats.page_bytes_read) / double(std::max<std::uint64_t>(1, needed_bytes))},
-          {"touched_over_needed_pages",
-           double(touched_order.size()) / double(std::max<std::size_t>(1, needed.size()))},
-          {"touched_over_needed_bytes",
-           double(touched_bytes) / double(std::max<std::uint64_t>(1, needed_bytes))},
-          {"index_and_locator_bytes", first->stats.lmdb_bytes_read - first->stats.page_bytes_read}};
-      c["seconds"] = {
-          {"warm_extract", median(warm_extract)}, {"warm_extract_all", warm_extract},
-          {"warm_total", median(warm_total)},     {"open", first->open_seconds},
-          {"to_mesh", first->mesh_seconds},       {"extraction_phase", s.extract_seconds},
-          {"expansion_phase", s.expand_seconds},  {"hot_extract", median(hot_extract)}};
-      if (cold) {
-        c["seconds"]["cold_extract"] = cold->extract_seconds;
-        c["seconds"]["cold_total"] =
-            cold->open_seconds + cold->extract_seconds + cold->mesh_seconds;
-        c["seconds"]["cold_over_warm"] = cold->extract_seconds / median(warm_extract);
-      }
-      const double out_tris = double(s.triangles - s.void_triangles);
-      c["triangles_per_second_warm"] = out_tris / std::max(1e-12, median(warm_extract));
-      if (a.raw) {
-        std::uint64_t bytes = 0;
-        json r;
-        if (a.cold) {
-          r["resident_bytes_after_drop"] = drop_from_page_cache(a.db);
-          r["cold_seconds"] = raw_read(a.db, touched_order, &bytes);
-        }
-        std::vector<double> warm;
-        for (int i = 0; i < a.repeat; ++i) warm.push_back(raw_read(a.db, touched_order, &bytes));
-        r["warm_seconds"] = median(warm);
-        r["pages"] = touched_order.size();
-        r["bytes"] = bytes;
-        r["warm_mb_per_s"] = double(bytes) / 1e6 / std::max(1e-12, median(warm));
-        r["warm_extract_over_raw"] = median(warm_extract) / std::max(1e-12, median(warm));
-        if (a.cold) {
-          r["cold_mb_per_s"] =
-              double(bytes) / 1e6 / std::max(1e-12, r["cold_seconds"].get<double>());
-          r["cold_extract_over_raw"] =
-              cold->extract_seconds / std::max(1e-12, r["cold_seconds"].get<double>());
-        }
-        c["raw_read"] = r;
-      }
-      std::fprintf(stderr,
-                   "    |F| %llu  pages needed %zu touched %zu read %llu  lmdb/needed %.2f  warm "
-                   "%.3fs%s\n",
-                   static_cast<unsigned long long>(s.triangles - s.void_triangles), needed.size(),
-                   touched_order.size(), static_cast<unsigned long long>(first->stats.pages_read),
-                   lmdb / double(std::max<std::uint64_t>(1, needed_bytes)), median(warm_extract),
-                   cold ? (", cold " + std::to_string(cold->extract_seconds) + "s").c_str() : "");
-      cases.push_back(c);
-    }
+    const smr::Rcf rcf = smr::make_rcf(spec, index.info.kind, nullptr);
+    for (const std::string& alg : a.algorithms)
+      cases.push_back(run_case(a, index, rcf, px, alg, out["view"].get<std::string>()));
   }
   out["cases"] = cases;
   return out;
