@@ -1,5 +1,5 @@
-// bench_db: I/O benchmarks of the on-disk database (DESIGN.md sections 3, 5, 6, 8.7). Prints one
-// JSON object. Modes:
+// bench_db: I/O benchmarks of the on-disk database (docs/design.md sections 3, 5, 6, 8.7). Prints
+// one JSON object. Modes:
 //
 //   extract DB   For one view (a named camera placed relative to the database's bounds, or an
 //                explicit --eye/--target) and each --pixel-error and algorithm (minimal surface,
