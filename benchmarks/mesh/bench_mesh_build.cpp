@@ -150,27 +150,18 @@ json ours_json(const smr::Crmr& crmr, const smr::QemPmStats& stats) {
     for (const auto& t : op.fragment) finest += !t.killer.valid() && !t.is_void();
   }
   const auto [depth, mean_depth] = dag_depth(crmr);
-  return {{"threads", smr::thread_count(0)},  // QemPmOptions::threads = 0: one per core
-          {"vertices", crmr.header.vertex_count},
-          {"ops", crmr.ops.size()},
-          {"fragment_triangles", crmr.triangle_count()},
-          {"max_fragment_triangles", max_fragment},
-          {"finest_triangles", finest},
-          {"base_vertices", stats.base_vertices},
-          {"base_triangles", stats.base_triangles},
-          {"collapses", stats.collapses},
-          {"bounds_computed", stats.bounds_computed},
-          {"bounds_ahead", stats.bounds_ahead},
-          {"bounds_ahead_used", stats.bounds_ahead_used},
-          {"rejected_link", stats.rejected_link},
-          {"rejected_flip", stats.rejected_flip},
-          {"rejected_intersection", stats.rejected_intersection},
-          {"rejected_mixed_levels", stats.rejected_mixed_levels},
-          {"rejected_boundary", stats.rejected_boundary},
-          {"err0", crmr.header.err0},
-          {"err_final", crmr.header.err_final},
-          {"dag_depth", depth},
-          {"dag_mean_depth", mean_depth}};
+  json j = stats;  // the builder's counters, as `smrdb ingest --json` reports them
+  j.update({{"threads", smr::thread_count(0)},  // QemPmOptions::threads = 0: one per core
+            {"vertices", crmr.header.vertex_count},
+            {"ops", crmr.ops.size()},
+            {"fragment_triangles", crmr.triangle_count()},
+            {"max_fragment_triangles", max_fragment},
+            {"finest_triangles", finest},
+            {"err0", crmr.header.err0},
+            {"err_final", crmr.header.err_final},
+            {"dag_depth", depth},
+            {"dag_mean_depth", mean_depth}});
+  return j;
 }
 
 // ---- CGAL -----------------------------------------------------------------------------------

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "base/error.h"
+#include "smr/core/clock.h"
 #include "smr/core/parallel.h"
 #include "storage/external_sort.h"
 #include "storage/record_file.h"
@@ -162,11 +163,6 @@ void clear_keeping_buffers(Op& op) {
   keep(op.parents, fresh.parents);
   keep(op.children, fresh.children);
   op = std::move(fresh);
-}
-
-using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) {
-  return std::chrono::duration<double>(Clock::now() - t).count();
 }
 
 void report(const AssemblyOptions& options, double f) {
@@ -742,7 +738,7 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
   for (double e : s.err) err0 = std::max(err0, e);
   info.err0 = err0;
   info.err_final = std::min(info.err_final, err0);
-  s.stats.seconds_join = since(t0);
+  s.stats.seconds_join = seconds_since(t0);
   const auto t1 = Clock::now();
   sink.begin(info, m + 1);
 
@@ -753,7 +749,7 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
   s.stats.links +=
       emit_ops(s.options, m, chunk_bytes, Joined{s.spool, ops, fixups, links}, maker, sink, out);
   s.stats.scratch_bytes += fixups.spilled_bytes() + links.spilled_bytes();
-  s.stats.seconds_emit = since(t1);
+  s.stats.seconds_emit = seconds_since(t1);
   report(s.options, 1.0);
 }
 

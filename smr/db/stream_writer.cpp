@@ -440,7 +440,7 @@ WriteReport DatabaseStreamWriter::finish() {
   if (!s_->begun || s_->finished) throw_internal("database writer: finish() without begin()");
   s_->finished = true;
   State& s = *s_;
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   s.hand_over();
   s.drain();
   std::uint64_t scratch = 0;

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "index/rtree.h"
+#include "smr/core/clock.h"
 #include "smr/core/crmr.h"
 #include "smr/db/quantize.h"
 #include "smr/db/writer.h"
@@ -44,10 +45,6 @@ struct SortedEntry {
 };
 
 using EntrySorter = storage::ExternalSorter<SortedEntry>;
-
-inline double seconds_since(std::chrono::steady_clock::time_point t) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
-}
 
 index::BuildOptions rtree_options(const CrmrInfo& header, const WriteOptions& options);
 

@@ -207,7 +207,7 @@ WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header
                          const QuantGrid& grid, double z_shift, EntrySorter& sorted,
                          const TableCounts& counts, const OpsOf& ops_of,
                          const WriteOptions& options, const std::string& tmp_dir) {
-  const auto started = std::chrono::steady_clock::now();
+  const auto started = Clock::now();
   WriteReport report;
   report.grid = grid;
   report.z_shift = z_shift;
@@ -231,7 +231,7 @@ WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header
 
   const std::string text = meta_text(header, grid, z_shift, counts, report, options);
   writer.put(Table::kMeta, "meta", storage::seal(storage::as_bytes(text)));  // last
-  const auto committing = std::chrono::steady_clock::now();
+  const auto committing = Clock::now();
   report.seconds_tables = seconds_since(started);
   writer.finish();
   report.seconds_commit = seconds_since(committing);
@@ -244,7 +244,7 @@ WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header
 }
 
 WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptions& options) {
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   // Opening the writer first checks the path (exists without --force) before any work.
   storage::DatabaseWriter writer = open_writer(path, options);
   const QuantGrid grid = choose_grid(crmr.header, options.z_quantum);

@@ -11,15 +11,10 @@
 #include <vector>
 
 #include "base/error.h"
+#include "smr/core/clock.h"
 #include "smr/extract/expansion.h"
 
 namespace smr {
-
-namespace {
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-}  // namespace
 
 Extraction expand(const OpSource& source, std::span<const OpId> x,
                   const ExpansionOptions& options) {
@@ -28,10 +23,10 @@ Extraction expand(const OpSource& source, std::span<const OpId> x,
 
 Extraction extract_minimal_surface(const OpSource& source, const Rcf& rcf,
                                    const ExpansionOptions& options) {
-  auto t0 = std::chrono::steady_clock::now();
+  auto t0 = Clock::now();
   const std::vector<OpId> x = add_to_list(source, rcf);
   const double t_extract = seconds_since(t0);
-  t0 = std::chrono::steady_clock::now();
+  t0 = Clock::now();
   Extraction e = run_expansion(source, x, false, options);
   e.stats.expand_seconds = seconds_since(t0);
   e.stats.extract_seconds = t_extract;
@@ -46,10 +41,10 @@ Extraction extract_reduced(const OpSource& source, const Rcf& rcf,
         "reduced extraction is defined for 2.5-D terrains (Brown 5.2); use the minimal "
         "surface algorithm for 3-D meshes");
   }
-  auto t0 = std::chrono::steady_clock::now();
+  auto t0 = Clock::now();
   const std::vector<OpId> x = add_to_list_reduced(source, rcf);
   const double t_extract = seconds_since(t0);
-  t0 = std::chrono::steady_clock::now();
+  t0 = Clock::now();
   Extraction e = run_expansion(source, x, true, options);
   e.stats.expand_seconds = seconds_since(t0);
   e.stats.extract_seconds = t_extract;

@@ -11,6 +11,7 @@
 
 #include "base/error.h"
 #include "smr/builders/terrain/greedy_tin.h"
+#include "smr/core/clock.h"
 #include "smr/core/invariants.h"
 #include "smr/db/verify.h"
 #include "smr/io/dem_reader.h"
@@ -23,12 +24,6 @@ static_assert(std::is_same_v<std::variant_alternative_t<std::size_t(IngestPath::
               "IngestReport::path() maps the variant's index to IngestPath");
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 // The database names its source by file name only, like describe(): where the input sits must
 // not change the bytes.

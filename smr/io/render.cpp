@@ -87,20 +87,12 @@ void check_input(const TriangleMesh& mesh, const RenderOptions& options) {
   }
 }
 
-// Bounds of the finite vertices that triangles use; lo.x > hi.x when there are none.
-struct Bounds {
-  Vec3 lo{std::numeric_limits<double>::infinity()};
-  Vec3 hi{-std::numeric_limits<double>::infinity()};
-  bool empty() const { return !(lo.x <= hi.x); }
-};
-
-Bounds used_bounds(const TriangleMesh& mesh) {
-  Bounds b;
+// Bounds of the finite vertices that triangles use (empty when there are none).
+Box3 used_bounds(const TriangleMesh& mesh) {
+  Box3 b;
   for (const auto& tri : mesh.triangles) {
     for (std::uint32_t v : tri) {
-      if (!finite(mesh.positions[v])) continue;
-      b.lo = glm::min(b.lo, mesh.positions[v]);
-      b.hi = glm::max(b.hi, mesh.positions[v]);
+      if (finite(mesh.positions[v])) b.add(mesh.positions[v]);
     }
   }
   return b;
@@ -126,7 +118,7 @@ int image_height(const RenderOptions& options, double ext_w, double ext_h) {
   return options.width;
 }
 
-View fit_view(const RgbImage& img, const Bounds& b, double sx, double ext_w, double ext_h) {
+View fit_view(const RgbImage& img, const Box3& b, double sx, double ext_w, double ext_h) {
   View view{img.width, img.height, sx, std::numeric_limits<double>::infinity(), 0.0, 0.0};
   const double margin = std::min(img.width, img.height) >= 8 ? 2.0 : 0.0;
   const double avail_w = img.width - 2 * margin, avail_h = img.height - 2 * margin;
@@ -146,7 +138,7 @@ struct Palette {
   double zlo = 0.0, zhi = 0.0;
 };
 
-Palette make_palette(const TriangleMesh& mesh, const RenderOptions& options, const Bounds& b) {
+Palette make_palette(const TriangleMesh& mesh, const RenderOptions& options, const Box3& b) {
   Palette pal;
   pal.by_values = options.colour_by_values && !mesh.triangle_values.empty() &&
                   mesh.triangle_values.size() == mesh.triangles.size();
@@ -267,7 +259,7 @@ void draw_wireframe(RgbImage& img, const TriangleMesh& mesh, const View& view) {
 
 RgbImage render_image(const TriangleMesh& mesh, const RenderOptions& options) {
   check_input(mesh, options);
-  const Bounds bounds = used_bounds(mesh);
+  const Box3 bounds = used_bounds(mesh);
   const bool empty = bounds.empty();
   const double lat_mid = empty ? 0.0 : 0.5 * (bounds.lo.y + bounds.hi.y);
   const double sx = options.geographic ? std::max(std::cos(lat_mid * kPi / 180.0), 1e-6) : 1.0;

@@ -13,6 +13,7 @@
 #include "base/error.h"
 #include "smr/builders/mesh/morton_order.h"
 #include "smr/builders/mesh/qem_rounds.h"
+#include "smr/core/clock.h"
 #include "smr/core/parallel.h"
 
 namespace smr::qem {
@@ -91,11 +92,7 @@ BlockPmBuilder::BlockPmBuilder(const MeshStream& mesh, const BlockPmOptions& opt
 }
 
 void BlockPmBuilder::run(OpSink& sink) {
-  using Clock = std::chrono::steady_clock;
   const auto t0 = Clock::now();
-  auto since = [](Clock::time_point t) {
-    return std::chrono::duration<double>(Clock::now() - t).count();
-  };
   read_vertices();
   AssemblyOptions ao;
   ao.tmp_dir = opt_.tmp_dir;
@@ -106,7 +103,7 @@ void BlockPmBuilder::run(OpSink& sink) {
   auto faces =
       std::make_unique<storage::ExternalSorter<FaceRecord>>(opt_.tmp_dir, opt_.face_sort_bytes);
   sort_faces(*faces);
-  stats_.seconds_sort = since(t0);
+  stats_.seconds_sort = seconds_since(t0);
   const auto t1 = Clock::now();
   simplify_leaves(*faces);
   std::unordered_set<std::uint32_t>().swap(leaf_cells_);
@@ -114,16 +111,16 @@ void BlockPmBuilder::run(OpSink& sink) {
   faces.reset();
   const auto t_tail = Clock::now();
   for (int l = 0; l < levels_; ++l) flush(l);
-  stats_.seconds_tail = since(t_tail);
+  stats_.seconds_tail = seconds_since(t_tail);
   // The octree spans are done with (the root locks nothing): the assembly may use the room.
   std::vector<std::uint32_t>().swap(vmin_);
   std::vector<std::uint32_t>().swap(vmax_);
   if (pending_[levels_].size() != 1) throw_internal("block PM: the root block is missing");
   BlockState root = std::move(pending_[levels_].front());
-  stats_.seconds_blocks = since(t1);
+  stats_.seconds_blocks = seconds_since(t1);
   const auto t2 = Clock::now();
   finish(root, sink);
-  stats_.seconds_assemble = since(t2);
+  stats_.seconds_assemble = seconds_since(t2);
 }
 
 void BlockPmBuilder::report(double f) const {

@@ -34,7 +34,6 @@
 namespace smr {
 namespace {
 
-using block_tin::Clock;
 using block_tin::decimate_blocks;
 using block_tin::DecimationScratch;
 using block_tin::Grid;

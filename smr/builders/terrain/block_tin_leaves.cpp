@@ -281,7 +281,7 @@ LeafPass::LeafInput LeafPass::read_leaf_now(std::size_t k) {
   leaf_tol_[k] = read_tol_;
   ++stats_.leaf_blocks;
   stats_.samples += w.z.size();
-  stats_.seconds_read += std::chrono::duration<double>(Clock::now() - t0).count();
+  stats_.seconds_read += seconds_since(t0);
   return in;
 }
 

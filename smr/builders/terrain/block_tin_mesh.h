@@ -17,6 +17,7 @@
 
 #include "smr/builders/terrain/block_tin.h"
 #include "smr/core/chunked.h"
+#include "smr/core/clock.h"
 #include "smr/core/id_map.h"
 
 namespace smr::block_tin {
@@ -174,7 +175,6 @@ inline void relink(Mesh& mesh, std::uint32_t o, std::uint32_t a, std::uint32_t b
   }
 }
 
-using Clock = std::chrono::steady_clock;
 /// Seconds since t, and t moved to now.
 inline double since(Clock::time_point& t) {
   const Clock::time_point now = Clock::now();
