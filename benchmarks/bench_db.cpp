@@ -608,7 +608,8 @@ json mode_codecs(const CodecArgs& a) {
         sink += smr::storage::decode_geometry(*codec, g, "geometry").faces.size();
     });
     const double page_s = time_passes(a.min_seconds, [&] {
-      for (const auto& p : payloads) sink += smr::decode_page(p, db->grid(), "page").size();
+      for (const auto& p : payloads)
+        sink += smr::decode_page(p, db->grid(), db->info(), "page")->size();
     });
     const double raw_geo_bytes = 12.0 * double(positions + faces);  // int32 x 3, uint32 x 3
     codecs[name] = {{"file_bytes", w.file_bytes},

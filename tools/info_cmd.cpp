@@ -55,7 +55,7 @@ int cmd_info(const std::string& db_path, bool json) {
       "MB)\n",
       double(db->file_bytes()) / 1e6, out["bytes_per_vertex"].get<double>(),
       double(meta["bytes"]["pages"].get<std::uint64_t>()) / 1e6,
-      double(meta["bytes"]["nodes"].get<std::uint64_t>()) / 1e6,
+      double(meta["bytes"]["locators"].get<std::uint64_t>()) / 1e6,
       double(meta["bytes"]["rtree"].get<std::uint64_t>()) / 1e6);
   std::printf("error           err0 %g, err_final %g (includes the z quantization shift %g)\n",
               m["err0"].get<double>(), m["err_final"].get<double>(), meta["z_shift"].get<double>());

@@ -15,6 +15,75 @@ const CoarserLink* Op::coarser_link(std::uint32_t tri, std::uint8_t edge) const 
   return nullptr;
 }
 
+OpView::OpView(const Op& op)
+    : id(op.id),
+      birth_res(op.birth_res),
+      error(op.error),
+      vertices(op.vertices),
+      new_vertex_count(op.new_vertex_count),
+      fragment(op.fragment),
+      pre(op.pre),
+      pre_tris(op.pre_tris),
+      coarser(op.coarser),
+      parents(op.parents),
+      children(op.children),
+      box(op.box),
+      sphere(op.sphere),
+      cone(op.cone),
+      roi(op.roi),
+      subtree_cone(op.subtree_cone) {}
+
+const CoarserLink* OpView::coarser_link(std::uint32_t tri, std::uint8_t edge) const {
+  for (const CoarserLink& l : coarser) {
+    if (l.tri == tri && l.edge == edge) return &l;
+  }
+  return nullptr;
+}
+
+const FragmentTriangle& OpView::triangle(std::uint32_t i) const {
+  if (i >= fragment.size())
+    throw_input("op " + std::to_string(id.value) + " has no triangle " + std::to_string(i));
+  return fragment[i];
+}
+
+Op to_op(const OpView& view) {
+  Op op;
+  op.id = view.id;
+  op.birth_res = view.birth_res;
+  op.error = view.error;
+  op.new_vertex_count = view.new_vertex_count;
+  const std::size_t n = view.own_vertex_count();
+  op.vertices.reserve(n);
+  std::unordered_map<std::uint32_t, std::uint32_t> local;  // index in view.vertices -> in op's
+  for (std::size_t i = 0; i < n; ++i) {
+    op.vertices.push_back(view.own_vertex(i));
+    local.emplace(view.vertex_list.empty() ? std::uint32_t(i) : view.vertex_list[i],
+                  std::uint32_t(i));
+  }
+  const auto renumber = [&](std::array<std::uint32_t, 3> v) {
+    for (std::uint32_t& c : v) c = local.at(c);
+    return v;
+  };
+  op.fragment.assign(view.fragment.begin(), view.fragment.end());
+  for (FragmentTriangle& t : op.fragment) t.v = renumber(t.v);
+  op.pre.assign(view.pre.begin(), view.pre.end());
+  op.pre_tris.assign(view.pre_tris.begin(), view.pre_tris.end());
+  for (PreTriangle& t : op.pre_tris) t.v = renumber(t.v);
+  op.coarser.assign(view.coarser.begin(), view.coarser.end());
+  op.parents.assign(view.parents.begin(), view.parents.end());
+  op.children.assign(view.children.begin(), view.children.end());
+  op.box = view.box;
+  op.sphere = view.sphere;
+  op.cone = view.cone;
+  op.roi = view.roi;
+  op.subtree_cone = view.subtree_cone;
+  return op;
+}
+
+OpRef Crmr::op(OpId id) const {
+  return std::make_shared<const OpView>(ops.at(id.value));
+}
+
 std::uint64_t Crmr::triangle_count() const {
   std::uint64_t n = 0;
   for (const Op& op : ops) n += op.fragment.size();
@@ -42,16 +111,20 @@ Crmr CrmrCollector::take() {
 // In-fragment neighbours: the triangle across each edge that has the reversed edge. Fragments
 // are small (a few triangles), so a quadratic scan beats a hash map; R^0 may be large.
 void derive_fragment_neighbours(Op& op) {
-  const std::size_t n = op.fragment.size();
+  derive_fragment_neighbours(std::span<FragmentTriangle>(op.fragment));
+}
+
+void derive_fragment_neighbours(std::span<FragmentTriangle> fragment) {
+  const std::size_t n = fragment.size();
   if (n > 64) {
     std::unordered_map<std::uint64_t, std::int32_t> by_edge;
     by_edge.reserve(n * 3);
     for (std::size_t i = 0; i < n; ++i) {
-      const auto& v = op.fragment[i].v;
+      const auto& v = fragment[i].v;
       for (int k = 0; k < 3; ++k)
         by_edge[(std::uint64_t(v[k]) << 32) | v[(k + 1) % 3]] = std::int32_t(i);
     }
-    for (FragmentTriangle& t : op.fragment) {
+    for (FragmentTriangle& t : fragment) {
       for (int k = 0; k < 3; ++k) {
         auto it = by_edge.find((std::uint64_t(t.v[(k + 1) % 3]) << 32) | t.v[k]);
         t.nbr[k] = it == by_edge.end() ? FragmentTriangle::kNoNeighbour : it->second;
@@ -59,12 +132,12 @@ void derive_fragment_neighbours(Op& op) {
     }
     return;
   }
-  for (FragmentTriangle& t : op.fragment) {
+  for (FragmentTriangle& t : fragment) {
     for (int k = 0; k < 3; ++k) {
       const std::uint32_t a = t.v[(k + 1) % 3], b = t.v[k];  // the reversed edge a -> b
       t.nbr[k] = FragmentTriangle::kNoNeighbour;
       for (std::size_t j = 0; j < n; ++j) {
-        const auto& u = op.fragment[j].v;
+        const auto& u = fragment[j].v;
         if ((u[0] == a && u[1] == b) || (u[1] == a && u[2] == b) || (u[2] == a && u[0] == b)) {
           t.nbr[k] = std::int32_t(j);
           break;
@@ -75,7 +148,15 @@ void derive_fragment_neighbours(Op& op) {
 }
 
 void compute_op_bounds(Op& op) {
-  // The thread's scratch, kept: builders call this for every op, on several threads at once.
+  const OpBounds b = op_bounds(op);
+  op.box = b.box;
+  op.sphere = b.sphere;
+  op.cone = b.cone;
+}
+
+OpBounds op_bounds(const OpView& op) {
+  // The thread's scratch, kept: builders and page decoders call this for every op, on several
+  // threads at once.
   thread_local std::vector<Vec3> points, normals;
   points.clear();
   normals.clear();
@@ -87,10 +168,11 @@ void compute_op_bounds(Op& op) {
     add(op.position(t, 0), op.position(t, 1), op.position(t, 2));
   for (const PreTriangle& t : op.pre_tris)
     add(op.position(t, 0), op.position(t, 1), op.position(t, 2));
-  op.box = Box3{};
-  for (const Vec3& p : points) op.box.add(p);
-  op.sphere = bounding_sphere(points);
-  op.cone = normal_cone(normals);
+  OpBounds b;
+  for (const Vec3& p : points) b.box.add(p);
+  b.sphere = bounding_sphere(points);
+  b.cone = normal_cone(normals);
+  return b;
 }
 
 void link_dag(Crmr& crmr) {

@@ -22,7 +22,7 @@ class Crmr final : public OpSource {
 
   const CrmrInfo& info() const override { return header; }
   std::uint64_t op_count() const override { return ops.size(); }
-  OpRef op(OpId id) const override { return OpRef(OpRef{}, &ops.at(id.value)); }
+  OpRef op(OpId id) const override;
   std::uint64_t triangle_count() const;  // over all fragments
 };
 
@@ -67,11 +67,19 @@ class CrmrCollector final : public OpSink {
 /// Sets op.box, op.sphere and op.cone from the op's own record: the corners and normals of F
 /// then of PreF (via pre_tris), in that order. Deterministic, so the store recomputes them.
 void compute_op_bounds(Op& op);
+struct OpBounds {
+  Box3 box;
+  Sphere sphere;
+  NormalCone cone;
+};
+/// compute_op_bounds' values for any op, an Op or a paged one.
+OpBounds op_bounds(const OpView& op);
 
 /// Sets every fragment triangle's `nbr` from the fragment itself: across edge k, the triangle that
 /// has the reversed edge (kNoNeighbour if none). Fragments are small, so it scans them; R^0 may be
 /// large and is hashed.
 void derive_fragment_neighbours(Op& op);
+void derive_fragment_neighbours(std::span<FragmentTriangle> fragment);
 
 /// ROI of every op = its box united with its children's ROIs (children have larger ids).
 void compute_rois(Crmr& crmr);

@@ -64,7 +64,8 @@ struct GridTri {
   std::array<VertexId, 3> id;
 };
 
-GridTri grid_tri(const CrmrInfo& info, const Op& op, const FragmentTriangle& t) {
+template <class OpT>  // Op or OpView
+GridTri grid_tri(const CrmrInfo& info, const OpT& op, const FragmentTriangle& t) {
   GridTri g;
   for (int k = 0; k < 3; ++k) {
     g.p[k] = to_grid(info, op.position(t, k));
@@ -540,8 +541,8 @@ InvariantReport check_tiling(const OpSource& source, std::span<const TriRef> tri
       continue;
     }
     const OpRef op_ref = source.op(ref.op);
-    const Op& op = *op_ref;
-    const GridTri g = grid_tri(info, op, op.fragment.at(ref.index));
+    const OpView& op = *op_ref;
+    const GridTri g = grid_tri(info, op, op.triangle(ref.index));
     const std::int64_t a2 = orient(g.p[0], g.p[1], g.p[2]);
     if (a2 <= 0)
       r.fail("triangle " + op_name(ref.op) + "/" + std::to_string(ref.index) +
@@ -582,8 +583,8 @@ DelaunayReport check_delaunay(const OpSource& source, std::span<const TriRef> tr
   std::unordered_map<DirectedEdge, Side, EdgeHash> edges;
   for (const TriRef& ref : triangles) {
     const OpRef op_ref = source.op(ref.op);
-    const Op& op = *op_ref;
-    const GridTri g = grid_tri(info, op, op.fragment.at(ref.index));
+    const OpView& op = *op_ref;
+    const GridTri g = grid_tri(info, op, op.triangle(ref.index));
     for (int k = 0; k < 3; ++k) edges[{g.id[k].value, g.id[(k + 1) % 3].value}] = {ref, g, k};
   }
   for (const auto& [e, s] : edges) {
@@ -614,8 +615,8 @@ SurfaceReport check_surface(const OpSource& source, std::span<const TriRef> tria
       continue;
     }
     const OpRef op_ref = source.op(ref.op);
-    const Op& op = *op_ref;
-    const FragmentTriangle& t = op.fragment.at(ref.index);
+    const OpView& op = *op_ref;
+    const FragmentTriangle& t = op.triangle(ref.index);
     std::array<std::uint64_t, 3> ids{};
     for (int k = 0; k < 3; ++k) {
       ids[k] = op.vertex_id(t, k).value;

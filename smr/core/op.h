@@ -3,10 +3,15 @@
 // An Op is self-contained: it names other ops only by OpId and other triangles only by TriRef,
 // and carries the positions of every vertex its fragment uses, so one op can be serialised and
 // paged in on its own (docs/design.md section 3).
+//
+// Builders make Ops (each a set of vectors). Readers see OpViews: the same fields as spans, over
+// an Op or over a decoded data page (smr/db/page.h), where every array of every op of the page
+// lies in one block and corners index the page's shared vertex table.
 #pragma once
 
 #include <array>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "smr/core/geometry.h"
@@ -99,5 +104,52 @@ struct Op {
 
   friend bool operator==(const Op&, const Op&) = default;
 };
+
+/// An op as extraction and the checks read it: Op's fields as spans into storage someone else
+/// owns (an Op, or a decoded page), so reading an op copies no array. Corners of `fragment` and
+/// `pre_tris` index `vertices`, which is the op's own vertex list for an Op and the page's vertex
+/// table for a paged op; `vertex_list` then names the op's own vertices in that table (the first
+/// `new_vertex_count` are V(R^i)).
+struct OpView {
+  OpId id;
+  double birth_res = 0.0;
+  double error = 0.0;
+  std::span<const Vertex> vertices;            // what corners index
+  std::span<const std::uint32_t> vertex_list;  // the op's vertices in `vertices`; empty: all
+  std::uint32_t new_vertex_count = 0;
+  std::span<const FragmentTriangle> fragment;
+  std::span<const TriRef> pre;
+  std::span<const PreTriangle> pre_tris;
+  std::span<const CoarserLink> coarser;  // sorted by (tri, edge)
+  std::span<const OpId> parents;
+  std::span<const OpId> children;
+  Box3 box;
+  Sphere sphere;
+  NormalCone cone;
+  Box3 roi;
+  NormalCone subtree_cone;
+
+  OpView() = default;
+  OpView(const Op& op);  // NOLINT(google-explicit-constructor): an Op reads as its view
+
+  const Vec3& position(const FragmentTriangle& t, int k) const { return vertices[t.v[k]].p; }
+  const Vec3& position(const PreTriangle& t, int k) const { return vertices[t.v[k]].p; }
+  VertexId vertex_id(const FragmentTriangle& t, int k) const { return vertices[t.v[k]].id; }
+  /// The op's own vertices, in its order (new ones first).
+  std::size_t own_vertex_count() const {
+    return vertex_list.empty() ? vertices.size() : vertex_list.size();
+  }
+  const Vertex& own_vertex(std::size_t i) const {
+    return vertex_list.empty() ? vertices[i] : vertices[vertex_list[i]];
+  }
+  /// The link of boundary edge `edge` of triangle `tri`, or nullptr (model boundary).
+  const CoarserLink* coarser_link(std::uint32_t tri, std::uint8_t edge) const;
+  /// Fragment triangle i; throws smr::Error (kInvalidInput) if there is none.
+  const FragmentTriangle& triangle(std::uint32_t i) const;
+};
+
+/// An Op with the view's contents (corners renumbered to the op's own vertex list): equal to the
+/// Op the view was written from.
+Op to_op(const OpView& view);
 
 }  // namespace smr

@@ -16,6 +16,10 @@ double resolution_of(const CrmrInfo& info, double error) {
   return std::clamp(1.0 - (error - info.err_final) / span, 0.0, 1.0);
 }
 
+FragmentTriangle OpSource::triangle(TriRef t) const {
+  return op(t.op)->triangle(t.index);
+}
+
 double OpSource::error_at(double res) const {
   return smr::error_at(info(), res);
 }

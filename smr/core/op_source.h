@@ -33,10 +33,9 @@ struct CrmrInfo {
   friend bool operator==(const CrmrInfo&, const CrmrInfo&) = default;
 };
 
-/// A handle on an op that keeps it alive: an op paged in from disk stays in memory while a handle
-/// on it exists, even if the page cache evicts its page. In-memory sources hand out non-owning
-/// handles (no reference count is touched).
-using OpRef = std::shared_ptr<const Op>;
+/// A handle on an op that keeps it alive: an op paged in from disk stays in memory, with its whole
+/// decoded page, while a handle on it exists, even if the page cache evicts the page.
+using OpRef = std::shared_ptr<const OpView>;
 
 /// Read access to a CRMR, in memory (Crmr) or paged from disk (smr/db's Database).
 class OpSource {
@@ -50,8 +49,12 @@ class OpSource {
   /// increasing order is cheapest (smr/db: the op's data page). Reads no op. Traversals whose
   /// result does not depend on the visiting order use it to visit ops page by page.
   virtual std::uint64_t locality(OpId) const { return 0; }
+  /// The memory an OpRef into place `locality` holds beyond the source's own (smr/db: the
+  /// decoded page, which a handle keeps alive); 0 for in-memory sources.
+  virtual std::uint64_t locality_bytes(std::uint64_t /*locality*/) const { return 0; }
 
-  FragmentTriangle triangle(TriRef t) const { return op(t.op)->fragment.at(t.index); }
+  /// Triangle `t`; throws smr::Error if it does not exist.
+  FragmentTriangle triangle(TriRef t) const;
   double error_at(double res) const;
   double resolution_of(double error) const;
 };

@@ -2,8 +2,11 @@
 // pages and R-tree nodes on demand through one page cache.
 #include "smr/db/database.h"
 
+#include <array>
 #include <exception>
+#include <optional>
 #include <string>
+#include <string_view>
 
 #include <malloc.h>
 
@@ -50,11 +53,52 @@ auto naming_file(const std::string& path, F&& f) -> decltype(f()) {
   }
 }
 
+// Refuses a database of another format, naming it and the command that rebuilds it.
+[[noreturn]] void refuse_format(const std::string& path, int version, const json& meta) {
+  std::string source = "SOURCE";
+  if (meta.contains("model") && meta["model"].contains("source") &&
+      meta["model"]["source"].is_string() && !meta["model"]["source"].get<std::string>().empty())
+    source = meta["model"]["source"].get<std::string>();
+  throw_input(path + ": database format " + std::to_string(version) +
+              " is not supported (this smrdb reads format " + std::to_string(kDatabaseFormat) +
+              "); rebuild it from its source: smrdb ingest " + source + " -o " + path + " --force");
+}
+
+// Opens the file's tables. A format-2 database (its op locators' table was "nodes") is refused
+// by refuse_format; any other failure is the first open's.
+std::unique_ptr<storage::Env> open_env(const std::string& path) {
+  try {
+    return std::make_unique<storage::Env>(storage::Env::open_read_only(path, kTableNames));
+  } catch (const Error& first) {
+    if (first.kind() != ErrorKind::kCorrupt) throw;
+    constexpr std::array<std::string_view, 5> kFormat2Tables = {"meta", "nodes", "pages", "rtree",
+                                                                "aux"};
+    std::optional<storage::Env> old;
+    try {
+      old.emplace(storage::Env::open_read_only(path, kFormat2Tables));
+    } catch (const Error&) {
+      throw first;
+    }
+    const storage::ReadTxn txn = old->read();
+    const auto meta = txn.get(Table::kMeta, "meta");
+    if (!meta) throw first;
+    json j;
+    try {
+      const ByteView text = storage::unseal(*meta, table_name(Table::kMeta), "meta");
+      j = json::parse(text.begin(), text.end());
+      if (!j.at("version").is_number_integer()) throw first;
+    } catch (const std::exception&) {
+      throw first;
+    }
+    refuse_format(path, j.at("version").get<int>(), j);
+  }
+}
+
 }  // namespace
 
 std::unique_ptr<Database> Database::open(const std::string& path, const Options& options) {
   std::unique_ptr<Database> db(new Database());
-  db->env_ = std::make_unique<storage::Env>(storage::Env::open_read_only(path, kTableNames));
+  db->env_ = open_env(path);
   db->cache_ = std::make_unique<storage::PageCache<CacheItem>>(options.cache_bytes);
   const storage::ReadTxn txn = db->env_->read();
   const auto meta = txn.get(Table::kMeta, "meta");
@@ -69,9 +113,7 @@ std::unique_ptr<Database> Database::open(const std::string& path, const Options&
     const json j = json::parse(text.begin(), text.end());
     if (j.at("format").get<std::string>() != "smrdb") throw_input(path + ": not an smrdb database");
     if (j.at("version").get<int>() != kDatabaseFormat)
-      throw_input(path + ": database format " + std::to_string(j.at("version").get<int>()) +
-                  " is not supported (this smrdb reads format " + std::to_string(kDatabaseFormat) +
-                  ")");
+      refuse_format(path, j.at("version").get<int>(), j);
     db->info_ = json_info(j.at("model"));
     db->grid_.origin = json_vec(j.at("grid").at("origin"));
     db->grid_.step = json_vec(j.at("grid").at("step"));
@@ -140,10 +182,9 @@ storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table,
     nodes_read_.fetch_add(1);
   } else if (table == Table::kPages) {
     const ByteView payload = storage::unseal(raw, table_name(table), key_text(id));
-    std::vector<Op> ops = decode_page(payload, grid_, path() + ": " + name);
-    std::size_t bytes = kCacheItemOverhead + heap_block_bytes(ops.capacity() * sizeof(Op));
-    for (const Op& op : ops) bytes += op_memory_bytes(op) - sizeof(Op);
-    loaded.charged_bytes = bytes;
+    std::shared_ptr<const DecodedPage> ops =
+        decode_page(payload, grid_, info_, path() + ": " + name);
+    loaded.charged_bytes = kCacheItemOverhead + ops->memory_bytes();
     loaded.value = std::make_shared<const CacheItem>(std::move(ops));
     pages_read_.fetch_add(1);
     page_bytes_read_.fetch_add(raw.size());
@@ -182,10 +223,13 @@ Database::Locator Database::locate(OpId id) const {
   return locs[i];
 }
 
-std::shared_ptr<const std::vector<Op>> Database::page(std::uint64_t page) const {
+std::shared_ptr<const DecodedPage> Database::page(std::uint64_t page) const {
   if (page >= page_count_) throw_input(path() + ": page " + key_text(page) + " does not exist");
-  auto item = cached(1, Table::kPages, page);
-  return {item, &std::get<std::vector<Op>>(*item)};
+  return std::get<std::shared_ptr<const DecodedPage>>(*cached(1, Table::kPages, page));
+}
+
+std::uint64_t Database::locality_bytes(std::uint64_t p) const {
+  return page(p)->memory_bytes();
 }
 
 OpRef Database::op(OpId id) const {

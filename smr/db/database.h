@@ -13,6 +13,7 @@
 
 #include "index/rtree.h"
 #include "smr/core/op_source.h"
+#include "smr/db/page.h"
 #include "smr/db/quantize.h"
 #include "smr/db/tables.h"
 #include "storage/bytes.h"
@@ -49,6 +50,7 @@ class Database final : public OpSource {
   std::uint64_t op_count() const override { return op_count_; }
   OpRef op(OpId id) const override;
   std::uint64_t locality(OpId id) const override { return locate(id).page; }
+  std::uint64_t locality_bytes(std::uint64_t page) const override;
   /// The entries of the R-tree that `visitor` accepts, grouped by leaf (= data page); reads the
   /// nodes the query enters (through the cache) and no page. Errors name the file.
   std::vector<index::Hit> rtree_query(index::Visitor& visitor) const;
@@ -60,7 +62,7 @@ class Database final : public OpSource {
   std::uint64_t file_bytes() const;
   DatabaseStats stats() const;
   /// Decoded ops of data page `page` (through the cache).
-  std::shared_ptr<const std::vector<Op>> page(std::uint64_t page) const;
+  std::shared_ptr<const DecodedPage> page(std::uint64_t page) const;
   /// Where the op locators say op `id` is: its data page and slot. Reads no page.
   std::pair<std::uint64_t, std::uint32_t> locator(OpId id) const {
     const Locator l = locate(id);
@@ -75,7 +77,8 @@ class Database final : public OpSource {
     std::uint64_t page;
     std::uint32_t slot;
   };
-  using CacheItem = std::variant<std::vector<Op>, std::vector<Locator>, storage::Bytes>;
+  using CacheItem =
+      std::variant<std::shared_ptr<const DecodedPage>, std::vector<Locator>, storage::Bytes>;
   std::shared_ptr<const CacheItem> cached(std::uint64_t kind, Table table, std::uint64_t id) const;
   // Reads and decodes one value (the cache's loader).
   storage::PageCache<CacheItem>::Loaded load(Table table, std::uint64_t id) const;

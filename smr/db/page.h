@@ -5,14 +5,23 @@
 // as zstd-compressed varints. What an op's record can derive is not stored: box, sphere and normal
 // cone are recomputed from the corners (compute_op_bounds), in-fragment neighbours from shared
 // edges, and a triangle's death_res is its killer's birth_res (every killer is a child).
+// Resolutions are 32-bit floats, rounded by the writer so that every bound stays true, and an
+// op's error is the one its resolution stands for (smr/db/quantize.h: round_for_storage,
+// stored_op_error).
 //
-// Layout of the (unsealed) value: u8 format, u8 codec, varint op count, blob records
-// (zstd), blob geometry (codec).
+// Layout of the (unsealed) value, format 3: u8 format, u8 codec, varint op count, seven varint
+// totals (page vertices, op vertex-list entries, fragment triangles, PreF triangles, links,
+// parents, children: the decoder sizes its one block from them), blob records (zstd), blob
+// geometry (codec).
+//
+// A decoded page (DecodedPage) is one allocation: every op's arrays lie in it, each op is an
+// OpView over them, and fragment and PreF corners index the page's vertex table directly.
 #pragma once
 
+#include <cstddef>
+#include <memory>
 #include <span>
 #include <string>
-#include <vector>
 
 #include "smr/core/op.h"
 #include "smr/db/quantize.h"
@@ -21,25 +30,47 @@
 
 namespace smr {
 
-inline constexpr std::uint8_t kPageFormat = 2;  // 2: subtree normal cones
+inline constexpr std::uint8_t kPageFormat = 3;  // 3: float resolutions, one-block decoding
+
+/// The ops of one data page, decoded into one block. Immutable once made.
+class DecodedPage {
+ public:
+  DecodedPage(const DecodedPage&) = delete;
+  DecodedPage& operator=(const DecodedPage&) = delete;
+  ~DecodedPage();
+
+  std::span<const OpView> ops() const { return {ops_, op_count_}; }
+  std::size_t size() const { return op_count_; }
+  const OpView& operator[](std::size_t i) const { return ops_[i]; }
+  /// What holding the page costs: its block and this object (as the heap allocates them).
+  std::size_t memory_bytes() const;
+
+ private:
+  friend class PageDecoder;
+  DecodedPage() = default;
+  std::unique_ptr<std::byte[]> block_;
+  std::size_t block_bytes_ = 0;
+  OpView* ops_ = nullptr;
+  std::size_t op_count_ = 0;
+};
 
 /// Encodes `ops` (in the given order; the decoder returns them in it). The ops' positions must
-/// lie on `grid` (quantize() the model first); throws kInternal otherwise.
+/// lie on `grid` (quantize() the model first) and their resolutions and errors be as
+/// round_for_storage() leaves them; throws kInternal otherwise.
 storage::Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid,
                            storage::CodecId codec);
 
-/// Decodes a page; `context` (e.g. "pages/12") names it in every error. Malformed input throws
-/// smr::Error (kCorrupt), never crashes.
-std::vector<Op> decode_page(storage::ByteView page, const QuantGrid& grid,
-                            const std::string& context);
+/// Decodes a page of the model `info` (its errors are derived: stored_op_error); `context` (e.g.
+/// "pages/12") names it in every error. Malformed input throws smr::Error (kCorrupt), never
+/// crashes.
+std::shared_ptr<const DecodedPage> decode_page(storage::ByteView page, const QuantGrid& grid,
+                                               const CrmrInfo& info, const std::string& context);
 
 /// One Hypermesh link of op `id` as pages store it (the stream writer's spool too): its triangle
 /// and edge, the coarser triangle's op as a difference from `id`, its index and edge.
 void write_link(storage::ByteWriter& w, const CoarserLink& link, std::uint64_t id);
 CoarserLink read_link(storage::ByteReader& r, std::uint64_t id);
 
-/// Heap bytes held by an op (what the page cache charges for it).
-std::size_t op_memory_bytes(const Op& op);
 /// What a heap block of `bytes` really takes (glibc malloc: an 8-byte header, 16-byte granules,
 /// 32 bytes at least). Charging a cache only the requested bytes let it hold ~1.7x its budget.
 std::size_t heap_block_bytes(std::size_t bytes);

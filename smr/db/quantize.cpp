@@ -84,6 +84,21 @@ double snap_vertices(Op& op, const QuantGrid& grid) {
   return shift;
 }
 
+double stored_resolution(double res) {
+  float f = static_cast<float>(res);
+  if (double(f) > res) f = std::nextafter(f, -std::numeric_limits<float>::infinity());
+  return f;
+}
+
+double stored_op_error(const CrmrInfo& info, double birth_res) {
+  return std::min(info.err0, error_at(info, birth_res));
+}
+
+void round_for_storage(Op& op) {
+  op.birth_res = stored_resolution(op.birth_res);
+  for (FragmentTriangle& t : op.fragment) t.death_res = stored_resolution(t.death_res);
+}
+
 double quantize(Crmr& crmr, const QuantGrid& grid) {
   double shift = 0.0;
   for (Op& op : crmr.ops) shift = std::max(shift, snap_vertices(op, grid));
@@ -91,11 +106,12 @@ double quantize(Crmr& crmr, const QuantGrid& grid) {
   for (Op& op : crmr.ops) {
     for (const Vertex& v : op.vertices) crmr.header.bounds.add(v.p);
     compute_op_bounds(op);
-    op.error += shift;
+    round_for_storage(op);
   }
   compute_rois(crmr);
   crmr.header.err0 += shift;
   crmr.header.err_final += shift;
+  for (Op& op : crmr.ops) op.error = stored_op_error(crmr.header, op.birth_res);
   return shift;
 }
 

@@ -39,8 +39,21 @@ QuantGrid choose_grid(const CrmrInfo& info, double z_quantum);
 /// caller.
 double snap_vertices(Op& op, const QuantGrid& grid);
 
-/// Snaps every vertex of `crmr` to `grid`, recomputes bounds and ROIs, and raises every stored
-/// error (ops, err0, err_final) by the largest vertex shift, which it returns.
+/// Snaps every vertex of `crmr` to `grid`, recomputes bounds and ROIs, raises err0 and err_final
+/// by the largest vertex shift, which it returns, rounds the ops' resolutions for storage
+/// (round_for_storage) and sets their errors to stored_op_error.
 double quantize(Crmr& crmr, const QuantGrid& grid);
+
+/// Pages store resolutions as 32-bit floats (page.h), rounded so that every bound stays true: to
+/// the largest float not above the resolution (a triangle then claims less resolution than it
+/// has, so it reads a larger error and is refined at least as far). The rounding is monotone, so
+/// orders between ops are kept, and a triangle's death_res stays its killer's birth_res.
+double stored_resolution(double res);
+/// Rounds op.birth_res and every fragment triangle's death_res as above.
+void round_for_storage(Op& op);
+/// An op's error as pages give it (they do not store it): the error its stored birth_res stands
+/// for, error_at(birth_res), at most err0. Not below the op's true error, since birth_res was
+/// rounded down.
+double stored_op_error(const CrmrInfo& info, double birth_res);
 
 }  // namespace smr

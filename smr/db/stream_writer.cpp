@@ -172,6 +172,7 @@ struct EncodedHead {
 void encode_op(Op& op, ModelKind kind, const QuantGrid& grid, bool bounds_set, Bytes& out) {
   EncodedHead h;
   h.moved = snap_vertices(op, grid);
+  round_for_storage(op);  // before the index entry: its resolutions are the stored ones
   for (const Vertex& v : op.vertices) h.vertices.add(v.p);
   if (h.moved != 0.0 || !bounds_set) compute_op_bounds(op);
   h.entry = entry_of(op, kind, op.box, op.cone);
@@ -476,7 +477,7 @@ WriteReport DatabaseStreamWriter::finish() {
               unspool_op(ByteView(bytes).subspan(at, e.spool_size), e.id, s.grid));
           op.roi = from_index(e.roi);
           op.subtree_cone = e.cone;
-          op.error += s.shift;
+          op.error = stored_op_error(s.header, op.birth_res);
           ops[i] = &op;
         }
         return ops;

@@ -2,7 +2,7 @@
 //
 //   meta         "meta" -> JSON (format, model info, grid, counts, build parameters), sealed
 //   pages        u64 leaf -> data page (smr/db/page.h): the ops of R-tree leaf `leaf`, sealed
-//   op locators  u64 block -> where ops 256*block .. 256*block+255 are: varint page, varint slot
+//   locators     u64 block -> where ops 256*block .. 256*block+255 are: varint page, varint slot
 //                per op (differences of pages as svarints), sealed
 //   rtree        u64 node -> R-tree node (index/rtree.h); key 2^64-1 -> the tree's header
 //   aux          unused so far
@@ -16,23 +16,21 @@
 
 namespace smr {
 
-inline constexpr int kDatabaseFormat = 2;  // 2: 8-bit R-tree boxes, bfloat16 res
+inline constexpr int kDatabaseFormat = 3;  // 3: page format 3 (page.h), table "locators"
 inline constexpr std::uint64_t kOpsPerLocatorBlock = 256;
 inline constexpr std::uint64_t kRtreeHeaderKey = std::numeric_limits<std::uint64_t>::max();
 
 /// A table of a database: its index in kTableNames (storage::Table converts from it).
 enum class Table : std::uint8_t { kMeta, kOpLocators, kPages, kRtree, kAux };
 
-/// The LMDB sub-database names, by Table, in the order the writer creates them. Names and order
-/// are part of the file's bytes: databases must stay byte-identical, so format 2 keeps them. The
-/// op locators' table is named "nodes" on disk (and in the meta record's "bytes" counts); a new
-/// format (issue 34) may rename it.
-inline constexpr std::array<std::string_view, 5> kTableNames = {"meta", "nodes", "pages", "rtree",
-                                                                "aux"};
+/// The LMDB sub-database names, by Table, in the order the writer creates them (names and order
+/// are part of the file's bytes). Format 2 named the op locators' table "nodes".
+inline constexpr std::array<std::string_view, 5> kTableNames = {"meta", "locators", "pages",
+                                                                "rtree", "aux"};
 inline constexpr std::array<Table, 5> kAllTables = {Table::kMeta, Table::kOpLocators, Table::kPages,
                                                     Table::kRtree, Table::kAux};
 
-/// The table's on-disk name, as error messages spell it ("nodes/12: ...").
+/// The table's on-disk name, as error messages spell it ("locators/12: ...").
 constexpr std::string_view table_name(Table table) {
   return kTableNames[static_cast<std::size_t>(table)];
 }

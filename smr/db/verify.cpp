@@ -71,7 +71,7 @@ void read_pages(const Database& db, Gathered& g, VerifyReport& rep, Faults& faul
   const std::uint64_t n = g.n();
   for (std::uint64_t p = 0; p < db.page_count(); ++p) {
     if (progress && p % 64 == 0) progress(0.8 * double(p) / double(db.page_count()));
-    std::shared_ptr<const std::vector<Op>> ops;
+    std::shared_ptr<const DecodedPage> ops;
     try {
       ops = db.page(p);
     } catch (const Error& e) {
@@ -81,7 +81,7 @@ void read_pages(const Database& db, Gathered& g, VerifyReport& rep, Faults& faul
     ++rep.pages;
     db.clear_cache();  // keep memory flat: every page is read once
     for (std::uint32_t s = 0; s < ops->size(); ++s) {
-      const Op& op = (*ops)[s];
+      const OpView& op = (*ops)[s];
       const std::string name = std::string(table_name(Table::kPages)) + "/" + std::to_string(p) +
                                " op " + std::to_string(op.id.value);
       if (op.id.value >= n) {

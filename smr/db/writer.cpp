@@ -151,8 +151,7 @@ void write_locators(storage::DatabaseWriter& writer, LocatorSorter& locators, Wr
   if (!block.empty()) write_block();
 }
 
-// The meta record's text (tables.h). Its "bytes" count of the op locators keeps the table's
-// on-disk name, "nodes".
+// The meta record's text (tables.h).
 std::string meta_text(const CrmrInfo& header, const QuantGrid& grid, double z_shift,
                       const TableCounts& counts, const WriteReport& report,
                       const WriteOptions& options) {
@@ -171,7 +170,7 @@ std::string meta_text(const CrmrInfo& header, const QuantGrid& grid, double z_sh
                        {"dag_depth", counts.dag_depth}}},
                      {"bytes",
                       {{"pages", report.page_bytes},
-                       {"nodes", report.locator_bytes},
+                       {"locators", report.locator_bytes},
                        {"rtree", report.rtree_bytes}}},
                      {"page_bytes_target", options.page_bytes},
                      {"parameters", options.parameters}};

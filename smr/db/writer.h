@@ -45,7 +45,7 @@ struct WriteReport {
   QuantGrid grid;
   double z_shift = 0.0;  // largest vertex move made by the quantization (added to every error)
   std::uint64_t ops = 0, pages = 0, rtree_nodes = 0;
-  // Value bytes per table (the op locators' is meta's "nodes", tables.h).
+  // Value bytes per table (tables.h).
   std::uint64_t page_bytes = 0, locator_bytes = 0, rtree_bytes = 0;
   std::uint64_t file_bytes = 0;
   std::uint64_t dag_depth = 0;      // longest parent-to-child path from R^0

@@ -17,8 +17,8 @@ namespace {
 class OpFlags {
  public:
   OpFlags(const OpSource& s, const Rcf& r) : source_(s), rcf_(r) {}
-  bool finer(const Op& op) { return get(op, 0); }
-  bool completely_finer(const Op& op) { return get(op, 1); }
+  bool finer(const OpView& op) { return get(op, 0); }
+  bool completely_finer(const OpView& op) { return get(op, 1); }
   bool in_x(OpId id) const {
     const std::uint8_t* e = flags_.find(id.value);
     return e != nullptr && (*e & kInX) != 0;
@@ -32,7 +32,7 @@ class OpFlags {
 
  private:
   static constexpr std::uint8_t kInX = 0x10;
-  bool get(const Op& op, int which) {
+  bool get(const OpView& op, int which) {
     std::uint8_t& e = flags_[op.id.value];
     const std::uint8_t known = std::uint8_t(1u << (2 * which)),
                        value = std::uint8_t(2u << (2 * which));
@@ -90,7 +90,7 @@ std::vector<OpId> traverse(const OpSource& source, const Rcf& rcf, bool with_anc
       it->second.pop_back();
       if (flags.in_x(next.id)) continue;
       const OpRef op_ref = source.op(next.id);
-      const Op& op = *op_ref;
+      const OpView& op = *op_ref;
       if (next.test && flags.completely_finer(op)) continue;
       flags.add_to_x(next.id);
       x.push_back(next.id);
@@ -131,7 +131,7 @@ std::vector<OpId> add_to_list_reduced(const OpSource& source, const Rcf& rcf) {
   }
   for (std::uint64_t i = 1; i < source.op_count(); ++i) {
     const OpRef op_ref = source.op(OpId{i});
-    const Op& op = *op_ref;
+    const OpView& op = *op_ref;
     if (!rcf.is_completely_finer(op, source)) x.push_back(op.id);
   }
   std::sort(x.begin(), x.end(), std::greater<>());

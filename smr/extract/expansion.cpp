@@ -125,9 +125,9 @@ class ChunkedVector {
 // every op it held (a 3.3 M-triangle mesh, one oblique view: 190 492 page reads for 4 486 pages
 // touched). Here the first op of a page that the expansion asks for brings in every op of X on
 // that page (OpSource::locality), and each op leaves when infilled, so a page is read about once.
-// An op sharing ownership of a cached page is copied, so holding it does not hold the whole
-// page; ops of an in-memory CRMR (no owner) are held by reference. Beyond `max_bytes` of copies,
-// further pages are not brought in whole: their ops come through the source's cache as before.
+// A held op holds its decoded page (OpRef), which is charged (OpSource::locality_bytes) until the
+// page's last held op leaves. Beyond `max_bytes`, further pages are not brought in whole: their
+// ops come through the source's cache as before.
 class HeldOps {
  public:
   HeldOps(const OpSource& source, std::span<const std::uint64_t> x, std::uint64_t max_bytes)
@@ -138,25 +138,30 @@ class HeldOps {
     std::sort(by_place.begin(), by_place.end());
     group_of_.reserve(x.size());
     for (std::size_t i = 0; i < by_place.size(); ++i) {
-      if (i == 0 || by_place[i].first != by_place[i - 1].first) starts_.push_back(i);
+      if (i == 0 || by_place[i].first != by_place[i - 1].first) {
+        starts_.push_back(i);
+        places_.push_back(by_place[i].first);
+      }
       members_.push_back(by_place[i].second);
       group_of_[by_place[i].second] = static_cast<std::uint32_t>(starts_.size() - 1);
     }
     starts_.push_back(members_.size());
-    loaded_.assign(starts_.size() - 1, 0);
+    groups_.assign(places_.size(), Group{});
   }
 
   // Op `id`, no longer held afterwards (each op of X is infilled once).
   OpRef take(OpId id) {
     if (auto* held = held_.find(id.value)) {
       OpRef out = std::move(held->first);
-      bytes_ -= held->second;
+      Group& g = groups_[held->second];
       held_.erase(id.value);
+      if (--g.held == 0) bytes_ -= g.bytes;
       return out;
     }
     const std::uint32_t* group = group_of_.find(id.value);
-    if (group == nullptr || loaded_[*group] || bytes_ > max_bytes_) return source_.op(id);
-    loaded_[*group] = 1;
+    if (group == nullptr || groups_[*group].loaded || bytes_ > max_bytes_) return source_.op(id);
+    Group& g = groups_[*group];
+    g.loaded = true;
     OpRef wanted;
     for (std::size_t i = starts_[*group]; i < starts_[*group + 1]; ++i) {
       const OpId m{members_[i]};
@@ -165,13 +170,12 @@ class HeldOps {
         wanted = std::move(op);
         continue;
       }
-      std::uint64_t bytes = 0;
-      if (op.use_count() > 0) {  // owned by a cached page: copy it out
-        op = std::make_shared<const Op>(*op);
-        bytes = footprint(*op);
-      }
-      bytes_ += bytes;
-      held_[m.value] = {std::move(op), bytes};
+      held_[m.value] = {std::move(op), *group};
+      ++g.held;
+    }
+    if (g.held > 0) {
+      g.bytes = source_.locality_bytes(places_[*group]);
+      bytes_ += g.bytes;
     }
     peak_bytes_ = std::max(peak_bytes_, bytes_);
     peak_ops_ = std::max<std::uint64_t>(peak_ops_, held_.size());
@@ -181,21 +185,19 @@ class HeldOps {
   std::uint64_t peak_ops() const { return peak_ops_; }
 
  private:
-  static std::uint64_t footprint(const Op& op) {
-    return sizeof(Op) + 16 * 7 + op.vertices.capacity() * sizeof(Vertex) +
-           op.fragment.capacity() * sizeof(FragmentTriangle) + op.pre.capacity() * sizeof(TriRef) +
-           op.pre_tris.capacity() * sizeof(PreTriangle) +
-           op.coarser.capacity() * sizeof(CoarserLink) +
-           (op.parents.capacity() + op.children.capacity()) * sizeof(OpId);
-  }
-
+  struct Group {
+    bool loaded = false;
+    std::uint32_t held = 0;   // its ops held now
+    std::uint64_t bytes = 0;  // charged while held > 0
+  };
   const OpSource& source_;
   const std::uint64_t max_bytes_;
   std::vector<std::uint64_t> members_;  // X grouped by locality
   std::vector<std::size_t> starts_;     // group g is members_[starts_[g], starts_[g + 1])
-  std::vector<std::uint8_t> loaded_;
+  std::vector<std::uint64_t> places_;   // group g's locality
+  std::vector<Group> groups_;
   IdMap<std::uint32_t> group_of_;
-  IdMap<std::pair<OpRef, std::uint64_t>> held_;  // op, bytes charged
+  IdMap<std::pair<OpRef, std::uint32_t>> held_;  // op, its group
   std::uint64_t bytes_ = 0, peak_bytes_ = 0, peak_ops_ = 0;
 };
 
@@ -248,7 +250,7 @@ class Expander {
   // Infill (Fig. 5.6).
   void infill(OpId id) {
     const OpRef op_ref = held_->take(id);
-    const Op& op = *op_ref;
+    const OpView& op = *op_ref;
     std::vector<FrontKey> stack;
     if (auto it = stacks_.find(id.value); it != stacks_.end()) {
       stack = std::move(it->second);
@@ -299,7 +301,7 @@ class Expander {
     }
   }
 
-  void drain(const Op& op, std::vector<FrontKey>& stack) {
+  void drain(const OpView& op, std::vector<FrontKey>& stack) {
     while (!stack.empty() && !budget_reached()) {
       const FrontKey key = stack.back();
       stack.pop_back();
@@ -314,7 +316,7 @@ class Expander {
   }
 
   // PerformExpansion (Fig. 5.10 / 5.14) on the region to the right of front edge u->v.
-  void perform_expansion(const Op& op, const FrontKey& key, const FrontEntry& entry,
+  void perform_expansion(const OpView& op, const FrontKey& key, const FrontEntry& entry,
                          std::vector<FrontKey>& stack) {
     const FragmentTriangle& t = op.fragment[entry.tri];
     const std::uint64_t a = op.vertex_id(t, entry.edge).value;
@@ -345,7 +347,7 @@ class Expander {
     if (!reduced_) {
       while (!in_x_.contains(target.tri.op.value)) {
         const OpRef q_ref = source_.op(target.tri.op);
-        const Op& q = *q_ref;
+        const OpView& q = *q_ref;
         const CoarserLink* next = q.coarser_link(target.tri.index, target.edge);
         if (next == nullptr) {
           ++anomalies_;
@@ -365,7 +367,8 @@ class Expander {
     stacks_[moved.op].push_back(moved);
   }
 
-  static int edge_of(const Op& op, const FragmentTriangle& t, std::uint64_t u, std::uint64_t v) {
+  static int edge_of(const OpView& op, const FragmentTriangle& t, std::uint64_t u,
+                     std::uint64_t v) {
     for (int k = 0; k < 3; ++k) {
       if (op.vertex_id(t, k).value == u && op.vertex_id(t, (k + 1) % 3).value == v) return k;
     }
@@ -375,7 +378,7 @@ class Expander {
 
   // Adds triangle i of F(op) to the mesh and its other edges to the front. entry_edge is the edge
   // it was entered through (-1 for a starting point, which puts all three edges on the front).
-  void emit(const Op& op, std::uint32_t i, int entry_edge, std::vector<FrontKey>& stack) {
+  void emit(const OpView& op, std::uint32_t i, int entry_edge, std::vector<FrontKey>& stack) {
     const FragmentTriangle& t = op.fragment[i];
     expanded_[i] = 1;
     triangles_.push_back({op.id, i});
@@ -400,7 +403,7 @@ class Expander {
     }
   }
 
-  void track_fan(const Op& op, std::uint32_t i, int entry_edge) {
+  void track_fan(const OpView& op, std::uint32_t i, int entry_edge) {
     const FragmentTriangle& t = op.fragment[i];
     bool continues = false;
     if (entry_edge >= 0 && fan_.op == op.id &&
@@ -436,7 +439,7 @@ class Expander {
     fan_.last = i;
   }
 
-  std::array<GridPoint, 3> grid_triangle(const Op& op, const FragmentTriangle& t) const {
+  std::array<GridPoint, 3> grid_triangle(const OpView& op, const FragmentTriangle& t) const {
     return {to_grid(source_.info(), op.position(t, 0)), to_grid(source_.info(), op.position(t, 1)),
             to_grid(source_.info(), op.position(t, 2))};
   }

@@ -60,7 +60,7 @@ std::vector<TriRef> set_formula(const OpSource& source, std::span<const OpId> x)
   std::vector<TriRef> out;
   for (OpId id : x) {
     const OpRef op_ref = source.op(id);
-    const Op& op = *op_ref;
+    const OpView& op = *op_ref;
     for (std::uint32_t i = 0; i < op.fragment.size(); ++i) {
       if (!replaced.count({id, i})) out.push_back({id, i});
     }
@@ -97,8 +97,8 @@ TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles, 
   OpRef op_ref;
   for (const auto& [place, i] : order) {
     if (op_ref == nullptr || op_ref->id != triangles[i].op) op_ref = source.op(triangles[i].op);
-    const Op& op = *op_ref;
-    const FragmentTriangle& t = op.fragment.at(triangles[i].index);
+    const OpView& op = *op_ref;
+    const FragmentTriangle& t = op.triangle(triangles[i].index);
     if (t.is_void() && !keep_void) {
       corners[i][0] = kDropped;
       continue;

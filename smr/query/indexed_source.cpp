@@ -45,7 +45,7 @@ std::vector<OpId> IndexedSource::maybe_not_completely_finer(const Rcf& rcf) cons
 
 std::vector<OpId> IndexedSource::not_completely_finer(const Rcf& rcf) const {
   std::vector<OpId> x;
-  std::shared_ptr<const std::vector<Op>> ops;
+  std::shared_ptr<const DecodedPage> ops;
   std::uint64_t current = ~0ull;
   std::size_t slot = 0;  // hits come in slot order within a leaf: one pass over each page
   for (const index::Hit& h : rcf_hits(rcf)) {
@@ -55,7 +55,7 @@ std::vector<OpId> IndexedSource::not_completely_finer(const Rcf& rcf) const {
       slot = 0;
     }
     while (slot < ops->size() && (*ops)[slot].id.value != h.id) ++slot;
-    const Op* found = slot < ops->size() ? &(*ops)[slot] : nullptr;
+    const OpView* found = slot < ops->size() ? &(*ops)[slot] : nullptr;
     if (found == nullptr)
       throw Error(ErrorKind::kCorrupt, db_.path() + ": " + std::string(table_name(Table::kPages)) +
                                            "/" + std::to_string(h.leaf) + " lacks op " +

@@ -26,6 +26,9 @@ class IndexedSource final : public OpSource, public RcfIndexedSource {
   std::uint64_t op_count() const override { return db_.op_count(); }
   OpRef op(OpId id) const override { return db_.op(id); }
   std::uint64_t locality(OpId id) const override { return db_.locality(id); }
+  std::uint64_t locality_bytes(std::uint64_t page) const override {
+    return db_.locality_bytes(page);
+  }
 
   /// Reduced extraction's X from the R-tree: every op not completely finer than `rcf`. Reads
   /// the R-tree nodes the query enters and the data pages of the entries it accepts.

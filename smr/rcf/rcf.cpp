@@ -11,10 +11,10 @@
 
 namespace smr {
 
-Triangle3 corners(const Op& op, const FragmentTriangle& t) {
+Triangle3 corners(const OpView& op, const FragmentTriangle& t) {
   return {op.position(t, 0), op.position(t, 1), op.position(t, 2)};
 }
-Triangle3 corners(const Op& op, const PreTriangle& t) {
+Triangle3 corners(const OpView& op, const PreTriangle& t) {
   return {op.position(t, 0), op.position(t, 1), op.position(t, 2)};
 }
 Box3 triangle_box(const Triangle3& v) {
@@ -24,7 +24,7 @@ Box3 triangle_box(const Triangle3& v) {
 }
 
 // ---- culling ----
-bool FrustumCulling::culls(const Op& op) const {
+bool FrustumCulling::culls(const OpView& op) const {
   return sphere_outside(cam_, op.sphere) || box_outside(cam_, op.box);
 }
 
@@ -40,7 +40,7 @@ bool FrustumCulling::culls_triangle(const Triangle3& v) const {
   return false;
 }
 
-bool BackfaceCulling::culls(const Op& op) const {
+bool BackfaceCulling::culls(const OpView& op) const {
   const Vec3 centre = op.roi.center();
   return backfacing(cam_, Sphere{centre, glm::length(op.roi.hi - centre)}, op.subtree_cone);
 }
@@ -154,7 +154,7 @@ bool ScreenSpaceCriterion::region_satisfies(const Box3& box, double min_res,
 }
 
 // ---- composition ----
-bool Rcf::culled(const Op& op) const {
+bool Rcf::culled(const OpView& op) const {
   for (const auto& c : culling_) {
     if (c->culls(op)) return true;
   }
@@ -168,7 +168,7 @@ bool Rcf::triangle_culled(const Triangle3& v) const {
   return false;
 }
 
-bool Rcf::is_finer(const Op& op, const OpSource& source) const {
+bool Rcf::is_finer(const OpView& op, const OpSource& source) const {
   if (culled(op)) return true;
   for (const FragmentTriangle& t : op.fragment) {
     if (is_final_or_void(t)) continue;
@@ -180,7 +180,7 @@ bool Rcf::is_finer(const Op& op, const OpSource& source) const {
   return true;
 }
 
-bool Rcf::is_completely_finer(const Op& op, const OpSource& source) const {
+bool Rcf::is_completely_finer(const OpView& op, const OpSource& source) const {
   if (op.id == kBaseOp) return false;
   if (culled(op)) return true;
   if (similarity_.empty()) return true;

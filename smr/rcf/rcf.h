@@ -29,7 +29,7 @@ class CullingComponent {
   virtual ~CullingComponent() = default;
   virtual std::string describe() const = 0;
   /// True when F(op) and PreF(op) are invisible (and, for back faces, all that refines them).
-  virtual bool culls(const Op& op) const = 0;
+  virtual bool culls(const OpView& op) const = 0;
   /// Conservative: true only if every op whose box lies inside `box` is culled.
   virtual bool culls_region(const Box3& box) const = 0;
   /// The triangle with these corners is invisible, so it may stand at any resolution. Never true
@@ -59,7 +59,7 @@ class FrustumCulling final : public CullingComponent {
  public:
   explicit FrustumCulling(Camera cam) : cam_(std::move(cam)) {}
   std::string describe() const override { return "frustum-culling"; }
-  bool culls(const Op& op) const override;
+  bool culls(const OpView& op) const override;
   bool culls_region(const Box3& box) const override { return box_outside(cam_, box); }
   bool culls_triangle(const Triangle3& v) const override;
 
@@ -74,7 +74,7 @@ class BackfaceCulling final : public CullingComponent {
   /// Every normal of the op and of all its descendants (subtree_cone, around the ROI) faces away:
   /// refining it can never show anything (Hoppe 1997 section 4.2). The op's own cone is not
   /// enough: at a silhouette a coarse back-facing fragment refines into visible detail.
-  bool culls(const Op& op) const override;
+  bool culls(const OpView& op) const override;
   bool culls_region(const Box3&) const override { return false; }  // no normals for a region
   /// Never: a triangle's corners say nothing about the refinements that replace it.
   bool culls_triangle(const Triangle3&) const override { return false; }
@@ -166,16 +166,16 @@ class Rcf {
   void add(std::shared_ptr<const CullingComponent> c) { culling_.push_back(std::move(c)); }
   void add(std::shared_ptr<const SimilarityComponent> s) { similarity_.push_back(std::move(s)); }
 
-  bool culled(const Op& op) const;
+  bool culled(const OpView& op) const;
   bool triangle_culled(const Triangle3& v) const;
   /// Every triangle of F(op) that is not final or void satisfies every similarity component at
   /// its death_res, or op is culled.
-  bool is_finer(const Op& op, const OpSource& source) const;
+  bool is_finer(const OpView& op, const OpSource& source) const;
   /// op is not R^0, and op is culled or every non-void triangle t of PreF(op) is culled (its own
   /// corners) or satisfies every component at birth_res(op). Judging PreF triangle by
   /// triangle, like IsFiner judges F, makes "all parents finer => completely finer" exact, which
   /// Lemma 5.2.1 (reduced extraction) needs.
-  bool is_completely_finer(const Op& op, const OpSource& source) const;
+  bool is_completely_finer(const OpView& op, const OpSource& source) const;
   /// Conservative test for an index entry: true only if every op whose box lies in `box` and whose
   /// birth_res >= min_birth_res is completely finer than the RCF.
   bool region_completely_finer(const Box3& box, double min_birth_res, const CrmrInfo& info) const;
@@ -192,8 +192,8 @@ class Rcf {
 };
 
 /// Corners of a triangle of F(op) or PreF(op).
-Triangle3 corners(const Op& op, const FragmentTriangle& t);
-Triangle3 corners(const Op& op, const PreTriangle& t);
+Triangle3 corners(const OpView& op, const FragmentTriangle& t);
+Triangle3 corners(const OpView& op, const PreTriangle& t);
 Box3 triangle_box(const Triangle3& v);
 
 }  // namespace smr

@@ -520,7 +520,7 @@ TEST_F(DbCli, SameInputAndParametersGiveByteIdenticalFilesWhateverTheCommandLine
   const CliRun info = smrdb("info " + path("a.db"));
   ASSERT_EQ(info.code, 0) << info.out;
   for (const char* want :
-       {"format 2", "zstd pages", "source          dem.npy (65x65 samples)", "DAG depth",
+       {"format 3", "zstd pages", "source          dem.npy (65x65 samples)", "DAG depth",
         "bytes/vertex", "quantization", "max-error=0.05 ", "page-kb=2"}) {
     EXPECT_NE(info.out.find(want), std::string::npos) << want << "\n" << info.out;
   }

@@ -87,7 +87,7 @@ using test::same;
 
 // A 57 x 57 fBm terrain (2179 ops) in data pages of about 2.5 KiB: 600 KB, 147 LMDB pages. The
 // data pages are overflow values; the locators, R-tree nodes and meta are values inside leaf
-// pages; the nodes, pages and rtree tables each have a branch page over two or more leaves.
+// pages; the locators, pages and rtree tables each have a branch page over two or more leaves.
 struct SmallDb {
   TempDir dir;
   std::string path = dir.file("small.smrdb");
@@ -595,7 +595,7 @@ TEST(LmdbDamage, SmallDatabaseSpansSeveralPagesPerTable) {
   EXPECT_EQ(layout.last_pgno() + 1, db.bytes.size() / kPage);
   EXPECT_EQ(layout.count("main", "leaf"), 1u);
   EXPECT_GE(layout.count("meta", "leaf"), 1u);
-  for (const char* table : {"nodes", "pages", "rtree"}) {
+  for (const char* table : {"locators", "pages", "rtree"}) {
     EXPECT_GE(layout.count(table, "branch"), 1u) << table;
     EXPECT_GE(layout.count(table, "leaf"), 2u) << table;
   }

@@ -57,7 +57,7 @@ TEST_P(Spread, MinimalSurfaceAndReducedExtractionMeetEveryInvariant) {
     for (OpId id : e.x) {
       if (id == kBaseOp || sampled >= 6) continue;
       const OpRef op_ref = m.op(id);
-      const Op& op = *op_ref;
+      const OpView& op = *op_ref;
       if (std::any_of(op.children.begin(), op.children.end(),
                       [&](OpId c) { return in_x.count(c.value) != 0; }))
         continue;
@@ -180,7 +180,7 @@ TEST(Extraction, FansAndStatistics) {
     std::vector<std::uint64_t> common;
     for (std::size_t i = e.fan_starts[f]; i < end; ++i) {
       const OpRef op_ref = d.crmr.op(e.triangles[i].op);
-      const Op& op = *op_ref;
+      const OpView& op = *op_ref;
       const FragmentTriangle& t = op.fragment[e.triangles[i].index];
       std::vector<std::uint64_t> ids{op.vertex_id(t, 0).value, op.vertex_id(t, 1).value,
                                      op.vertex_id(t, 2).value};

@@ -164,7 +164,7 @@ TEST(Rcf, RegionTestIsConservative) {
       std::unordered_set<std::uint64_t> seen;
       while (!stack.empty()) {
         const OpRef q_ref = m.op(stack.back());
-        const Op& q = *q_ref;
+        const OpView& q = *q_ref;
         stack.pop_back();
         if (!seen.insert(q.id.value).second) continue;
         ASSERT_TRUE(rcf.is_completely_finer(q, m)) << rcf.describe() << ": op " << q.id.value;

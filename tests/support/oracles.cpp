@@ -30,8 +30,8 @@ std::string tri_name(const TriRef& t) {
 }
 
 // Calls f(col, row) for every grid sample in the closed triangle (exact integer test).
-template <class F>
-void for_samples(const CrmrInfo& info, const Op& op, const FragmentTriangle& t, F&& f) {
+template <class OpT, class F>
+void for_samples(const CrmrInfo& info, const OpT& op, const FragmentTriangle& t, F&& f) {
   GridPoint p[3];
   for (int k = 0; k < 3; ++k) p[k] = to_grid(info, op.position(t, k));
   const std::int64_t x0 = std::min({p[0].x, p[1].x, p[2].x}),
@@ -59,7 +59,7 @@ OracleResult check_error_bound(const OpSource& source, std::span<const TriRef> t
   const double tol = exact_tolerance(dem) * 10;
   for (const TriRef& ref : triangles) {
     const OpRef op_ref = source.op(ref.op);
-    const Op& op = *op_ref;
+    const OpView& op = *op_ref;
     const FragmentTriangle& t = op.fragment[ref.index];
     if (t.is_void()) continue;
     const double bound = error_at(info, t.death_res);
@@ -107,7 +107,7 @@ OracleResult check_rcf_pointwise(const OpSource& source, std::span<const TriRef>
 
   for (const TriRef& ref : triangles) {
     const OpRef op_ref = source.op(ref.op);
-    const Op& op = *op_ref;
+    const OpView& op = *op_ref;
     const FragmentTriangle& t = op.fragment[ref.index];
     if (t.is_void()) continue;
     ++r.checked;
@@ -227,7 +227,7 @@ OracleResult check_x_definition(const OpSource& source, std::span<const OpId> x,
   for (OpId id : x) {
     ++r.checked;
     const OpRef op_ref = source.op(id);
-    const Op& op = *op_ref;
+    const OpView& op = *op_ref;
     if (ancestors) {
       for (OpId p : op.parents) {
         if (!in.count(p.value))
@@ -249,7 +249,7 @@ OracleResult check_x_definition(const OpSource& source, std::span<const OpId> x,
   for (OpId id : x) {
     if (id == kBaseOp) continue;
     const OpRef op_ref = source.op(id);
-    const Op& op = *op_ref;
+    const OpView& op = *op_ref;
     bool justified = false;
     for (OpId p : op.parents) {
       justified |= in.count(p.value) && !rcf.is_finer(*source.op(p), source) &&
