@@ -19,11 +19,6 @@
 //                zstd, draco) and measures on every real page: geometry bytes per vertex and per
 //                triangle, decode_geometry throughput (MB/s of input, triangles/s) and whole-page
 //                decode_page throughput, and the database's total bytes per model vertex.
-#include <fcntl.h>
-#include <sys/mman.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -41,6 +36,7 @@
 
 #include "base/error.h"
 #include "benchmarks/bench_common.h"
+#include "benchmarks/bench_db_common.h"
 #include "smr/builders/terrain/greedy_tin.h"
 #include "smr/db/database.h"
 #include "smr/db/page.h"
@@ -57,81 +53,15 @@
 namespace {
 
 using nlohmann::json;
+using smr::bench::camera_json;
+using smr::bench::drop_from_page_cache;
 using smr::bench::median;
+using smr::bench::named_camera;
 using smr::bench::now_ns;
+using smr::bench::parse_vec3;
+using smr::bench::resident_bytes;
 using smr::bench::seconds_since;
 using smr::bench::vec3_json;
-
-// ---- the OS page cache ----------------------------------------------------------------------
-
-// Bytes of `path` resident in the OS page cache (mincore over a mapping that is never touched).
-std::uint64_t resident_bytes(const std::string& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) return 0;
-  struct stat st {};
-  std::uint64_t resident = 0;
-  if (::fstat(fd, &st) == 0 && st.st_size > 0) {
-    const auto size = static_cast<std::size_t>(st.st_size);
-    void* map = ::mmap(nullptr, size, PROT_READ, MAP_SHARED, fd, 0);
-    if (map != MAP_FAILED) {
-      const std::size_t page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
-      std::vector<unsigned char> in((size + page - 1) / page);
-      if (::mincore(map, size, in.data()) == 0) {
-        for (unsigned char c : in) resident += (c & 1u) ? page : 0;
-      }
-      ::munmap(map, size);
-    }
-  }
-  ::close(fd);
-  return resident;
-}
-
-// Drops `path` from the OS page cache (no process may map it at the time). Returns the bytes
-// still resident afterwards (0 when the drop worked).
-std::uint64_t drop_from_page_cache(const std::string& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) smr::throw_input(path + ": cannot open");
-  (void)::posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED);
-  ::close(fd);
-  return resident_bytes(path);
-}
-
-// ---- views ----------------------------------------------------------------------------------
-
-json camera_json(const smr::Camera& c) {
-  return {{"eye", vec3_json(c.eye)},
-          {"target", vec3_json(c.target)},
-          {"fov_y_deg", c.fov_y_deg},
-          {"viewport", {c.viewport_w, c.viewport_h}},
-          {"far", c.far_distance}};
-}
-
-smr::Vec3 parse_vec3(const std::string& text, const char* what) {
-  const std::vector<double> v = smr::bench::parse_doubles(text);
-  if (v.size() != 3) smr::throw_input(std::string(what) + " expects x,y,z, got '" + text + "'");
-  return {v[0], v[1], v[2]};
-}
-
-// Named cameras relative to the model's bounds (L = the larger horizontal extent):
-//   oblique   a low camera inside the south-west quarter, 0.02 L above the highest point,
-//             looking north-east across the terrain towards (60 %, 75 %) at 30 % of the relief;
-//   overview  a high camera 1.0 L above the highest point, south of the centre, looking at the
-//             centre: the whole terrain in view.
-smr::Camera named_camera(const std::string& name, const smr::Box3& b) {
-  const double lx = b.hi.x - b.lo.x, ly = b.hi.y - b.lo.y, zr = b.hi.z - b.lo.z;
-  const double l = std::max(lx, ly);
-  smr::Camera cam;
-  if (name == "oblique") {
-    cam.eye = {b.lo.x + 0.25 * lx, b.lo.y + 0.15 * ly, b.hi.z + 0.02 * l};
-    cam.target = {b.lo.x + 0.6 * lx, b.lo.y + 0.75 * ly, b.lo.z + 0.3 * zr};
-  } else if (name == "overview") {
-    cam.eye = {b.lo.x + 0.5 * lx, b.lo.y + 0.2 * ly, b.hi.z + 1.0 * l};
-    cam.target = {b.lo.x + 0.5 * lx, b.lo.y + 0.5 * ly, b.lo.z};
-  } else {
-    smr::throw_input("--view must be oblique or overview, got '" + name + "'");
-  }
-  return cam;
-}
 
 // ---- recording which ops and pages an extraction fetches -----------------------------------
 

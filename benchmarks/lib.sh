@@ -22,3 +22,9 @@ require_tools() {
 # the kernel's high-water mark before writing the database (clear_refs 5, to report that phase's
 # own peak), and the exit rusage reads the mark as reset; the report keeps the earlier peak.
 PEAK_RSS_JQ='def peak_rss_mb(time_kb; report): [time_kb / 1024, (report.peak_rss_mb // 0)] | max;'
+
+# A jq definition: output_memory_mb, on an `smrdb extract --json` report, is the output's size in
+# memory: the Extraction (TriRef 16 B + fan start 4 B per triangle, 8 B per op of X) and the
+# TriangleMesh (24 B per vertex, 12 + 4 B per triangle) plus to_mesh's id map (~40 B per vertex).
+OUTPUT_MEMORY_JQ='def output_memory_mb:
+  (.output.triangles * 36 + .extraction.x_plus * 8 + .output.vertices * 64) / 1048576;'

@@ -24,6 +24,8 @@ set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(cd "$here/.." && pwd)"
+# shellcheck source=lib.sh
+source "$here/lib.sh"
 BUILD_DIR="${BUILD_DIR:-$root/build/release}"
 WORK_DIR="${WORK_DIR:-$BUILD_DIR/bench-db}"
 SIZES="${SIZES:-1025 4097}"
@@ -133,14 +135,11 @@ if has_step memory; then
       kb="$(awk -F': ' '/Maximum resident set size/ { print $2 }' "$WORK_DIR/mem.time")"
       secs="$(awk -F': ' '/Elapsed \(wall clock\)/ { print $2 }' "$WORK_DIR/mem.time")"
       bytes="$(stat -c %s "$out")"
-      # In-memory output: Extraction (TriRef 16 B + fan start 4 B per triangle, 8 B per op of X)
-      # and TriangleMesh (24 B per vertex, 12 + 4 B per triangle) plus to_mesh's id map (~40 B
-      # per vertex).
       jq --argjson n "$n" --arg alg "$alg" --arg what "$what" --argjson kb "$kb" --arg wall "$secs" \
-         --argjson bytes "$bytes" --argjson cache "$CACHE_MB" \
-        '{size: $n, algorithm: $alg, rcf: $what, peak_rss_mb: ($kb / 1024), wall: $wall,
+         --argjson bytes "$bytes" --argjson cache "$CACHE_MB" "$OUTPUT_MEMORY_JQ"'
+         {size: $n, algorithm: $alg, rcf: $what, peak_rss_mb: ($kb / 1024), wall: $wall,
           output_file_bytes: $bytes, output: .output, extraction: .extraction, io: .io,
-          output_memory_mb: ((.output.triangles * 36 + .extraction.x_plus * 8 + .output.vertices * 64) / 1048576)}
+          output_memory_mb: output_memory_mb}
          | . + {budget_mb: ($cache + 32 + .output_memory_mb)}
          | . + {target_met: (.peak_rss_mb <= .budget_mb)}' "$WORK_DIR/mem_run.json" >"$WORK_DIR/mem_row.json"
       jq --slurpfile r "$WORK_DIR/mem_row.json" '. + $r' "$mem" >"$mem.tmp" && mv "$mem.tmp" "$mem"

@@ -20,6 +20,27 @@ for f in "$res"/build_vs_peers*.json; do
   ' "$f"
 done
 
+f="$res/extract_vs_martini.json"
+if [[ -f "$f" ]]; then
+  jq -r '
+    def f1: (. * 10 | round) / 10;
+    def f3: (. * 1000 | round) / 1000;
+    def m: (. / 1e4 | round) / 100;
+    "### extract_vs_martini.json — \(.date), commit \(.commit), \(.machine.nproc) × \(.machine.cpu_model), load \(.machine.loadavg_before) → \(.machine.loadavg_after)\n",
+    "\(.parameters.rounds) rounds × \(.parameters.runs_per_round) runs; max error \(.parameters.max_error) m (\(.parameters.max_error_fraction * 100) % of the range). Ours: warm = fresh Database, file in the OS page cache; hot = same Database again (cache \(.parameters.cache_mb) MiB); in memory = open + extract + to_mesh; + PLY = with write_mesh. Ratio = ours triangles/s over martini getMesh (warm) triangles/s.\n",
+    (.sizes[] | . as $s |
+      "#### \(.size)² fBm: database \(.database.file_bytes / 1e6 | f1) MB, \(.database.vertices) vertices, \(.database.bytes_per_vertex | f1) B/vertex (format \(.database.format_version), \(.database.codec))\n",
+      "| contender | triangles | median s | min s | M triangles/s | ratio |",
+      "|---|---|---|---|---|---|",
+      "| martini \(.martini.version) getMesh (createTile \(.martini.create_tile_seconds.median | f3) s) | \(.martini.triangles) | \(.martini.get_mesh_warm_seconds.median | f3) | \(.martini.get_mesh_warm_seconds.min | f3) | \(.martini.triangles_per_second | m) | 1 |",
+      (.ours.cases[] | . as $c |
+        (["warm", "in_memory_seconds", "triangles_per_second", "in memory"], ["warm", "with_ply_seconds", "triangles_per_second_with_ply", "+ PLY"], ["hot", "in_memory_seconds", "triangles_per_second", "in memory"]) as [$k, $t, $r, $what] |
+        "| ours \($c.case) \($c.algorithm), \($k), \($what) | \($c.triangles) | \($c[$k][$t].median | f3) | \($c[$k][$t].min | f3) | \($c[$k][$r] | m) | \(if $c.case == "full" then ($c[$k][$r] / $s.martini.triangles_per_second | . * 1000 | round / 1000) else "" end) |"),
+      "",
+      "Memory: `\(.memory.command)`: peak RSS \(.memory.peak_rss_mb | round) MiB, budget \(.memory.budget_mb | round) MiB (\(if .memory.target_met then "met" else "**not met**" end)); the cache holds \(.memory.cache_pages_per_mib | f1) pages per MiB.\n")
+  ' "$f"
+fi
+
 f="$res/extract.json"
 if [[ -f "$f" ]]; then
   jq -r '

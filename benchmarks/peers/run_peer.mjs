@@ -6,6 +6,7 @@
 // verify the peer's error bound on every sample with the same exact checker as ours.
 //
 //   node run_peer.mjs --peer delatin|martini --npy dem.npy --max-error 1.6 [--out-mesh m.bin]
+//                     [--repeat N]
 //
 // Peers (APIs as in node_modules/<peer>/index.js):
 //   delatin          new Delatin(data, width, height); tin.run(maxError): greedy Delaunay
@@ -18,6 +19,13 @@
 // Timing covers only the triangulation: not reading the file, not writing the dump.
 // `seconds` is delatin's constructor + run, or martini's createTile + getMesh; martini's
 // per-grid-size constructor (reusable across tiles) is reported separately as setup_seconds.
+//
+// --repeat N (martini only): getMesh runs N times on the same tile in this process, as a tile
+// server extracts meshes from a tile it has prepared. get_mesh_seconds stays the first call (the
+// JIT cold); get_mesh_seconds_all has every call, get_mesh_warm_median / get_mesh_warm_min are over
+// the calls after the first (the first alone when N = 1), get_mesh_triangles_per_second is
+// triangles / get_mesh_warm_median, and create_tile_seconds is the preprocessing (the error map)
+// done once per tile.
 import { readFileSync, writeFileSync } from 'node:fs';
 import { performance } from 'node:perf_hooks';
 import process from 'node:process';
@@ -66,6 +74,12 @@ function readNpyFloat32(path) {
   return { data, rows, cols };
 }
 
+function median(v) {
+  const s = [...v].sort((a, b) => a - b);
+  const n = s.length;
+  return n % 2 === 1 ? s[(n - 1) / 2] : (s[n / 2 - 1] + s[n / 2]) / 2;
+}
+
 function writeMesh(path, coords, triangles) {
   // SMRGRID1: magic, uint32 V, uint32 T, V x (col, row), T x (a, b, c); little-endian.
   const nv = coords.length / 2;
@@ -84,7 +98,11 @@ async function main() {
   const args = parseArgs(process.argv);
   const peer = args.peer;
   const maxError = Number(args['max-error']);
-  if (!args.npy || !(maxError >= 0)) throw new Error('usage: --peer delatin|martini --npy dem.npy --max-error M [--out-mesh m.bin]');
+  const repeat = Number(args.repeat ?? 1);
+  if (!args.npy || !(maxError >= 0) || !(Number.isInteger(repeat) && repeat >= 1)) {
+    throw new Error('usage: --peer delatin|martini --npy dem.npy --max-error M [--out-mesh m.bin] [--repeat N]');
+  }
+  if (repeat > 1 && peer !== 'martini') throw new Error('--repeat is for martini only (delatin runs once per instance)');
   const tRead = performance.now();
   const { data, rows, cols } = readNpyFloat32(args.npy);
   const readSeconds = (performance.now() - tRead) / 1000;
@@ -113,10 +131,23 @@ async function main() {
     const t2 = performance.now();
     const mesh = tile.getMesh(maxError);
     const t3 = performance.now();
+    const calls = [(t3 - t2) / 1000];
+    for (let i = 1; i < repeat; i++) {
+      const s = performance.now();
+      const again = tile.getMesh(maxError);
+      calls.push((performance.now() - s) / 1000);
+      if (again.triangles.length !== mesh.triangles.length) throw new Error('getMesh is not deterministic');
+    }
     result.setup_seconds = (t1 - t0) / 1000;
     result.create_tile_seconds = (t2 - t1) / 1000;
     result.get_mesh_seconds = (t3 - t2) / 1000;
     result.seconds = (t3 - t1) / 1000;
+    const warm = calls.length > 1 ? calls.slice(1) : calls;
+    result.get_mesh_repeat = repeat;
+    result.get_mesh_seconds_all = calls;
+    result.get_mesh_warm_median = median(warm);
+    result.get_mesh_warm_min = Math.min(...warm);
+    result.get_mesh_triangles_per_second = mesh.triangles.length / 3 / result.get_mesh_warm_median;
     coords = mesh.vertices;
     triangles = mesh.triangles;
     result.version = JSON.parse(readFileSync(new URL('./node_modules/@mapbox/martini/package.json', import.meta.url))).version;
