@@ -83,9 +83,6 @@ const std::uint8_t* ByteReader::take(std::size_t n, const char* what) {
   return p;
 }
 
-std::uint8_t ByteReader::u8() {
-  return *take(1, "u8");
-}
 std::uint16_t ByteReader::u16() {
   return get_le<std::uint16_t>(take(2, "u16"));
 }
@@ -102,7 +99,7 @@ double ByteReader::f64() {
   return std::bit_cast<double>(u64());
 }
 
-std::uint64_t ByteReader::varint() {
+std::uint64_t ByteReader::varint_long() {
   const std::size_t start = pos_;
   std::uint64_t v = 0;
   for (int shift = 0; shift < 64; shift += 7) {
@@ -117,11 +114,6 @@ std::uint64_t ByteReader::varint() {
     if ((b & 0x80) == 0) return v;
   }
   fail("varint longer than 10 bytes at offset " + std::to_string(start));
-}
-
-std::int64_t ByteReader::svarint() {
-  const std::uint64_t u = varint();
-  return static_cast<std::int64_t>((u >> 1) ^ (~(u & 1) + 1));
 }
 
 ByteView ByteReader::bytes(std::size_t n) {

@@ -47,14 +47,25 @@ class ByteReader {
   // `context` names what is being decoded ("<table>/<key>", say) and prefixes every error message.
   ByteReader(ByteView in, std::string context) : in_(in), context_(std::move(context)) {}
 
-  std::uint8_t u8();
+  std::uint8_t u8() {
+    if (pos_ < in_.size()) return in_[pos_++];
+    return *take(1, "u8");  // throws
+  }
   std::uint16_t u16();
   std::uint32_t u32();
   std::uint64_t u64();
   float f32();
   double f64();
-  std::uint64_t varint();  // rejects overlong (> 10 bytes) and overflowing encodings
-  std::int64_t svarint();
+  // Rejects overlong (> 10 bytes) and overflowing encodings. Inline for the one-byte case, which
+  // is most of a page's records.
+  std::uint64_t varint() {
+    if (pos_ < in_.size() && in_[pos_] < 0x80) return in_[pos_++];
+    return varint_long();
+  }
+  std::int64_t svarint() {
+    const std::uint64_t u = varint();
+    return static_cast<std::int64_t>((u >> 1) ^ (~(u & 1) + 1));
+  }
   ByteView bytes(std::size_t n);
   ByteView blob();
 
@@ -69,6 +80,7 @@ class ByteReader {
 
  private:
   const std::uint8_t* take(std::size_t n, const char* what);
+  std::uint64_t varint_long();
 
   ByteView in_;
   std::size_t pos_ = 0;

@@ -56,6 +56,11 @@ Bytes zstd_decompress(ByteView in, std::size_t max_bytes, std::string_view conte
   const std::size_t cap =
       max_bytes == std::numeric_limits<std::size_t>::max() ? max_bytes : max_bytes + 1;
   Bytes out;
+  // A declared size within 256x the input (zstd's usual ratios are far below) is trusted for the
+  // first allocation, so a page decodes without regrowing; beyond that the output grows as data
+  // arrives, so forged frames can at most take 256x their own size.
+  if (declared != ZSTD_CONTENTSIZE_UNKNOWN && declared <= 256 * in.size() + 65536)
+    out.resize(std::min<std::size_t>(cap, std::size_t(declared) + 4096));
   ZSTD_inBuffer input{in.data(), in.size(), 0};
   std::size_t produced = 0;
   for (;;) {

@@ -1,6 +1,7 @@
 #include "smr/core/crmr.h"
 
 #include <algorithm>
+#include <cmath>
 #include <string>
 #include <unordered_map>
 
@@ -109,7 +110,8 @@ Crmr CrmrCollector::take() {
 }
 
 // In-fragment neighbours: the triangle across each edge that has the reversed edge. Fragments
-// are small (a few triangles), so a quadratic scan beats a hash map; R^0 may be large.
+// are small (a few triangles), so a quadratic scan beats a hash map (and a sort); R^0 may be
+// large and is hashed.
 void derive_fragment_neighbours(Op& op) {
   derive_fragment_neighbours(std::span<FragmentTriangle>(op.fragment));
 }
@@ -155,23 +157,36 @@ void compute_op_bounds(Op& op) {
 }
 
 OpBounds op_bounds(const OpView& op) {
-  // The thread's scratch, kept: builders and page decoders call this for every op, on several
-  // threads at once.
-  thread_local std::vector<Vec3> points, normals;
-  points.clear();
+  // bounding_sphere and normal_cone over the corners and normals of F then PreF, computed in
+  // place (the same operations in the same order, so the same values): pages decode it per op.
+  thread_local std::vector<Vec3> normals;  // the thread's scratch, kept
   normals.clear();
-  auto add = [&](const Vec3& a, const Vec3& b, const Vec3& c) {
-    points.insert(points.end(), {a, b, c});
-    normals.push_back(triangle_normal(a, b, c));
+  OpBounds b;
+  Vec3 sum{0.0};
+  const auto first = [&](const Vec3& p0, const Vec3& p1, const Vec3& p2) {
+    b.box.add(p0);
+    b.box.add(p1);
+    b.box.add(p2);
+    normals.push_back(triangle_normal(p0, p1, p2));
+    sum += normals.back();
   };
   for (const FragmentTriangle& t : op.fragment)
-    add(op.position(t, 0), op.position(t, 1), op.position(t, 2));
+    first(op.position(t, 0), op.position(t, 1), op.position(t, 2));
   for (const PreTriangle& t : op.pre_tris)
-    add(op.position(t, 0), op.position(t, 1), op.position(t, 2));
-  OpBounds b;
-  for (const Vec3& p : points) b.box.add(p);
-  b.sphere = bounding_sphere(points);
-  b.cone = normal_cone(normals);
+    first(op.position(t, 0), op.position(t, 1), op.position(t, 2));
+  if (!b.box.empty()) {
+    b.sphere.center = b.box.center();
+    double r2 = 0.0;
+    const auto far = [&](const Vec3& p) {
+      r2 = std::max(r2, glm::dot(p - b.sphere.center, p - b.sphere.center));
+    };
+    for (const FragmentTriangle& t : op.fragment)
+      for (int k = 0; k < 3; ++k) far(op.position(t, k));
+    for (const PreTriangle& t : op.pre_tris)
+      for (int k = 0; k < 3; ++k) far(op.position(t, k));
+    b.sphere.radius = std::sqrt(r2);
+  }
+  b.cone = normal_cone_of(normals, sum);
   return b;
 }
 

@@ -76,8 +76,7 @@ struct OpBounds {
 OpBounds op_bounds(const OpView& op);
 
 /// Sets every fragment triangle's `nbr` from the fragment itself: across edge k, the triangle that
-/// has the reversed edge (kNoNeighbour if none). Fragments are small, so it scans them; R^0 may be
-/// large and is hashed.
+/// has the reversed edge (kNoNeighbour if none).
 void derive_fragment_neighbours(Op& op);
 void derive_fragment_neighbours(std::span<FragmentTriangle> fragment);
 

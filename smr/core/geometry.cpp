@@ -65,9 +65,13 @@ Sphere bounding_sphere(std::span<const Vec3> points) {
 }
 
 NormalCone normal_cone(std::span<const Vec3> unit_normals) {
-  NormalCone cone;
   Vec3 sum{0.0};
   for (const Vec3& n : unit_normals) sum += n;
+  return normal_cone_of(unit_normals, sum);
+}
+
+NormalCone normal_cone_of(std::span<const Vec3> unit_normals, const Vec3& sum) {
+  NormalCone cone;
   const double len = glm::length(sum);
   if (unit_normals.empty() || len < 1e-12) {
     cone.half_angle = M_PI;  // no usable axis: the cone admits every direction

@@ -127,6 +127,8 @@ inline double point_rect_distance2d(const Vec2& p, const Vec2& lo, const Vec2& h
 Sphere bounding_sphere(std::span<const Vec3> points);
 /// Smallest cone (approximately: axis = normalised mean) containing the given unit normals.
 NormalCone normal_cone(std::span<const Vec3> unit_normals);
+/// normal_cone(unit_normals) given their sum, added in order.
+NormalCone normal_cone_of(std::span<const Vec3> unit_normals, const Vec3& sum);
 /// The smallest cone around an axis on the great circle through a's and b's axes that holds
 /// both cones (half angle pi: every direction).
 NormalCone cone_union(const NormalCone& a, const NormalCone& b);

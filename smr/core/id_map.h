@@ -3,33 +3,42 @@
 // keeps one entry per op of X, which on a whole-database output is every op: std::unordered_map
 // spends ~40-50 bytes per entry on nodes and buckets, this map 2 x (8 + sizeof(V)) at worst, in two
 // arrays. Erase shifts the following entries of the probe run back (no tombstones). The id ~0 is
-// reserved as the empty marker.
+// reserved as the empty marker. FlatMap is the same map over any key with an empty marker and a
+// hash (KeyTraits): the expansion's front, keyed by (op, directed edge).
 #pragma once
 
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "smr/core/ids.h"  // mix64
 
 namespace smr {
 
-template <class V>
-class IdMap {
- public:
-  static constexpr std::uint64_t kEmpty = ~std::uint64_t{0};
+/// Keys of an IdMap: 64-bit ids, ~0 reserved.
+struct IdKeys {
+  static constexpr std::uint64_t empty() { return ~std::uint64_t{0}; }
+  static std::size_t hash(std::uint64_t id) { return std::size_t(mix64(id)); }
+};
 
-  IdMap() = default;
+template <class K, class V, class KeyTraits>
+class FlatMap {
+ public:
+  using Key = K;
+  static constexpr K kEmpty = KeyTraits::empty();
+
+  FlatMap() = default;
   /// A map filled to at most `max_load_percent` of its slots (50 by default; a big map known in
   /// advance trades a few more probes for half the memory at 60-75).
-  explicit IdMap(unsigned max_load_percent) : max_load_(max_load_percent) {}
+  explicit FlatMap(unsigned max_load_percent) : max_load_(max_load_percent) {}
 
   std::size_t size() const { return size_; }
   bool empty() const { return size_ == 0; }
 
   /// The value of `id`, inserted as V{} when absent. `id` must not be kEmpty.
-  V& operator[](std::uint64_t id) {
+  V& operator[](const K& id) {
     if ((size_ + 1) * 100 > keys_.size() * max_load_) grow();
     std::size_t i = slot(id);
     while (keys_[i] != kEmpty && keys_[i] != id) i = (i + 1) & mask_;
@@ -41,22 +50,22 @@ class IdMap {
     return values_[i];
   }
   /// Inserts `id` (with V{}); false if it was there already.
-  bool insert(std::uint64_t id) {
+  bool insert(const K& id) {
     const std::size_t before = size_;
     (*this)[id];
     return size_ != before;
   }
-  const V* find(std::uint64_t id) const {
+  const V* find(const K& id) const {
     if (size_ == 0) return nullptr;
     for (std::size_t i = slot(id);; i = (i + 1) & mask_) {
       if (keys_[i] == id) return &values_[i];
       if (keys_[i] == kEmpty) return nullptr;
     }
   }
-  V* find(std::uint64_t id) { return const_cast<V*>(static_cast<const IdMap&>(*this).find(id)); }
-  bool contains(std::uint64_t id) const { return find(id) != nullptr; }
+  V* find(const K& id) { return const_cast<V*>(static_cast<const FlatMap&>(*this).find(id)); }
+  bool contains(const K& id) const { return find(id) != nullptr; }
   /// Removes `id`; false if it was absent.
-  bool erase(std::uint64_t id) {
+  bool erase(const K& id) {
     if (size_ == 0) return false;
     std::size_t i = slot(id);
     while (keys_[i] != id) {
@@ -69,10 +78,11 @@ class IdMap {
       const bool stays = i <= j ? (i < home && home <= j) : (i < home || home <= j);
       if (stays) continue;
       keys_[i] = keys_[j];
-      values_[i] = values_[j];
+      values_[i] = std::move(values_[j]);
       i = j;
     }
     keys_[i] = kEmpty;
+    values_[i] = V{};
     --size_;
     return true;
   }
@@ -91,10 +101,10 @@ class IdMap {
   }
 
  private:
-  std::size_t slot(std::uint64_t id) const { return std::size_t(mix64(id)) & mask_; }
+  std::size_t slot(const K& id) const { return KeyTraits::hash(id) & mask_; }
   void grow() { rehash(std::max<std::size_t>(16, 2 * keys_.size())); }
   void rehash(std::size_t capacity) {
-    std::vector<std::uint64_t> keys(capacity, kEmpty);
+    std::vector<K> keys(capacity, kEmpty);
     std::vector<V> values(keys.size());
     keys.swap(keys_);
     values.swap(values_);
@@ -104,15 +114,18 @@ class IdMap {
       std::size_t j = slot(keys[i]);
       while (keys_[j] != kEmpty) j = (j + 1) & mask_;
       keys_[j] = keys[i];
-      values_[j] = values[i];
+      values_[j] = std::move(values[i]);
     }
   }
 
-  std::vector<std::uint64_t> keys_;
+  std::vector<K> keys_;
   std::vector<V> values_;
   std::size_t mask_ = 0;
   std::size_t size_ = 0;
   std::size_t max_load_ = 50;  // percent
 };
+
+template <class V>
+using IdMap = FlatMap<std::uint64_t, V, IdKeys>;
 
 }  // namespace smr

@@ -28,8 +28,9 @@ struct FrontKey {
   std::uint64_t op, u, v;
   friend bool operator==(const FrontKey&, const FrontKey&) = default;
 };
-struct FrontKeyHash {
-  std::size_t operator()(const FrontKey& k) const {
+struct FrontKeys {  // FlatMap's key traits
+  static constexpr FrontKey empty() { return {~std::uint64_t{0}, 0, 0}; }
+  static std::size_t hash(const FrontKey& k) {
     return mix64(k.op * 0x9E3779B97F4A7C15ULL ^ mix64(k.u * 0xC2B2AE3D27D4EB4FULL ^ k.v));
   }
 };
@@ -252,13 +253,13 @@ class Expander {
     const OpRef op_ref = held_->take(id);
     const OpView& op = *op_ref;
     std::vector<FrontKey> stack;
-    if (auto it = stacks_.find(id.value); it != stacks_.end()) {
-      stack = std::move(it->second);
-      stacks_.erase(it);
+    if (auto* waiting = stacks_.find(id.value)) {
+      stack = std::move(*waiting);
+      stacks_.erase(id.value);
     }
     expanded_.assign(op.fragment.size(), 0);
     bool on_front = false;
-    for (const FrontKey& k : stack) on_front |= front_.count(k) != 0;
+    for (const FrontKey& k : stack) on_front |= front_.contains(k);
     bool starting = !on_front;
     if (starting) {
       for (OpId c : op.children) {
@@ -305,12 +306,11 @@ class Expander {
     while (!stack.empty() && !budget_reached()) {
       const FrontKey key = stack.back();
       stack.pop_back();
-      auto it = front_.find(key);
-      if (it == front_.end()) continue;  // merged away earlier
-      const FrontEntry entry = it->second;
-      front_.erase(it);
-      if (front_.erase(FrontKey{key.op, key.v, key.u}) != 0)
-        continue;  // both sides expanded: merge
+      const FrontEntry* found = front_.find(key);
+      if (found == nullptr) continue;  // merged away earlier
+      const FrontEntry entry = *found;
+      front_.erase(key);
+      if (front_.erase(FrontKey{key.op, key.v, key.u})) continue;  // both sides expanded: merge
       perform_expansion(op, key, entry, stack);
     }
   }
@@ -360,11 +360,19 @@ class Expander {
       std::push_heap(queue_.begin(), queue_.end());
     }
     const FrontKey moved{target.tri.op.value, key.u, key.v};
-    if (!front_.emplace(moved, FrontEntry{target.tri.index, target.edge}).second) {
+    if (!add_to_front(moved, FrontEntry{target.tri.index, target.edge})) {
       ++anomalies_;
       return;
     }
     stacks_[moved.op].push_back(moved);
+  }
+
+  bool add_to_front(const FrontKey& key, const FrontEntry& entry) {  // false if there already
+    const std::size_t before = front_.size();
+    FrontEntry& slot = front_[key];
+    if (front_.size() == before) return false;
+    slot = entry;
+    return true;
   }
 
   static int edge_of(const OpView& op, const FragmentTriangle& t, std::uint64_t u,
@@ -395,7 +403,7 @@ class Expander {
     for (int n = 0; n < count; ++n) {
       const int k = ks[n];
       const FrontKey key{op.id.value, op.vertex_id(t, k).value, op.vertex_id(t, (k + 1) % 3).value};
-      if (!front_.emplace(key, FrontEntry{i, static_cast<std::uint8_t>(k)}).second) {
+      if (!add_to_front(key, FrontEntry{i, static_cast<std::uint8_t>(k)})) {
         ++anomalies_;
         continue;
       }
@@ -451,8 +459,8 @@ class Expander {
   ChunkedVector<TriRef> triangles_;   // out_.triangles while expanding
   IdMap<std::uint8_t> in_x_;          // X, then X+ (a set: the values are unused)
   std::vector<std::uint64_t> queue_;  // max-heap of op ids: finest first
-  std::unordered_map<FrontKey, FrontEntry, FrontKeyHash> front_;
-  std::unordered_map<std::uint64_t, std::vector<FrontKey>> stacks_;
+  FlatMap<FrontKey, FrontEntry, FrontKeys> front_;
+  IdMap<std::vector<FrontKey>> stacks_;
   std::vector<std::uint8_t> expanded_;
   std::unique_ptr<DomainIndex> domain_;
   std::unique_ptr<HeldOps> held_;

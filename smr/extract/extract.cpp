@@ -12,6 +12,7 @@
 
 #include "base/error.h"
 #include "smr/core/clock.h"
+#include "smr/core/id_map.h"
 #include "smr/extract/expansion.h"
 
 namespace smr {
@@ -89,7 +90,7 @@ TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles, 
   constexpr std::uint64_t kDropped = ~std::uint64_t{0};
   std::vector<std::array<std::uint64_t, 3>> corners(n);  // vertex ids; kDropped: a void triangle
   std::vector<float> values(n);
-  std::unordered_map<std::uint64_t, Vec3> position;
+  IdMap<Vec3> position;
   // A triangulated surface has about half as many vertices as triangles (Euler), plus its
   // boundary: sized once, since growing by doubling would hold up to twice the output a moment.
   const std::size_t vertices = n / 2 + 4 * static_cast<std::size_t>(std::sqrt(double(n))) + 16;
@@ -106,7 +107,7 @@ TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles, 
     for (int k = 0; k < 3; ++k) {
       const Vertex& v = op.vertices[t.v[k]];
       corners[i][k] = v.id.value;
-      position.emplace(v.id.value, v.p);
+      position[v.id.value] = v.p;  // the same position wherever a vertex appears
     }
     values[i] = static_cast<float>(t.death_res);
   }
@@ -116,16 +117,18 @@ TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles, 
   mesh.triangles.reserve(n);
   mesh.triangle_values.reserve(n);
   mesh.positions.reserve(position.size());
-  std::unordered_map<std::uint64_t, std::uint32_t> index;
+  IdMap<std::uint32_t> index;  // vertex id -> 1 + its index in the mesh
   index.reserve(position.size());
   for (std::size_t i = 0; i < n; ++i) {
     if (corners[i][0] == kDropped) continue;
     std::array<std::uint32_t, 3> tri{};
     for (int k = 0; k < 3; ++k) {
-      auto [it, fresh] =
-          index.emplace(corners[i][k], static_cast<std::uint32_t>(mesh.positions.size()));
-      if (fresh) mesh.positions.push_back(position.at(corners[i][k]));
-      tri[k] = it->second;
+      std::uint32_t& at = index[corners[i][k]];
+      if (at == 0) {
+        mesh.positions.push_back(*position.find(corners[i][k]));
+        at = static_cast<std::uint32_t>(mesh.positions.size());
+      }
+      tri[k] = at - 1;
     }
     mesh.triangles.push_back(tri);
     mesh.triangle_values.push_back(values[i]);
