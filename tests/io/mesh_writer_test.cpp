@@ -178,6 +178,104 @@ TEST(MeshWriter, BinaryAndAsciiPlyRoundTripsAreExact) {
   EXPECT_EQ(back.triangles, plain.triangles);
 }
 
+// ---- byte identity ---------------------------------------------------------------------------
+// The writers' exact bytes are part of the contract (scripts/same-bytes.sh compares extraction
+// outputs across binaries), so they are checked against bytes spelled out here from the formats'
+// definitions: the IEEE-754 bit patterns written out by hand, little-endian byte by byte, and the
+// decimal strings of std::to_chars (shortest round trip for OBJ and float values, 17 significant
+// digits like %.17g for ASCII PLY doubles).
+
+// 300 vertices (indices above 255 need every byte of a uint32): three with awkward doubles, then
+// 297 at the origin; three triangles with values.
+TriangleMesh golden_mesh() {
+  TriangleMesh m;
+  m.positions = {{1.0, -2.5, 0.1}, {-0.0, 1e17, 1.0 / 3.0}, {123456789.125, 4.9e-324, 0.0}};
+  m.positions.resize(300, Vec3{0, 0, 0});
+  m.triangles = {{0, 1, 2}, {299, 256, 2}, {2, 257, 298}};
+  m.triangle_values = {0.25f, -7.5f, 1e20f};
+  return m;
+}
+
+void append_le(std::string& out, std::uint64_t bits, int bytes) {
+  for (int i = 0; i < bytes; ++i) out += static_cast<char>((bits >> (8 * i)) & 0xff);
+}
+
+std::string ply_header(const char* format, bool values) {
+  return std::string("ply\nformat ") + format +
+         " 1.0\ncomment smrdb mesh\nelement vertex 300\nproperty double x\nproperty double y\n"
+         "property double z\nelement face 3\nproperty list uchar uint vertex_indices\n" +
+         (values ? "property float value\n" : "") + "end_header\n";
+}
+
+std::string golden_binary_ply(bool values) {
+  std::string s = ply_header("binary_little_endian", values);
+  const std::uint64_t doubles[9] = {0x3ff0000000000000, 0xc004000000000000, 0x3fb999999999999a,
+                                    0x8000000000000000, 0x4376345785d8a000, 0x3fd5555555555555,
+                                    0x419d6f3454800000, 0x0000000000000001, 0};
+  for (std::uint64_t d : doubles) append_le(s, d, 8);
+  s.append(297 * 3 * 8, '\0');  // 297 vertices (0, 0, 0)
+  const std::uint32_t faces[3][3] = {{0, 1, 2}, {299, 256, 2}, {2, 257, 298}};
+  const std::uint32_t value_bits[3] = {0x3e800000, 0xc0f00000, 0x60ad78ec};
+  for (int f = 0; f < 3; ++f) {
+    s += '\3';
+    for (std::uint32_t v : faces[f]) append_le(s, v, 4);
+    if (values) append_le(s, value_bits[f], 4);
+  }
+  return s;
+}
+
+std::string read_text(const std::string& path) {
+  const std::vector<std::uint8_t> bytes = test::read_bytes(path);
+  return std::string(bytes.begin(), bytes.end());
+}
+
+TEST(MeshWriter, BinaryPlyBytesAreTheFormatsDefinition) {
+  TempDir dir;
+  TriangleMesh mesh = golden_mesh();
+  write_ply(dir.file("v.ply"), mesh);
+  EXPECT_EQ(read_text(dir.file("v.ply")), golden_binary_ply(true));
+  mesh.triangle_values.clear();
+  write_mesh(dir.file("p.ply"), mesh);
+  EXPECT_EQ(read_text(dir.file("p.ply")), golden_binary_ply(false));
+}
+
+TEST(MeshWriter, AsciiPlyBytesAreTheFormatsDefinition) {
+  TempDir dir;
+  write_ply(dir.file("a.ply"), golden_mesh(), false);
+  std::string expected = ply_header("ascii", true);
+  expected +=
+      "1 -2.5 0.10000000000000001\n"
+      "-0 1e+17 0.33333333333333331\n"
+      "123456789.125 4.9406564584124654e-324 0\n";
+  for (int i = 3; i < 300; ++i) expected += "0 0 0\n";
+  expected += "3 0 1 2 0.25\n3 299 256 2 -7.5\n3 2 257 298 1e+20\n";
+  EXPECT_EQ(read_text(dir.file("a.ply")), expected);
+}
+
+TEST(MeshWriter, ObjBytesAreTheFormatsDefinition) {
+  TempDir dir;
+  write_mesh(dir.file("m.obj"), golden_mesh());
+  std::string expected = "# smrdb mesh: 300 vertices, 3 triangles\n";
+  expected +=
+      "v 1 -2.5 0.1\n"
+      "v -0 1e+17 0.3333333333333333\n"
+      "v 123456789.125 5e-324 0\n";
+  for (int i = 3; i < 300; ++i) expected += "v 0 0 0\n";
+  expected += "f 1 2 3\nf 300 257 3\nf 3 258 299\n";
+  EXPECT_EQ(read_text(dir.file("m.obj")), expected);
+}
+
+TEST(MeshWriter, EmptyMeshBytes) {
+  TempDir dir;
+  write_obj(dir.file("e.obj"), TriangleMesh{});
+  EXPECT_EQ(read_text(dir.file("e.obj")), "# smrdb mesh: 0 vertices, 0 triangles\n");
+  write_ply(dir.file("e.ply"), TriangleMesh{});
+  EXPECT_EQ(read_text(dir.file("e.ply")),
+            "ply\nformat binary_little_endian 1.0\ncomment smrdb mesh\nelement vertex 0\n"
+            "property double x\nproperty double y\nproperty double z\nelement face 0\n"
+            "property list uchar uint vertex_indices\nend_header\n");
+}
+
 TEST(MeshWriter, WriteMeshDispatchesOnExtension) {
   TempDir dir;
   const TriangleMesh mesh = sample_mesh();
