@@ -4,6 +4,8 @@
 
 #include <sys/resource.h>
 
+#include <algorithm>
+#include <bit>
 #include <cmath>
 #include <csignal>
 #include <cstring>
@@ -200,10 +202,12 @@ void append_le(std::string& out, std::uint64_t bits, int bytes) {
   for (int i = 0; i < bytes; ++i) out += static_cast<char>((bits >> (8 * i)) & 0xff);
 }
 
-std::string ply_header(const char* format, bool values) {
-  return std::string("ply\nformat ") + format +
-         " 1.0\ncomment smrdb mesh\nelement vertex 300\nproperty double x\nproperty double y\n"
-         "property double z\nelement face 3\nproperty list uchar uint vertex_indices\n" +
+std::string ply_header(const char* format, bool values, std::uint32_t vertices = 300,
+                       std::uint32_t faces = 3) {
+  return std::string("ply\nformat ") + format + " 1.0\ncomment smrdb mesh\nelement vertex " +
+         std::to_string(vertices) +
+         "\nproperty double x\nproperty double y\nproperty double z\nelement face " +
+         std::to_string(faces) + "\nproperty list uchar uint vertex_indices\n" +
          (values ? "property float value\n" : "") + "end_header\n";
 }
 
@@ -227,6 +231,15 @@ std::string golden_binary_ply(bool values) {
 std::string read_text(const std::string& path) {
   const std::vector<std::uint8_t> bytes = test::read_bytes(path);
   return std::string(bytes.begin(), bytes.end());
+}
+
+// For files too large to print: the sizes and the first differing byte.
+void expect_bytes(const std::string& path, const std::string& expected) {
+  const std::string got = read_text(path);
+  const auto diff = std::mismatch(got.begin(), got.end(), expected.begin(), expected.end());
+  EXPECT_TRUE(diff.first == got.end() && diff.second == expected.end())
+      << path << ": " << got.size() << " bytes, expected " << expected.size()
+      << "; first difference at byte " << (diff.first - got.begin());
 }
 
 TEST(MeshWriter, BinaryPlyBytesAreTheFormatsDefinition) {
@@ -263,6 +276,57 @@ TEST(MeshWriter, ObjBytesAreTheFormatsDefinition) {
   for (int i = 3; i < 300; ++i) expected += "v 0 0 0\n";
   expected += "f 1 2 3\nf 300 257 3\nf 3 258 299\n";
   EXPECT_EQ(read_text(dir.file("m.obj")), expected);
+}
+
+// Files of several MiB, so that every format crosses the writers' output chunks (and binary PLY
+// writes its vertex array in one piece): coordinates i + 0.25, -(i + 0.5), 0.75 and values
+// t + 0.25, whose decimal forms are those of the integers with ".25" / ".5" appended.
+TEST(MeshWriter, LargeMeshBytesAreTheFormatsDefinition) {
+  constexpr std::uint32_t kVertices = 100000, kTriangles = 300000;
+  TriangleMesh mesh;
+  for (std::uint32_t i = 0; i < kVertices; ++i)
+    mesh.positions.push_back({i + 0.25, -(i + 0.5), 0.75});
+  for (std::uint32_t t = 0; t < kTriangles; ++t) {
+    mesh.triangles.push_back({t % kVertices, (7 * t + 1) % kVertices, (13 * t + 2) % kVertices});
+    mesh.triangle_values.push_back(static_cast<float>(t) + 0.25f);
+  }
+  const auto x = [](std::uint32_t i) { return std::to_string(i) + ".25"; };
+  const auto y = [](std::uint32_t i) {
+    return std::string("-").append(std::to_string(i)).append(".5");
+  };
+  TempDir dir;
+
+  write_obj(dir.file("m.obj"), mesh);
+  std::string obj = "# smrdb mesh: 100000 vertices, 300000 triangles\n";
+  for (std::uint32_t i = 0; i < kVertices; ++i) obj += "v " + x(i) + " " + y(i) + " 0.75\n";
+  for (const auto& t : mesh.triangles) {
+    obj += "f " + std::to_string(t[0] + 1) + " " + std::to_string(t[1] + 1) + " " +
+           std::to_string(t[2] + 1) + "\n";
+  }
+  ASSERT_GT(obj.size(), 4u << 20);  // more than one of the writers' 4 MiB chunks
+  expect_bytes(dir.file("m.obj"), obj);
+
+  write_ply(dir.file("a.ply"), mesh, false);
+  std::string ascii = ply_header("ascii", true, kVertices, kTriangles);
+  for (std::uint32_t i = 0; i < kVertices; ++i) ascii += x(i) + " " + y(i) + " 0.75\n";
+  for (std::uint32_t t = 0; t < kTriangles; ++t) {
+    const auto& f = mesh.triangles[t];
+    ascii += "3 " + std::to_string(f[0]) + " " + std::to_string(f[1]) + " " + std::to_string(f[2]) +
+             " " + x(t) + "\n";
+  }
+  expect_bytes(dir.file("a.ply"), ascii);
+
+  write_ply(dir.file("b.ply"), mesh);
+  std::string binary = ply_header("binary_little_endian", true, kVertices, kTriangles);
+  for (const Vec3& p : mesh.positions) {
+    for (int k = 0; k < 3; ++k) append_le(binary, std::bit_cast<std::uint64_t>(p[k]), 8);
+  }
+  for (std::uint32_t t = 0; t < kTriangles; ++t) {
+    binary += '\3';
+    for (std::uint32_t v : mesh.triangles[t]) append_le(binary, v, 4);
+    append_le(binary, std::bit_cast<std::uint32_t>(mesh.triangle_values[t]), 4);
+  }
+  expect_bytes(dir.file("b.ply"), binary);
 }
 
 TEST(MeshWriter, EmptyMeshBytes) {
