@@ -252,30 +252,35 @@ TEST(MeshWriter, BinaryPlyBytesAreTheFormatsDefinition) {
   EXPECT_EQ(read_text(dir.file("p.ply")), golden_binary_ply(false));
 }
 
+// A text file of golden_mesh(): `head`, the three special vertices' lines, 297 times the line of
+// a vertex at the origin, then the faces' lines.
+std::string golden_text(std::string head, const char* vertices, const char* origin,
+                        const char* faces) {
+  head += vertices;
+  for (int i = 3; i < 300; ++i) head += origin;
+  return head + faces;
+}
+
 TEST(MeshWriter, AsciiPlyBytesAreTheFormatsDefinition) {
   TempDir dir;
   write_ply(dir.file("a.ply"), golden_mesh(), false);
-  std::string expected = ply_header("ascii", true);
-  expected +=
-      "1 -2.5 0.10000000000000001\n"
-      "-0 1e+17 0.33333333333333331\n"
-      "123456789.125 4.9406564584124654e-324 0\n";
-  for (int i = 3; i < 300; ++i) expected += "0 0 0\n";
-  expected += "3 0 1 2 0.25\n3 299 256 2 -7.5\n3 2 257 298 1e+20\n";
-  EXPECT_EQ(read_text(dir.file("a.ply")), expected);
+  EXPECT_EQ(read_text(dir.file("a.ply")),
+            golden_text(ply_header("ascii", true),
+                        "1 -2.5 0.10000000000000001\n"
+                        "-0 1e+17 0.33333333333333331\n"
+                        "123456789.125 4.9406564584124654e-324 0\n",
+                        "0 0 0\n", "3 0 1 2 0.25\n3 299 256 2 -7.5\n3 2 257 298 1e+20\n"));
 }
 
 TEST(MeshWriter, ObjBytesAreTheFormatsDefinition) {
   TempDir dir;
   write_mesh(dir.file("m.obj"), golden_mesh());
-  std::string expected = "# smrdb mesh: 300 vertices, 3 triangles\n";
-  expected +=
-      "v 1 -2.5 0.1\n"
-      "v -0 1e+17 0.3333333333333333\n"
-      "v 123456789.125 5e-324 0\n";
-  for (int i = 3; i < 300; ++i) expected += "v 0 0 0\n";
-  expected += "f 1 2 3\nf 300 257 3\nf 3 258 299\n";
-  EXPECT_EQ(read_text(dir.file("m.obj")), expected);
+  EXPECT_EQ(read_text(dir.file("m.obj")),
+            golden_text("# smrdb mesh: 300 vertices, 3 triangles\n",
+                        "v 1 -2.5 0.1\n"
+                        "v -0 1e+17 0.3333333333333333\n"
+                        "v 123456789.125 5e-324 0\n",
+                        "v 0 0 0\n", "f 1 2 3\nf 300 257 3\nf 3 258 299\n"));
 }
 
 // Files of several MiB, so that every format crosses the writers' output chunks (and binary PLY
