@@ -55,8 +55,10 @@ class ChunkBuffer {
     return block_.get() + used_;
   }
   void advance(char* end) { used_ = static_cast<std::size_t>(end - block_.get()); }
-  /// Bytes as they are; a large run goes to the file directly, without a copy.
+  /// Bytes as they are (data may be null when n is 0: an empty vector's); a large run goes to
+  /// the file directly, without a copy.
   void put(const void* data, std::size_t n) {
+    if (n == 0) return;
     if (n > kChunk / 2) {
       flush();
       file_.write(data, n);
