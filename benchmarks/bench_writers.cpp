@@ -11,12 +11,15 @@
 // write, fsync, rename) and the median over --repeat rounds is reported with MB/s (file bytes /
 // 1e6 / s) and triangles/s. The file system of --dir is reported (tmpfs or not: on a disk file
 // system the fsync is part of the time). Each output's FNV-1a 64 hash is reported so that two
-// builds of the writer can be shown to write the same bytes.
+// builds of the writer can be shown to write the same bytes. For scale, "raw_write" times writing
+// as many bytes as the binary PLY with values, already in memory, through the same AtomicFile in
+// 4 MiB writes (write, fsync, rename): the floor for any writer of that file.
 //
 //   bench_writers [MESH] [--subdivide 3] [--repeat 5] [--dir DIR]
 #include <sys/statfs.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -29,6 +32,7 @@
 
 #include "benchmarks/bench_common.h"
 #include "smr/core/mesh.h"
+#include "smr/io/atomic_file.h"
 #include "smr/io/mesh_reader.h"
 #include "smr/io/mesh_writer.h"
 
@@ -89,6 +93,16 @@ struct Config {
   std::string dir;
 };
 
+// Writes `bytes` bytes of memory through an AtomicFile in 4 MiB writes and commits.
+void raw_write(const std::string& path, std::size_t bytes) {
+  static const std::vector<char> block(std::size_t{4} << 20, 'x');
+  smr::AtomicFile file(path);
+  for (std::size_t done = 0; done < bytes; done += block.size()) {
+    file.write(block.data(), std::min(block.size(), bytes - done));
+  }
+  file.commit();
+}
+
 int run(const Config& cfg) {
   json report;
   report["benchmark"] = "mesh_writers";
@@ -113,6 +127,8 @@ int run(const Config& cfg) {
   report["repeat"] = cfg.repeat;
 
   std::vector<std::vector<double>> times(std::size(kFormats));
+  std::vector<double> raw_times;
+  const std::string raw_path = (dir / "raw").string();
   for (int round = 0; round < cfg.repeat; ++round) {
     for (std::size_t f = 0; f < std::size(kFormats); ++f) {
       const Format& format = kFormats[f];
@@ -121,6 +137,9 @@ int run(const Config& cfg) {
       format.write(path, format.values ? with_values : mesh);
       times[f].push_back(seconds_since(t0));
     }
+    const std::uint64_t t0 = now_ns();
+    raw_write(raw_path, std::filesystem::file_size(dir / "ply_binary_values.ply"));
+    raw_times.push_back(seconds_since(t0));
   }
   json results = json::object();
   for (std::size_t f = 0; f < std::size(kFormats); ++f) {
@@ -137,6 +156,12 @@ int run(const Config& cfg) {
                             {"triangles_per_s", static_cast<double>(triangles) / seconds},
                             {"fnv1a64", hash}};
   }
+  const double raw_bytes = static_cast<double>(std::filesystem::file_size(raw_path));
+  const double raw_seconds = smr::bench::median(raw_times);
+  results["raw_write"] = {{"seconds", raw_seconds},
+                          {"all_seconds", raw_times},
+                          {"bytes", raw_bytes},
+                          {"mb_per_s", raw_bytes / 1e6 / raw_seconds}};
   std::filesystem::remove_all(dir);
   report["results"] = results;
   report["rss_peak_mb"] = smr::bench::peak_rss_mb();
