@@ -4,6 +4,8 @@
 
 #include <sys/resource.h>
 
+#include <algorithm>
+#include <bit>
 #include <cmath>
 #include <csignal>
 #include <cstring>
@@ -176,6 +178,171 @@ TEST(MeshWriter, BinaryAndAsciiPlyRoundTripsAreExact) {
   const ParsedMesh back = parse_ply(dir.file("plain.ply"));
   EXPECT_TRUE(back.values.empty());
   EXPECT_EQ(back.triangles, plain.triangles);
+}
+
+// ---- byte identity ---------------------------------------------------------------------------
+// The writers' exact bytes are part of the contract (scripts/same-bytes.sh compares extraction
+// outputs across binaries), so they are checked against bytes spelled out here from the formats'
+// definitions: the IEEE-754 bit patterns written out by hand, little-endian byte by byte, and the
+// decimal strings of std::to_chars (shortest round trip for OBJ and float values, 17 significant
+// digits like %.17g for ASCII PLY doubles).
+
+// 300 vertices (indices above 255 need every byte of a uint32): three with awkward doubles, then
+// 297 at the origin; three triangles with values.
+TriangleMesh golden_mesh() {
+  TriangleMesh m;
+  m.positions = {{1.0, -2.5, 0.1}, {-0.0, 1e17, 1.0 / 3.0}, {123456789.125, 4.9e-324, 0.0}};
+  m.positions.resize(300, Vec3{0, 0, 0});
+  m.triangles = {{0, 1, 2}, {299, 256, 2}, {2, 257, 298}};
+  m.triangle_values = {0.25f, -7.5f, 1e20f};
+  return m;
+}
+
+void append_le(std::string& out, std::uint64_t bits, int bytes) {
+  for (int i = 0; i < bytes; ++i) out += static_cast<char>((bits >> (8 * i)) & 0xff);
+}
+
+std::string ply_header(const char* format, bool values, std::uint32_t vertices = 300,
+                       std::uint32_t faces = 3) {
+  return std::string("ply\nformat ") + format + " 1.0\ncomment smrdb mesh\nelement vertex " +
+         std::to_string(vertices) +
+         "\nproperty double x\nproperty double y\nproperty double z\nelement face " +
+         std::to_string(faces) + "\nproperty list uchar uint vertex_indices\n" +
+         (values ? "property float value\n" : "") + "end_header\n";
+}
+
+std::string golden_binary_ply(bool values) {
+  std::string s = ply_header("binary_little_endian", values);
+  const std::uint64_t doubles[9] = {0x3ff0000000000000, 0xc004000000000000, 0x3fb999999999999a,
+                                    0x8000000000000000, 0x4376345785d8a000, 0x3fd5555555555555,
+                                    0x419d6f3454800000, 0x0000000000000001, 0};
+  for (std::uint64_t d : doubles) append_le(s, d, 8);
+  s.append(297 * 3 * 8, '\0');  // 297 vertices (0, 0, 0)
+  const std::uint32_t faces[3][3] = {{0, 1, 2}, {299, 256, 2}, {2, 257, 298}};
+  const std::uint32_t value_bits[3] = {0x3e800000, 0xc0f00000, 0x60ad78ec};
+  for (int f = 0; f < 3; ++f) {
+    s += '\3';
+    for (std::uint32_t v : faces[f]) append_le(s, v, 4);
+    if (values) append_le(s, value_bits[f], 4);
+  }
+  return s;
+}
+
+std::string read_text(const std::string& path) {
+  const std::vector<std::uint8_t> bytes = test::read_bytes(path);
+  return std::string(bytes.begin(), bytes.end());
+}
+
+// For files too large to print: the sizes and the first differing byte.
+void expect_bytes(const std::string& path, const std::string& expected) {
+  const std::string got = read_text(path);
+  const auto diff = std::mismatch(got.begin(), got.end(), expected.begin(), expected.end());
+  EXPECT_TRUE(diff.first == got.end() && diff.second == expected.end())
+      << path << ": " << got.size() << " bytes, expected " << expected.size()
+      << "; first difference at byte " << (diff.first - got.begin());
+}
+
+TEST(MeshWriter, BinaryPlyBytesAreTheFormatsDefinition) {
+  TempDir dir;
+  TriangleMesh mesh = golden_mesh();
+  write_ply(dir.file("v.ply"), mesh);
+  EXPECT_EQ(read_text(dir.file("v.ply")), golden_binary_ply(true));
+  mesh.triangle_values.clear();
+  write_mesh(dir.file("p.ply"), mesh);
+  EXPECT_EQ(read_text(dir.file("p.ply")), golden_binary_ply(false));
+}
+
+// A text file of golden_mesh(): `head`, the three special vertices' lines, 297 times the line of
+// a vertex at the origin, then the faces' lines.
+std::string golden_text(std::string head, const char* vertices, const char* origin,
+                        const char* faces) {
+  head += vertices;
+  for (int i = 3; i < 300; ++i) head += origin;
+  return head + faces;
+}
+
+TEST(MeshWriter, AsciiPlyBytesAreTheFormatsDefinition) {
+  TempDir dir;
+  write_ply(dir.file("a.ply"), golden_mesh(), false);
+  EXPECT_EQ(read_text(dir.file("a.ply")),
+            golden_text(ply_header("ascii", true),
+                        "1 -2.5 0.10000000000000001\n"
+                        "-0 1e+17 0.33333333333333331\n"
+                        "123456789.125 4.9406564584124654e-324 0\n",
+                        "0 0 0\n", "3 0 1 2 0.25\n3 299 256 2 -7.5\n3 2 257 298 1e+20\n"));
+}
+
+TEST(MeshWriter, ObjBytesAreTheFormatsDefinition) {
+  TempDir dir;
+  write_mesh(dir.file("m.obj"), golden_mesh());
+  EXPECT_EQ(read_text(dir.file("m.obj")),
+            golden_text("# smrdb mesh: 300 vertices, 3 triangles\n",
+                        "v 1 -2.5 0.1\n"
+                        "v -0 1e+17 0.3333333333333333\n"
+                        "v 123456789.125 5e-324 0\n",
+                        "v 0 0 0\n", "f 1 2 3\nf 300 257 3\nf 3 258 299\n"));
+}
+
+// Files of several MiB, so that every format crosses the writers' output chunks (and binary PLY
+// writes its vertex array in one piece): coordinates i + 0.25, -(i + 0.5), 0.75 and values
+// t + 0.25, whose decimal forms are those of the integers with ".25" / ".5" appended.
+TEST(MeshWriter, LargeMeshBytesAreTheFormatsDefinition) {
+  constexpr std::uint32_t kVertices = 100000, kTriangles = 300000;
+  TriangleMesh mesh;
+  for (std::uint32_t i = 0; i < kVertices; ++i)
+    mesh.positions.push_back({i + 0.25, -(i + 0.5), 0.75});
+  for (std::uint32_t t = 0; t < kTriangles; ++t) {
+    mesh.triangles.push_back({t % kVertices, (7 * t + 1) % kVertices, (13 * t + 2) % kVertices});
+    mesh.triangle_values.push_back(static_cast<float>(t) + 0.25f);
+  }
+  const auto x = [](std::uint32_t i) { return std::to_string(i) + ".25"; };
+  const auto y = [](std::uint32_t i) {
+    return std::string("-").append(std::to_string(i)).append(".5");
+  };
+  TempDir dir;
+
+  write_obj(dir.file("m.obj"), mesh);
+  std::string obj = "# smrdb mesh: 100000 vertices, 300000 triangles\n";
+  for (std::uint32_t i = 0; i < kVertices; ++i) obj += "v " + x(i) + " " + y(i) + " 0.75\n";
+  for (const auto& t : mesh.triangles) {
+    obj += "f " + std::to_string(t[0] + 1) + " " + std::to_string(t[1] + 1) + " " +
+           std::to_string(t[2] + 1) + "\n";
+  }
+  ASSERT_GT(obj.size(), 4u << 20);  // more than one of the writers' 4 MiB chunks
+  expect_bytes(dir.file("m.obj"), obj);
+
+  write_ply(dir.file("a.ply"), mesh, false);
+  std::string ascii = ply_header("ascii", true, kVertices, kTriangles);
+  for (std::uint32_t i = 0; i < kVertices; ++i) ascii += x(i) + " " + y(i) + " 0.75\n";
+  for (std::uint32_t t = 0; t < kTriangles; ++t) {
+    const auto& f = mesh.triangles[t];
+    ascii += "3 " + std::to_string(f[0]) + " " + std::to_string(f[1]) + " " + std::to_string(f[2]) +
+             " " + x(t) + "\n";
+  }
+  expect_bytes(dir.file("a.ply"), ascii);
+
+  write_ply(dir.file("b.ply"), mesh);
+  std::string binary = ply_header("binary_little_endian", true, kVertices, kTriangles);
+  for (const Vec3& p : mesh.positions) {
+    for (int k = 0; k < 3; ++k) append_le(binary, std::bit_cast<std::uint64_t>(p[k]), 8);
+  }
+  for (std::uint32_t t = 0; t < kTriangles; ++t) {
+    binary += '\3';
+    for (std::uint32_t v : mesh.triangles[t]) append_le(binary, v, 4);
+    append_le(binary, std::bit_cast<std::uint32_t>(mesh.triangle_values[t]), 4);
+  }
+  expect_bytes(dir.file("b.ply"), binary);
+}
+
+TEST(MeshWriter, EmptyMeshBytes) {
+  TempDir dir;
+  write_obj(dir.file("e.obj"), TriangleMesh{});
+  EXPECT_EQ(read_text(dir.file("e.obj")), "# smrdb mesh: 0 vertices, 0 triangles\n");
+  write_ply(dir.file("e.ply"), TriangleMesh{});
+  EXPECT_EQ(read_text(dir.file("e.ply")),
+            "ply\nformat binary_little_endian 1.0\ncomment smrdb mesh\nelement vertex 0\n"
+            "property double x\nproperty double y\nproperty double z\nelement face 0\n"
+            "property list uchar uint vertex_indices\nend_header\n");
 }
 
 TEST(MeshWriter, WriteMeshDispatchesOnExtension) {
