@@ -1,0 +1,79 @@
+// Storage rounding (smr/db/quantize.h): pages keep resolutions as 32-bit floats, rounded down, and
+// derive errors from them; every bound a database states must stay true after the rounding.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <vector>
+
+#include "smr/db/database.h"
+#include "smr/db/quantize.h"
+#include "smr/db/writer.h"
+#include "tests/support/datasets.h"
+#include "tests/support/files.h"
+
+namespace smr {
+namespace {
+
+TEST(StoredResolution, RoundsDownToAFloatAndKeepsOrder) {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  std::vector<double> rs(100000);
+  for (double& r : rs) r = unit(rng);
+  rs.push_back(0.0);
+  std::sort(rs.begin(), rs.end());
+  double prev = 0.0;
+  for (const double r : rs) {
+    const double s = stored_resolution(r);
+    ASSERT_EQ(double(float(s)), s) << r;          // a float
+    ASSERT_LE(s, r) << r;                         // never above
+    ASSERT_LT(r - s, std::ldexp(1.0, -23)) << r;  // the float just below at worst
+    ASSERT_GE(s, prev) << r;                      // monotone
+    prev = s;
+  }
+  for (double exact : {0.0, 1.0, 0.5, 0.25, double(0.1f), double(std::nextafter(1.0f, 0.0f))})
+    EXPECT_EQ(stored_resolution(exact), exact);
+  EXPECT_EQ(stored_resolution(double(0.1f) + 1e-12), double(0.1f));
+  EXPECT_EQ(stored_resolution(double(0.1f) - 1e-12), double(std::nextafter(0.1f, 0.0f)));
+}
+
+// A database written from a real DEM: every op's stored birth_res and every triangle's death_res
+// is at most the builder's, by less than a float step, and every stored error at least the
+// builder's: a triangle reads at least its true error, so no bound of the source is lost.
+TEST(StoredResolution, DatabasesOnlyGrowErrors) {
+  for (const char* name : {"topobathy", "elev"}) {
+    const test::Dataset& d = test::dataset(name);
+    const Crmr exact = d.crmr;
+    Crmr m = d.crmr;
+    test::TempDir dir("smrdb-quantize-test");
+    const std::string path = dir.file("x.smrdb");
+    write_database(m, path, {});
+    const auto db = Database::open(path, {});
+    ASSERT_EQ(db->op_count(), exact.ops.size());
+    std::size_t rounded = 0;
+    for (const Op& e : exact.ops) {
+      const OpRef got = db->op(e.id);
+      ASSERT_LE(got->birth_res, e.birth_res) << name << " op " << e.id.value;
+      ASSERT_LT(e.birth_res - got->birth_res, std::ldexp(1.0, -23)) << name;
+      // Up to the rounding of the error <-> resolution map itself (1e-12 of err0, as the
+      // invariants allow): ops at resolution 0 or 1 are floats already and keep their error.
+      const double noise = 1e-12 * exact.header.err0;
+      ASSERT_GE(got->error, e.error - noise) << name << " op " << e.id.value;
+      ASSERT_GE(db->error_at(got->birth_res), e.error - noise) << name << " op " << e.id.value;
+      rounded += got->birth_res != e.birth_res;
+      ASSERT_EQ(got->fragment.size(), e.fragment.size());
+      for (std::size_t i = 0; i < e.fragment.size(); ++i) {
+        ASSERT_LE(got->fragment[i].death_res, e.fragment[i].death_res) << name;
+        ASSERT_GE(db->error_at(got->fragment[i].death_res),
+                  exact.error_at(e.fragment[i].death_res) - noise)
+            << name << " op " << e.id.value << " triangle " << i;
+      }
+    }
+    EXPECT_GT(rounded, exact.ops.size() / 2) << name << ": the rounding is exercised";
+  }
+}
+
+}  // namespace
+}  // namespace smr
