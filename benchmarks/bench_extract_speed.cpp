@@ -1,7 +1,8 @@
 // bench_extract_speed: how fast an on-disk database gives back a mesh (issue 34's targets), the
 // figure run_extract_vs_martini.sh sets beside @mapbox/martini's getMesh. Prints one JSON object.
 //
-// Cases, each with minimal surface (Brown 5.1) and reduced extraction (Brown 5.2; terrain only):
+// Cases, each with minimal surface (Brown 5.1; "minimal-pages": its triangles from the set formula,
+// ExpansionOptions::fronts false) and reduced extraction (Brown 5.2; terrain only):
 //   full     an RCF of constant object-space level 1 (`smrdb extract --floor 1`): the whole
 //            finest mesh M^m, every data page read;
 //   oblique  a 1 px screen-space view (bench_db's named `oblique` camera relative to the bounds,
@@ -52,7 +53,7 @@ using smr::bench::seconds_since;
 struct Args {
   std::string db, ply, view = "oblique", eye, target, viewport = "1024x768";
   std::vector<std::string> cases{"full", "oblique"};
-  std::vector<std::string> algorithms{"minimal", "reduced"};
+  std::vector<std::string> algorithms{"minimal", "minimal-pages", "reduced"};
   double pixel_error = 1.0, fov = 60.0;
   std::uint64_t cache_mb = 1024;
   int repeat = 5;
@@ -86,14 +87,15 @@ struct Run {
   std::string tiling;  // "ok" or the first failure; empty when not checked
 };
 
-Run run_once(const smr::Database& db, const smr::Rcf& rcf, bool reduced, const std::string& ply,
-             bool verify) {
+Run run_once(const smr::Database& db, const smr::Rcf& rcf, const std::string& alg,
+             const std::string& ply, bool verify) {
   Run r;
   const json before = db.stats();
   std::uint64_t t0 = now_ns();
   const smr::IndexedSource source(db);
   const smr::Extraction e =
-      reduced ? smr::extract_reduced(source, rcf) : smr::extract_minimal_surface(source, rcf);
+      alg == "reduced" ? smr::extract_reduced(source, rcf)
+                       : smr::extract_minimal_surface(source, rcf, {.fronts = alg == "minimal"});
   r.extract = seconds_since(t0);
   t0 = now_ns();
   const smr::TriangleMesh mesh = smr::to_mesh(db, e.triangles);
@@ -170,20 +172,20 @@ json cache_json(const json& io, std::uint64_t cache_mb) {
       {"evictions", io.value("cache_evictions", std::uint64_t{0})}};
 }
 
-json run_case(const Args& a, const std::string& name, const smr::Rcf& rcf, bool reduced) {
+json run_case(const Args& a, const std::string& name, const smr::Rcf& rcf, const std::string& alg) {
   std::vector<Run> warm, hot;
   std::vector<double> open;
   for (int i = 0; i < a.repeat; ++i) {
     const std::uint64_t t0 = now_ns();
     const auto db = smr::Database::open(a.db, {std::size_t(a.cache_mb) << 20});
     open.push_back(seconds_since(t0));
-    warm.push_back(run_once(*db, rcf, reduced, a.ply, a.verify && i == 0));
-    hot.push_back(run_once(*db, rcf, reduced, a.ply, false));
+    warm.push_back(run_once(*db, rcf, alg, a.ply, a.verify && i == 0));
+    hot.push_back(run_once(*db, rcf, alg, a.ply, false));
   }
   const Run& first = warm.front();
   const smr::ExtractStats& s = first.stats;
   json c = {{"case", name},
-            {"algorithm", reduced ? "reduced" : "minimal"},
+            {"algorithm", alg},
             {"rcf", rcf.describe()},
             {"triangles", first.triangles},
             {"mesh_vertices", first.vertices},
@@ -199,9 +201,9 @@ json run_case(const Args& a, const std::string& name, const smr::Rcf& rcf, bool 
             {"cache", cache_json(first.io, a.cache_mb)}};
   if (!first.tiling.empty()) c["tiling"] = first.tiling;
   std::fprintf(stderr,
-               "  %-7s %-7s %9zu triangles  warm %.3f s (%.3g tri/s), +PLY %.3f s, hot %.3f s; "
+               "  %-7s %-13s %9zu triangles  warm %.3f s (%.3g tri/s), +PLY %.3f s, hot %.3f s; "
                "%llu pages read\n",
-               name.c_str(), reduced ? "reduced" : "minimal", first.triangles,
+               name.c_str(), alg.c_str(), first.triangles,
                c["warm"]["in_memory_seconds"]["median"].get<double>(),
                c["warm"]["triangles_per_second"].get<double>(),
                c["warm"]["with_ply_seconds"]["median"].get<double>(),
@@ -278,10 +280,10 @@ json run(const Args& a) {
     smr::validate(spec);
     const smr::Rcf rcf = smr::make_rcf(spec, info.kind, nullptr);
     for (const std::string& alg : a.algorithms) {
-      if (alg != "minimal" && alg != "reduced")
+      if (alg != "minimal" && alg != "minimal-pages" && alg != "reduced")
         smr::throw_input("--algorithms: unknown algorithm '" + alg + "'");
       if (alg == "reduced" && info.kind != smr::ModelKind::kTerrain) continue;
-      cases.push_back(run_case(a, name, rcf, alg == "reduced"));
+      cases.push_back(run_case(a, name, rcf, alg));
     }
   }
   out["cases"] = cases;
@@ -298,7 +300,7 @@ int main(int argc, char** argv) {
   Args a;
   app.add_option("db", a.db, "Database file")->required();
   app.add_option("--cases", a.cases, "full,oblique")->delimiter(',')->capture_default_str();
-  app.add_option("--algorithms", a.algorithms, "minimal,reduced")
+  app.add_option("--algorithms", a.algorithms, "minimal,minimal-pages,reduced")
       ->delimiter(',')
       ->capture_default_str();
   app.add_option("--cache-mb", a.cache_mb, "Decoded-page cache budget, MiB")->capture_default_str();

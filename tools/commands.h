@@ -59,6 +59,7 @@ struct IngestArgs {
 /// `extract` and `build`: the output and how to extract it.
 struct ExtractArgs {
   std::string algorithm = "minimal", out, png, dem;
+  std::string order = "fronts";  // ExpansionOptions::fronts: "fronts" or "pages"
   std::uint64_t cache_mb = 64;
   std::uint64_t held_mb = 512;  // ExpansionOptions::max_held_bytes, in MiB
 

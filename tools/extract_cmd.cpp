@@ -112,6 +112,11 @@ RcfSpec RcfOptions::spec() const {
 void ExtractArgs::add_to(CLI::App& app, bool with_budgets) {
   app.add_option("--algorithm", algorithm, "minimal (Brown 5.1) or reduced (Brown 5.2)")
       ->capture_default_str();
+  app.add_option("--order", order,
+                 "fronts: triangles as the advancing front emits them, in fans (Brown 5.1.2); "
+                 "pages: the same triangles from the set formula, page by page (minimal only; "
+                 "faster)")
+      ->capture_default_str();
   app.add_option("-o,--output", out, "Output mesh (.obj or .ply)")->required();
   app.add_option("--png", png, "Also write a top-down picture of the mesh (.png)");
   if (with_budgets) {
@@ -127,6 +132,12 @@ void ExtractArgs::add_to(CLI::App& app, bool with_budgets) {
 void ExtractArgs::validate() const {
   if (algorithm != "minimal" && algorithm != "reduced")
     throw_input("--algorithm must be 'minimal' or 'reduced', got '" + algorithm + "'");
+  if (order != "fronts" && order != "pages")
+    throw_input("--order must be 'fronts' or 'pages', got '" + order + "'");
+  if (order == "pages" && algorithm != "minimal")
+    throw_input(
+        "--order pages needs --algorithm minimal (reduced extraction grows X+ as its "
+        "front advances)");
   const std::string ext = extension_of(out);
   if (ext != ".obj" && ext != ".ply")
     throw_input("-o " + out + ": the output must end in .obj or .ply");
@@ -145,12 +156,14 @@ nlohmann::json run_extract(const Database& db, const Heightfield* dem, const Rcf
   const Rcf rcf = make_rcf(spec, db.info().kind, dem);
   ExpansionOptions expansion;
   expansion.max_held_bytes = a.held_mb << 20;
+  expansion.fronts = a.order == "fronts";
   const IndexedSource source(db);  // the R-tree answers the RCF's queries
   const Extraction e = a.algorithm == "reduced" ? extract_reduced(source, rcf, expansion)
                                                 : extract_minimal_surface(source, rcf, expansion);
   report["rcf"] = rcf.describe();
   report["extraction"] = e.stats;
   report["extraction"]["algorithm"] = a.algorithm;
+  report["extraction"]["order"] = a.order;
   if (verify && db.info().kind == ModelKind::kTerrain) {
     const InvariantReport r = check_tiling(db, e.triangles);
     if (!r.ok()) throw_internal("output does not tile the domain: " + r.summary());

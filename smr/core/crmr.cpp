@@ -30,7 +30,6 @@ OpView::OpView(const Op& op)
       children(op.children),
       box(op.box),
       sphere(op.sphere),
-      cone(op.cone),
       roi(op.roi),
       subtree_cone(op.subtree_cone) {}
 
@@ -73,9 +72,10 @@ Op to_op(const OpView& view) {
   op.coarser.assign(view.coarser.begin(), view.coarser.end());
   op.parents.assign(view.parents.begin(), view.parents.end());
   op.children.assign(view.children.begin(), view.children.end());
+  derive_fragment_neighbours(op);  // views from pages do not carry them
   op.box = view.box;
   op.sphere = view.sphere;
-  op.cone = view.cone;
+  op.cone = op_bounds(view).cone;  // nor their own normal cone
   op.roi = view.roi;
   op.subtree_cone = view.subtree_cone;
   return op;
@@ -117,7 +117,15 @@ void derive_fragment_neighbours(Op& op) {
 }
 
 void derive_fragment_neighbours(std::span<FragmentTriangle> fragment) {
+  thread_local std::vector<std::array<std::int32_t, 3>> nbr;
+  fragment_neighbours(fragment, nbr);
+  for (std::size_t i = 0; i < fragment.size(); ++i) fragment[i].nbr = nbr[i];
+}
+
+void fragment_neighbours(std::span<const FragmentTriangle> fragment,
+                         std::vector<std::array<std::int32_t, 3>>& nbr) {
   const std::size_t n = fragment.size();
+  nbr.resize(n);
   if (n > 64) {
     std::unordered_map<std::uint64_t, std::int32_t> by_edge;
     by_edge.reserve(n * 3);
@@ -126,22 +134,24 @@ void derive_fragment_neighbours(std::span<FragmentTriangle> fragment) {
       for (int k = 0; k < 3; ++k)
         by_edge[(std::uint64_t(v[k]) << 32) | v[(k + 1) % 3]] = std::int32_t(i);
     }
-    for (FragmentTriangle& t : fragment) {
+    for (std::size_t i = 0; i < n; ++i) {
+      const auto& v = fragment[i].v;
       for (int k = 0; k < 3; ++k) {
-        auto it = by_edge.find((std::uint64_t(t.v[(k + 1) % 3]) << 32) | t.v[k]);
-        t.nbr[k] = it == by_edge.end() ? FragmentTriangle::kNoNeighbour : it->second;
+        auto it = by_edge.find((std::uint64_t(v[(k + 1) % 3]) << 32) | v[k]);
+        nbr[i][k] = it == by_edge.end() ? FragmentTriangle::kNoNeighbour : it->second;
       }
     }
     return;
   }
-  for (FragmentTriangle& t : fragment) {
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto& v = fragment[i].v;
     for (int k = 0; k < 3; ++k) {
-      const std::uint32_t a = t.v[(k + 1) % 3], b = t.v[k];  // the reversed edge a -> b
-      t.nbr[k] = FragmentTriangle::kNoNeighbour;
+      const std::uint32_t a = v[(k + 1) % 3], b = v[k];  // the reversed edge a -> b
+      nbr[i][k] = FragmentTriangle::kNoNeighbour;
       for (std::size_t j = 0; j < n; ++j) {
         const auto& u = fragment[j].v;
         if ((u[0] == a && u[1] == b) || (u[1] == a && u[2] == b) || (u[2] == a && u[0] == b)) {
-          t.nbr[k] = std::int32_t(j);
+          nbr[i][k] = std::int32_t(j);
           break;
         }
       }

@@ -79,6 +79,10 @@ OpBounds op_bounds(const OpView& op);
 /// has the reversed edge (kNoNeighbour if none).
 void derive_fragment_neighbours(Op& op);
 void derive_fragment_neighbours(std::span<FragmentTriangle> fragment);
+/// The same neighbours into `nbr` (one entry per triangle), for fragments that do not keep them
+/// (a paged op's view).
+void fragment_neighbours(std::span<const FragmentTriangle> fragment,
+                         std::vector<std::array<std::int32_t, 3>>& nbr);
 
 /// ROI of every op = its box united with its children's ROIs (children have larger ids).
 void compute_rois(Crmr& crmr);

@@ -125,9 +125,11 @@ struct OpView {
   std::span<const OpId> children;
   Box3 box;
   Sphere sphere;
-  NormalCone cone;
   Box3 roi;
   NormalCone subtree_cone;
+  // Not here, though Op has them, since pages derive them only on demand: each fragment
+  // triangle's `nbr` (fragment_neighbours, crmr.h; a paged op's are kNoNeighbour) and the op's
+  // own normal cone (op_bounds(view).cone).
 
   OpView() = default;
   OpView(const Op& op);  // NOLINT(google-explicit-constructor): an Op reads as its view
@@ -148,8 +150,8 @@ struct OpView {
   const FragmentTriangle& triangle(std::uint32_t i) const;
 };
 
-/// An Op with the view's contents (corners renumbered to the op's own vertex list): equal to the
-/// Op the view was written from.
+/// An Op with the view's contents (corners renumbered to the op's own vertex list, neighbours and
+/// the normal cone derived): equal to the Op the view was written from.
 Op to_op(const OpView& view);
 
 }  // namespace smr

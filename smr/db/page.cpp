@@ -2,6 +2,10 @@
 
 #include <algorithm>
 #include <array>
+#include <climits>
+#include <cmath>
+
+#include <glm/geometric.hpp>
 #include <memory>
 #include <type_traits>
 #include <unordered_map>
@@ -369,11 +373,29 @@ class PageDecoder {
     }
     op.coarser = {links, std::size_t(nl)};
     if (op.fragment.empty() && op.pre.empty()) r.fail("an op without triangles");
-    const OpBounds b = op_bounds(op);
-    op.box = b.box;
-    op.sphere = b.sphere;
-    op.cone = b.cone;
-    read_roi_and_cone(r, op);
+    if (op.vertex_list.empty()) r.fail("an op without vertices");
+    read_roi_and_cone(r, op, set_box_and_sphere(op));
+  }
+
+  // op_bounds' box and sphere, from the op's own vertices: they are exactly the corners of F
+  // and PreF (every listed vertex is used; PreF's corners are F's), so the values are the same.
+  // The box is found on the grid (dequantizing is monotone on each axis); returns it there.
+  std::array<std::array<std::int32_t, 3>, 2> set_box_and_sphere(OpView& op) const {
+    std::array<std::int32_t, 3> lo{INT32_MAX, INT32_MAX, INT32_MAX};
+    std::array<std::int32_t, 3> hi{INT32_MIN, INT32_MIN, INT32_MIN};
+    for (std::uint32_t v : op.vertex_list) {
+      const auto& q = geometry_.positions[v];
+      for (int k = 0; k < 3; ++k) lo[k] = std::min(lo[k], q[k]), hi[k] = std::max(hi[k], q[k]);
+    }
+    op.box = Box3{grid_.dequantize(lo), grid_.dequantize(hi)};
+    op.sphere.center = op.box.center();
+    double r2 = 0.0;
+    for (std::uint32_t v : op.vertex_list) {
+      const Vec3 d = op.vertices[v].p - op.sphere.center;
+      r2 = std::max(r2, glm::dot(d, d));
+    }
+    op.sphere.radius = std::sqrt(r2);
+    return {lo, hi};
   }
 
   void read_children_and_fragment(ByteReader& r, OpView& op, std::uint32_t stamp) {
@@ -416,8 +438,7 @@ class PageDecoder {
       if (v >= nf) r.fail("void triangle out of range");
       tris[v].flags |= FragmentTriangle::kVoid;
     }
-    op.fragment = {tris, std::size_t(nf)};
-    derive_fragment_neighbours(std::span<FragmentTriangle>(tris, std::size_t(nf)));
+    op.fragment = {tris, std::size_t(nf)};  // neighbours are derived on demand
   }
 
   void read_parents_and_pre(ByteReader& r, OpView& op) {
@@ -457,8 +478,9 @@ class PageDecoder {
     op.pre_tris = {pre_tris, std::size_t(npre)};
   }
 
-  void read_roi_and_cone(ByteReader& r, OpView& op) {
-    auto lo = grid_.quantize(op.box.lo), hi = grid_.quantize(op.box.hi);
+  void read_roi_and_cone(ByteReader& r, OpView& op,
+                         std::array<std::array<std::int32_t, 3>, 2> box) {
+    auto [lo, hi] = box;
     for (int k = 0; k < 3; ++k)
       lo[k] = std::int32_t(std::int64_t(lo[k]) - std::int64_t(r.varint()));
     for (int k = 0; k < 3; ++k)

@@ -2,9 +2,10 @@
 // their geometry — the page's distinct vertices on the global quantization grid and every
 // fragment triangle, in op order — through a storage codec (Draco, zstd or raw), and their
 // compact records (ids, resolutions, PreF, DAG and Hypermesh links, ROI, subtree normal cone)
-// as zstd-compressed varints. What an op's record can derive is not stored: box, sphere and normal
-// cone are recomputed from the corners (compute_op_bounds), in-fragment neighbours from shared
-// edges, and a triangle's death_res is its killer's birth_res (every killer is a child).
+// as zstd-compressed varints. What an op's record can derive is not stored: box and sphere are
+// recomputed from its vertices (compute_op_bounds' values), its own normal cone and in-fragment
+// neighbours only by readers that need them (op_bounds, fragment_neighbours), and a triangle's
+// death_res is its killer's birth_res (every killer is a child).
 // Resolutions are 32-bit floats, rounded by the writer so that every bound stays true, and an
 // op's error is the one its resolution stands for (smr/db/quantize.h: round_for_storage,
 // stored_op_error).

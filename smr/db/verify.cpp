@@ -105,7 +105,7 @@ void read_pages(const Database& db, Gathered& g, VerifyReport& rep, Faults& faul
       for (const TriRef& t : op.pre) g.pre.push_back({t, op.id});
       for (const CoarserLink& l : op.coarser) g.links.push_back({op.id, l.coarser});
       if (!contains(op.roi, op.box)) fault(name + ": its ROI does not contain its box");
-      if (!cone_contains(op.subtree_cone, op.cone))
+      if (!cone_contains(op.subtree_cone, op_bounds(op).cone))
         fault(name + ": its subtree normal cone does not hold its own");
     }
   }

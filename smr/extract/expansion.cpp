@@ -17,6 +17,7 @@
 #include <utility>
 
 #include "base/error.h"
+#include "smr/core/crmr.h"
 #include "smr/core/id_map.h"
 #include "smr/core/invariants.h"
 
@@ -258,6 +259,7 @@ class Expander {
       stacks_.erase(id.value);
     }
     expanded_.assign(op.fragment.size(), 0);
+    fragment_neighbours(op.fragment, nbr_);  // a paged op's view does not carry them
     bool on_front = false;
     for (const FrontKey& k : stack) on_front |= front_.contains(k);
     bool starting = !on_front;
@@ -328,8 +330,8 @@ class Expander {
     if (a == key.v && b == key.u) {
       beyond = entry.tri;
       beyond_edge = entry.edge;
-    } else if (t.nbr[entry.edge] >= 0) {
-      beyond = t.nbr[entry.edge];
+    } else if (nbr_[entry.tri][entry.edge] >= 0) {
+      beyond = nbr_[entry.tri][entry.edge];
       beyond_edge = edge_of(op, op.fragment[beyond], key.v, key.u);
     }
     if (beyond >= 0) {
@@ -415,7 +417,7 @@ class Expander {
     const FragmentTriangle& t = op.fragment[i];
     bool continues = false;
     if (entry_edge >= 0 && fan_.op == op.id &&
-        t.nbr[entry_edge] == static_cast<std::int32_t>(fan_.last)) {
+        nbr_[i][entry_edge] == static_cast<std::int32_t>(fan_.last)) {
       const std::uint64_t u = op.vertex_id(t, entry_edge).value;
       const std::uint64_t v = op.vertex_id(t, (entry_edge + 1) % 3).value;
       if (fan_.len == 1) {
@@ -462,6 +464,7 @@ class Expander {
   FlatMap<FrontKey, FrontEntry, FrontKeys> front_;
   IdMap<std::vector<FrontKey>> stacks_;
   std::vector<std::uint8_t> expanded_;
+  std::vector<std::array<std::int32_t, 3>> nbr_;  // the infilled op's fragment neighbours
   std::unique_ptr<DomainIndex> domain_;
   std::unique_ptr<HeldOps> held_;
   std::uint64_t anomalies_ = 0;

@@ -28,9 +28,47 @@ Extraction extract_minimal_surface(const OpSource& source, const Rcf& rcf,
   const std::vector<OpId> x = add_to_list(source, rcf);
   const double t_extract = seconds_since(t0);
   t0 = Clock::now();
-  Extraction e = run_expansion(source, x, false, options);
+  Extraction e = options.fronts || options.max_triangles != 0
+                     ? run_expansion(source, x, false, options)
+                     : extract_set_formula(source, x);
   e.stats.expand_seconds = seconds_since(t0);
   e.stats.extract_seconds = t_extract;
+  return e;
+}
+
+Extraction extract_set_formula(const OpSource& source, std::span<const OpId> x) {
+  const std::uint64_t n = source.op_count();
+  std::vector<std::uint64_t> in_x((n + 63) / 64, 0);              // a bit per op
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> by_place;  // (locality, id)
+  by_place.reserve(x.size());
+  for (OpId id : x) {
+    if (id.value >= n) throw_input("op " + std::to_string(id.value) + " does not exist");
+    std::uint64_t& word = in_x[id.value / 64];
+    const std::uint64_t bit = std::uint64_t{1} << (id.value % 64);
+    if (word & bit) continue;
+    word |= bit;
+    by_place.push_back({source.locality(id), id.value});
+  }
+  std::sort(by_place.begin(), by_place.end());
+  const auto member = [&](OpId id) {
+    return id.valid() && id.value < n && (in_x[id.value / 64] >> (id.value % 64) & 1) != 0;
+  };
+  Extraction e;
+  for (const auto& [place, id] : by_place) {
+    const OpRef op = source.op(OpId{id});
+    const auto count = static_cast<std::uint32_t>(op->fragment.size());
+    for (std::uint32_t i = 0; i < count; ++i) {
+      const FragmentTriangle& t = op->fragment[i];
+      if (member(t.killer)) continue;
+      e.triangles.push_back({op->id, i});
+      e.stats.void_triangles += t.is_void() ? 1 : 0;
+    }
+  }
+  e.x.reserve(by_place.size());
+  for (const auto& entry : by_place) e.x.push_back(OpId{entry.second});
+  std::sort(e.x.begin(), e.x.end(), std::greater<>());
+  e.stats.x = e.stats.x_plus = e.stats.ops_visited = e.x.size();
+  e.stats.triangles = e.triangles.size();
   return e;
 }
 
