@@ -6,7 +6,7 @@
 // jacksboro_fault_dem.npz's greedy TIN written with each codec (zstd, raw, Draco; write_database)
 // and blobby_3cc.off ingested as a mesh (ingest, zstd). Each page value is read from the file's
 // "pages" table through storage::Env and unsealed as smr::Database does, and every one must decode
-// to exactly what Database::page returns (to_op, op for op). Three regression cases are made from
+// to exactly what Database::page returns (to_op, op for op). Five regression cases are made from
 // R^0's page (regressions()). Then, for a sample of pages (R^0's, the largest, the smallest, then
 // seeded others), every one of these inputs is decoded:
 //   prefix    every truncated prefix of the page (each must be rejected);
@@ -98,7 +98,6 @@ constexpr double kTerrainError = 10.0;
 constexpr std::uint32_t kPageBytes = 1024 - 16;
 constexpr const char* kMesh = "blobby_3cc.off";
 constexpr unsigned kCaseSeconds = 30;  // one decode over this is a hang
-constexpr std::size_t kMultiMutations = 48;
 
 // ---------------------------------------------------------------------------------------------
 // What is being decoded, for a failure, a crash or a hang.
@@ -142,6 +141,7 @@ struct Failure {
 struct CaseFailed {};
 bool g_keep_going = false;
 std::vector<Failure> g_failures;
+bool g_reported = false;  // the failure or crash at hand is printed
 
 [[noreturn]] void fail(const std::string& why) {
   if (!g_keep_going) {
@@ -149,6 +149,7 @@ std::vector<Failure> g_failures;
                  "page fuzz: FAILURE: %s\n  case: %s\n  input saved to page_fuzz-failure.page\n",
                  why.c_str(), describe(g_case).c_str());
     save_input("page_fuzz-failure.page");
+    g_reported = true;
     std::abort();
   }
   std::string k = why;
@@ -247,6 +248,8 @@ std::string check_fragment(const OpView& op, const std::vector<std::uint32_t>& o
 }
 
 std::string check_links(const OpView& op, const std::vector<std::uint32_t>& own) {
+  if (!op.id.valid() || (!op.children.empty() && !op.children.back().valid()))
+    return "the invalid id as the op's or a child's";
   for (std::size_t i = 0; i < op.children.size(); ++i) {
     if (op.children[i] <= (i == 0 ? op.id : op.children[i - 1]))
       return "children not increasing from the op";
@@ -433,6 +436,8 @@ void decode_input(ByteView bytes, const std::string& name, Tally& tally) {
 // The smoke mode.
 
 void on_crash() {
+  if (g_reported) return;
+  g_reported = true;
   std::fprintf(stderr, "page fuzz: crashed on %s\n", describe(g_case).c_str());
   save_input("page_fuzz-failure.page");
 }
@@ -444,12 +449,13 @@ void on_signal(int sig) {
   std::raise(sig == SIGALRM ? SIGABRT : sig);
 }
 
-// Hooks printing the case on a crash (a sanitizer report, a signal) and the watchdog's alarm.
+// Hooks printing the case on a crash (a sanitizer report: the death callback, or SIGABRT with
+// abort_on_error; a signal) and the watchdog's alarm.
 void install_crash_hooks() {
 #if defined(__SANITIZE_ADDRESS__)
   __sanitizer_set_death_callback(on_crash);
 #endif
-  for (int sig : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGALRM}) std::signal(sig, on_signal);
+  for (int sig : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT, SIGALRM}) std::signal(sig, on_signal);
 }
 
 struct Seed {
@@ -510,6 +516,8 @@ std::vector<const Seed*> sample(const std::vector<Seed>& seeds, const Source& s,
 
 // ---------------------------------------------------------------------------------------------
 // Mutations.
+
+constexpr std::size_t kMultiMutations = 48;  // per page, on its bytes and on its records
 
 // A page cut into its parts (page.h's layout), to change one and re-assemble it.
 struct Parts {
@@ -755,6 +763,23 @@ void regressions(const Seed& seed, Tallies& t) {
   first.box.hi.x = first.box.lo.x;
   first.roi.hi.x = model.grid.dequantize({std::numeric_limits<std::int32_t>::max(), 0, 0}).x;
   run_case(encoded(), model, "regression", 3, 0, t);
+  // 4, 5. zstd geometry (codec.cpp's layout: the positions' and then the corners' deltas) of
+  // two positions and one face, whose second x, then second corner, is 2^63 - 1 past the one
+  // before: the decoder added the delta before its range check, a signed overflow (UBSan).
+  for (std::size_t huge : {3, 7}) {
+    std::array<std::int64_t, 9> deltas = {1000, 0, 0, 5, 0, 0, 1, -1, 1};
+    deltas[huge] = std::numeric_limits<std::int64_t>::max();
+    Bytes stream;
+    ByteWriter s(stream);
+    for (std::int64_t d : deltas) s.svarint(d);
+    Bytes zstd;
+    ByteWriter z(zstd);
+    z.varint(2);
+    z.varint(1);
+    z.bytes(storage::zstd_compress(stream));
+    p.codec = static_cast<std::uint8_t>(CodecId::kZstd);
+    run_case(join(p, p.packed, zstd), model, "regression", huge == 3 ? 4 : 5, 0, t);
+  }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -879,6 +904,14 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
 }
 
 #ifndef SMRDB_LIBFUZZER
+#if defined(__SANITIZE_ADDRESS__)
+// UBSan's report ends the process with exit code 1 and no death callback unless it aborts: with
+// abort_on_error the SIGABRT hook prints the case (UBSAN_OPTIONS still overrides it).
+extern "C" const char* __ubsan_default_options() {  // NOLINT(bugprone-reserved-identifier)
+  return "abort_on_error=1";
+}
+#endif
+
 int main(int argc, char** argv) {
   return smr::fuzz::run_main(argc, argv);
 }
