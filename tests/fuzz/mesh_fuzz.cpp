@@ -19,6 +19,8 @@
 #include <string_view>
 #include <vector>
 
+#include "tests/fuzz/fuzz_rng.h"
+
 namespace smr::fuzz {
 
 using Bytes = std::vector<std::uint8_t>;
@@ -449,21 +451,6 @@ std::vector<Bytes> real_meshes(MeshFormat format, std::vector<std::string>& name
 
 // ---------------------------------------------------------------------------------------------
 // Mutations (deterministic: splitmix64)
-
-class Rng {
- public:
-  explicit Rng(std::uint64_t seed) : s_(seed) {}
-  std::uint64_t next() {
-    std::uint64_t z = (s_ += 0x9e3779b97f4a7c15ULL);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-    return z ^ (z >> 31);
-  }
-  std::size_t below(std::size_t n) { return n == 0 ? 0 : static_cast<std::size_t>(next() % n); }
-
- private:
-  std::uint64_t s_;
-};
 
 const char* const kTokens[] = {"0",
                                "-1",
