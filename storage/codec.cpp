@@ -116,11 +116,10 @@ GeometryBlob decode_zstd(ByteReader& r) {
   for (auto& p : blob.positions) {
     for (int a = 0; a < 3; ++a) {
       const std::int64_t delta = s.svarint();
-      const std::int64_t c = prev[a] + delta;
-      if (delta < -(std::int64_t{1} << 33) || delta > (std::int64_t{1} << 33) || c < INT32_MIN ||
-          c > INT32_MAX) {
+      if (delta < -(std::int64_t{1} << 33) || delta > (std::int64_t{1} << 33))
         s.fail("zstd geometry: coordinate out of int32 range");
-      }
+      const std::int64_t c = prev[a] + delta;
+      if (c < INT32_MIN || c > INT32_MAX) s.fail("zstd geometry: coordinate out of int32 range");
       p[a] = static_cast<std::int32_t>(c);
       prev[a] = c;
     }
@@ -130,9 +129,10 @@ GeometryBlob decode_zstd(ByteReader& r) {
   for (std::size_t f = 0; f < nf; ++f) {
     for (std::uint32_t& v : blob.faces[f]) {
       const std::int64_t delta = s.svarint();
+      if (delta < -(std::int64_t{1} << 33) || delta > (std::int64_t{1} << 33))
+        s.fail("zstd geometry: face " + std::to_string(f) + " refers to a position out of range");
       const std::int64_t index = prev_index + delta;
-      if (delta < -(std::int64_t{1} << 33) || delta > (std::int64_t{1} << 33) || index < 0 ||
-          static_cast<std::uint64_t>(index) >= np) {
+      if (index < 0 || static_cast<std::uint64_t>(index) >= np) {
         s.fail("zstd geometry: face " + std::to_string(f) + " refers to a position out of range");
       }
       v = static_cast<std::uint32_t>(index);

@@ -4,6 +4,7 @@
 #include <array>
 #include <climits>
 #include <cmath>
+#include <limits>
 
 #include <glm/geometric.hpp>
 #include <memory>
@@ -284,7 +285,7 @@ class PageDecoder {
   T* carve(std::size_t& at, std::uint64_t n) {
     static_assert(std::is_trivially_destructible_v<T> && alignof(T) <= 16);
     at = (at + alignof(T) - 1) & ~(alignof(T) - 1);
-    T* p = reinterpret_cast<T*>(block_ + at);
+    T* p = block_ == nullptr ? nullptr : reinterpret_cast<T*>(block_ + at);  // sizing pass
     at += std::size_t(n) * sizeof(T);
     return p;
   }
@@ -325,6 +326,8 @@ class PageDecoder {
     std::uint64_t prev = 0;
     for (std::size_t i = 0; i < totals_.vertices; ++i) {
       prev += std::uint64_t(r.svarint());
+      for (std::int32_t c : geometry_.positions[i])  // the writer's grid is +-INT32_MAX
+        if (c == std::numeric_limits<std::int32_t>::min()) r.fail("vertex outside the grid");
       vertices_[i] = {VertexId(prev), grid_.dequantize(geometry_.positions[i])};
     }
   }
@@ -340,6 +343,7 @@ class PageDecoder {
 
   void read_op(ByteReader& r, OpView& op, std::uint64_t prev_op) {
     const std::uint64_t id = prev_op + std::uint64_t(r.svarint());
+    if (id == OpId::kInvalidValue) r.fail("op id out of range");
     op.id = OpId(id);
     op.birth_res = r.f32();
     if (!(op.birth_res >= 0.0 && op.birth_res <= 1.0)) r.fail("resolution out of range");
@@ -405,13 +409,16 @@ class PageDecoder {
     std::uint64_t prev = id;
     for (std::size_t i = 0; i < nc; ++i) {
       const std::uint64_t d = r.varint();
-      if (d == 0 || d > ~prev) r.fail("child id out of range");
+      if (d == 0 || d >= ~prev) r.fail("child id out of range");  // the sum stays below ~0
       prev += d;
       children[i] = OpId(prev);
     }
     op.children = {children, std::size_t(nc)};
     child_res_.resize(nc);
-    for (double& c : child_res_) c = r.f32();
+    for (double& c : child_res_) {
+      c = r.f32();
+      if (!(c >= 0.0 && c <= 1.0)) r.fail("resolution out of range");
+    }
     const std::uint64_t nf = r.varint();
     if (nf > geometry_.faces.size() - face_) r.fail("more triangles than the geometry holds");
     FragmentTriangle* tris = triangles_ + face_;
@@ -481,10 +488,19 @@ class PageDecoder {
   void read_roi_and_cone(ByteReader& r, OpView& op,
                          std::array<std::array<std::int32_t, 3>, 2> box) {
     auto [lo, hi] = box;
-    for (int k = 0; k < 3; ++k)
-      lo[k] = std::int32_t(std::int64_t(lo[k]) - std::int64_t(r.varint()));
-    for (int k = 0; k < 3; ++k)
-      hi[k] = std::int32_t(std::int64_t(hi[k]) + std::int64_t(r.varint()));
+    constexpr std::int64_t kMax = std::numeric_limits<std::int32_t>::max();
+    for (int k = 0; k < 3; ++k) {
+      const std::uint64_t d = r.varint();
+      if (d > std::uint64_t(2 * kMax) || std::int64_t(lo[k]) - std::int64_t(d) < -kMax)
+        r.fail("ROI outside the grid");
+      lo[k] = std::int32_t(std::int64_t(lo[k]) - std::int64_t(d));
+    }
+    for (int k = 0; k < 3; ++k) {
+      const std::uint64_t d = r.varint();
+      if (d > std::uint64_t(2 * kMax) || std::int64_t(hi[k]) + std::int64_t(d) > kMax)
+        r.fail("ROI outside the grid");
+      hi[k] = std::int32_t(std::int64_t(hi[k]) + std::int64_t(d));
+    }
     op.roi = Box3{grid_.dequantize(lo), grid_.dequantize(hi)};
     ConeCode cone;
     const std::uint8_t cone_flag = r.u8();

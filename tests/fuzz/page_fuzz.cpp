@@ -65,6 +65,7 @@
 #include "smr/builders/terrain/greedy_tin.h"
 #include "smr/core/clock.h"
 #include "smr/db/database.h"
+#include "smr/core/crmr.h"
 #include "smr/db/page.h"
 #include "smr/db/tables.h"
 #include "smr/db/writer.h"
@@ -220,12 +221,15 @@ Oddities g_odd;
 
 std::string check_fragment(const OpView& op, const std::vector<std::uint32_t>& own) {
   std::vector<double> child_death(op.children.size(), -1.0);
-  for (const FragmentTriangle& t : op.fragment) {
+  std::vector<std::array<std::int32_t, 3>> nbr;  // views carry none: derived as readers do
+  fragment_neighbours(op.fragment, nbr);
+  for (std::size_t i = 0; i < op.fragment.size(); ++i) {
+    const FragmentTriangle& t = op.fragment[i];
     if (auto bad = check_corners(op, t.v, own); !bad.empty()) return "fragment: " + bad;
     if (t.v[0] == t.v[1] || t.v[1] == t.v[2] || t.v[0] == t.v[2]) ++g_odd.repeated_corner;
     if ((t.flags & ~FragmentTriangle::kVoid) != 0) return "a triangle with unknown flags";
     for (int k = 0; k < 3; ++k) {
-      const std::int32_t n = t.nbr[std::size_t(k)];
+      const std::int32_t n = nbr[i][std::size_t(k)];
       if (n == FragmentTriangle::kNoNeighbour) continue;
       if (n < 0 || std::size_t(n) >= op.fragment.size()) return "a neighbour out of the fragment";
       if (!has_directed_edge(op.fragment[std::size_t(n)], t.v[std::size_t((k + 1) % 3)],
@@ -286,7 +290,7 @@ std::string check_op(const OpView& op, const CrmrInfo& info) {
   if (auto bad = check_fragment(op, own); !bad.empty()) return bad;
   if (auto bad = check_links(op, own); !bad.empty()) return bad;
   if (op.box.empty() || !op.roi.contains(op.box)) return "an ROI that does not hold the box";
-  if (!(op.sphere.radius >= 0.0) || !(op.cone.half_angle >= 0.0) ||
+  if (!(op.sphere.radius >= 0.0) || !(op_bounds(op).cone.half_angle >= 0.0) ||
       !(op.subtree_cone.half_angle >= 0.0))
     return "a bad sphere or normal cone";
   return {};
