@@ -41,7 +41,8 @@ class PageCache {
   // not kept. Evicted values stay alive while callers hold them. load() runs without the lock,
   // so two threads missing the same key may both load it (the first one stored is kept); an
   // exception from load() propagates and caches nothing.
-  std::shared_ptr<const Value> get(std::uint64_t key, const std::function<Loaded()>& load) {
+  template <class Load>  // Loaded load()
+  std::shared_ptr<const Value> get(std::uint64_t key, Load&& load) {
     {
       std::lock_guard lock(mutex_);
       if (auto it = index_.find(key); it != index_.end()) {

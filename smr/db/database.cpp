@@ -26,6 +26,8 @@ using storage::ByteView;
 
 namespace {
 
+std::atomic<std::uint64_t> next_instance{1};  // Database::instance_ values, never reused
+
 // A cached value's own cost beyond its payload: the shared_ptr's block holding the variant and the
 // cache's list and map nodes.
 constexpr std::size_t kCacheItemOverhead = 160;
@@ -96,10 +98,35 @@ std::unique_ptr<storage::Env> open_env(const std::string& path) {
 
 }  // namespace
 
+// Each thread's last pages and locator blocks (8 of each, direct-mapped): extraction reads ops
+// page by page, and most op() and locality() calls then find their page and locator here without
+// the cache's lock and hash lookup. A memo keeps its items alive: up to 8 pages and 8 blocks per
+// thread beyond the cache's budget.
+struct Database::Memo {
+  static constexpr std::size_t kSlots = 8;  // direct-mapped by key: a sweep alternates few pages
+  struct Slot {
+    std::uint64_t instance = 0, key = 0;
+    std::shared_ptr<const CacheItem> item;
+  };
+  std::array<Slot, kSlots> slots;
+  Slot& slot(std::uint64_t key) { return slots[key % kSlots]; }
+  void forget(std::uint64_t instance) {
+    for (Slot& s : slots) {
+      if (s.instance == instance) s = Slot{};
+    }
+  }
+};
+
+Database::Memo& Database::memo(std::uint64_t kind) {
+  thread_local std::array<Memo, 2> memos;  // kind 1: pages, kind 2: locator blocks
+  return memos[kind - 1];
+}
+
 std::unique_ptr<Database> Database::open(const std::string& path, const Options& options) {
   std::unique_ptr<Database> db(new Database());
   db->env_ = open_env(path);
   db->cache_ = std::make_unique<storage::PageCache<CacheItem>>(options.cache_bytes);
+  db->instance_.store(next_instance.fetch_add(1));
   const storage::ReadTxn txn = db->env_->read();
   const auto meta = txn.get(Table::kMeta, "meta");
   if (!meta) {
@@ -139,7 +166,11 @@ std::unique_ptr<Database> Database::open(const std::string& path, const Options&
   return db;
 }
 
-Database::~Database() = default;
+Database::~Database() {
+  for (std::uint64_t kind : {1, 2})
+    memo(kind).forget(instance_.load());  // this thread's (others'
+                                          // lapse: never matched)
+}
 
 const std::string& Database::path() const {
   return env_->path();
@@ -160,7 +191,16 @@ void Database::maybe_release() const {
 std::shared_ptr<const Database::CacheItem> Database::cached(std::uint64_t kind, Table table,
                                                             std::uint64_t id) const {
   const std::uint64_t key = (kind << 60) | id;
-  return cache_->get(key, [&]() { return naming_file(path(), [&] { return load(table, id); }); });
+  const auto get = [&] {
+    return cache_->get(key, [&]() { return naming_file(path(), [&] { return load(table, id); }); });
+  };
+  if (kind != 1 && kind != 2) return get();
+  Memo::Slot& m = memo(kind).slot(id);
+  const std::uint64_t instance = instance_.load(std::memory_order_relaxed);
+  if (m.instance == instance && m.key == key) return m.item;
+  auto item = get();
+  m = Memo::Slot{instance, key, item};
+  return item;
 }
 
 storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table,
@@ -259,6 +299,9 @@ DatabaseStats Database::stats() const {
 }
 
 void Database::clear_cache() const {
+  // Every thread's memo lapses; this thread's lets go of its items now.
+  const std::uint64_t old = instance_.exchange(next_instance.fetch_add(1));
+  for (std::uint64_t kind : {1, 2}) memo(kind).forget(old);
   cache_->clear();
 }
 

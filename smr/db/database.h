@@ -80,6 +80,8 @@ class Database final : public OpSource {
   using CacheItem =
       std::variant<std::shared_ptr<const DecodedPage>, std::vector<Locator>, storage::Bytes>;
   std::shared_ptr<const CacheItem> cached(std::uint64_t kind, Table table, std::uint64_t id) const;
+  struct Memo;
+  static Memo& memo(std::uint64_t kind);
   // Reads and decodes one value (the cache's loader).
   storage::PageCache<CacheItem>::Loaded load(Table table, std::uint64_t id) const;
   Locator locate(OpId id) const;
@@ -95,6 +97,9 @@ class Database final : public OpSource {
   mutable std::atomic<std::uint64_t> pages_read_{0}, page_bytes_read_{0}, nodes_read_{0};
   mutable std::atomic<std::uint64_t> rtree_bytes_read_{0}, locator_bytes_read_{0};
   mutable std::atomic<std::uint64_t> released_at_{0};
+  // Names this database (and its cache's contents) in each thread's memo of the last page and
+  // locator block it read (cached()): a new number after clear_cache().
+  mutable std::atomic<std::uint64_t> instance_{0};
 };
 
 }  // namespace smr

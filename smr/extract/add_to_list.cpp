@@ -1,7 +1,7 @@
 // Refinement operation extraction (Brown 5.1.1, Fig. 5.2; Lemma 5.2.1 for the reduced variant).
 // AddToList is run with an explicit stack; the set it reaches is the same fixed point.
 #include <algorithm>
-#include <map>
+#include <set>
 #include <vector>
 
 #include "smr/core/id_map.h"
@@ -71,39 +71,50 @@ std::vector<OpId> traverse(const OpSource& source, const Rcf& rcf, bool with_anc
     OpId id;
     bool test;  // reached as a child: joins X only if not completely finer
   };
-  std::map<std::uint64_t, std::vector<Pending>> pending;  // locality -> ops waiting in it
+  // Ops waiting, by locality: a bucket per place (found by hash), and the places with a non-empty
+  // bucket in order (for the sweep), which change far less often than ops are pushed.
+  IdMap<std::uint32_t> bucket_of;  // locality -> 1 + index in buckets
+  std::vector<std::vector<Pending>> buckets;
+  std::set<std::uint64_t> waiting;  // localities whose bucket is not empty
   const auto push = [&](OpId id, bool test) {
-    if (!flags.in_x(id)) pending[source.locality(id)].push_back({id, test});
+    if (flags.in_x(id)) return;
+    const std::uint64_t place = source.locality(id);
+    std::uint32_t& b = bucket_of[place];
+    if (b == 0) {
+      buckets.emplace_back();
+      b = static_cast<std::uint32_t>(buckets.size());
+    }
+    if (buckets[b - 1].empty()) waiting.insert(place);
+    buckets[b - 1].push_back({id, test});
   };
   std::vector<OpId> x;
   push(kBaseOp, false);
   std::uint64_t cursor = 0;
-  while (!pending.empty()) {
-    auto bucket = pending.lower_bound(cursor);
-    if (bucket == pending.end()) bucket = pending.begin();
-    const std::uint64_t here = bucket->first;
-    // Ops pushed into this bucket while it is processed join it (hence the lookup each time).
-    for (;;) {
-      auto it = pending.find(here);
-      if (it == pending.end() || it->second.empty()) break;
-      const Pending next = it->second.back();
-      it->second.pop_back();
-      if (flags.in_x(next.id)) continue;
-      const OpRef op_ref = source.op(next.id);
+  while (!waiting.empty()) {
+    auto next = waiting.lower_bound(cursor);
+    if (next == waiting.end()) next = waiting.begin();
+    const std::uint64_t here = *next;
+    const std::uint32_t b = *bucket_of.find(here) - 1;
+    // Ops pushed into this bucket while it is processed join it (buckets may grow: re-indexed).
+    while (!buckets[b].empty()) {
+      const Pending p = buckets[b].back();
+      buckets[b].pop_back();
+      if (flags.in_x(p.id)) continue;
+      const OpRef op_ref = source.op(p.id);
       const OpView& op = *op_ref;
-      if (next.test && flags.completely_finer(op)) continue;
-      flags.add_to_x(next.id);
-      x.push_back(next.id);
+      if (p.test && flags.completely_finer(op)) continue;
+      flags.add_to_x(p.id);
+      x.push_back(p.id);
       if (!flags.finer(op)) {
         for (OpId c : op.children) {
           if (!ruled_out(c)) push(c, true);
         }
       }
       if (with_ancestors) {
-        for (OpId p : op.parents) push(p, false);
+        for (OpId q : op.parents) push(q, false);
       }
     }
-    pending.erase(here);
+    waiting.erase(here);
     cursor = here + 1;
   }
   std::sort(x.begin(), x.end(), std::greater<>());

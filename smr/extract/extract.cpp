@@ -123,47 +123,70 @@ TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles, 
                                     : source.locality(triangles[i].op);
     order.push_back({place, static_cast<std::uint32_t>(i)});
   }
-  std::stable_sort(order.begin(), order.end(),
-                   [](const auto& a, const auto& b) { return a.first < b.first; });
-  constexpr std::uint64_t kDropped = ~std::uint64_t{0};
-  std::vector<std::array<std::uint64_t, 3>> corners(n);  // vertex ids; kDropped: a void triangle
+  const auto by_place = [](const auto& a, const auto& b) { return a.first < b.first; };
+  if (!std::is_sorted(order.begin(), order.end(), by_place))
+    std::stable_sort(order.begin(), order.end(), by_place);
+  // First pass, page by page: every distinct vertex gets a slot (its id and position, in order of
+  // first use here), and each corner its slot. Corners index their op's vertex pool (a page's
+  // vertex table, or an in-memory op's own list), so a vertex id is looked up once per pool, not
+  // once per corner. The pool stays alive while op_ref holds its op, so a pool met again at the
+  // same address is the same pool.
+  constexpr std::uint32_t kDropped = ~std::uint32_t{0};
+  std::vector<std::array<std::uint32_t, 3>> corners(n);  // slots; kDropped: a void triangle
   std::vector<float> values(n);
-  IdMap<Vec3> position;
+  std::vector<Vec3> positions;   // by slot
+  IdMap<std::uint32_t> slot_of;  // vertex id -> 1 + slot
   // A triangulated surface has about half as many vertices as triangles (Euler), plus its
   // boundary: sized once, since growing by doubling would hold up to twice the output a moment.
   const std::size_t vertices = n / 2 + 4 * static_cast<std::size_t>(std::sqrt(double(n))) + 16;
-  position.reserve(vertices);
+  slot_of.reserve(vertices);
+  positions.reserve(vertices);
+  const Vertex* pool = nullptr;
+  std::vector<std::uint32_t> pool_slot;  // pool index -> 1 + slot, 0 if not met yet
   OpRef op_ref;
   for (const auto& [place, i] : order) {
     if (op_ref == nullptr || op_ref->id != triangles[i].op) op_ref = source.op(triangles[i].op);
     const OpView& op = *op_ref;
+    if (op.vertices.data() != pool) {
+      pool = op.vertices.data();
+      pool_slot.assign(op.vertices.size(), 0);
+    }
     const FragmentTriangle& t = op.triangle(triangles[i].index);
     if (t.is_void() && !keep_void) {
       corners[i][0] = kDropped;
       continue;
     }
     for (int k = 0; k < 3; ++k) {
-      const Vertex& v = op.vertices[t.v[k]];
-      corners[i][k] = v.id.value;
-      position[v.id.value] = v.p;  // the same position wherever a vertex appears
+      std::uint32_t& known = pool_slot[t.v[k]];
+      if (known == 0) {
+        const Vertex& v = op.vertices[t.v[k]];
+        std::uint32_t& slot = slot_of[v.id.value];
+        if (slot == 0) {
+          positions.push_back(v.p);  // the same position wherever a vertex appears
+          slot = static_cast<std::uint32_t>(positions.size());
+        }
+        known = slot;
+      }
+      corners[i][k] = known - 1;
     }
     values[i] = static_cast<float>(t.death_res);
   }
   op_ref.reset();
   std::vector<std::pair<std::uint64_t, std::uint32_t>>().swap(order);
+  slot_of = IdMap<std::uint32_t>();  // freed before the mesh grows
+  // Second pass, in the given order: slots -> mesh indices by first use.
   TriangleMesh mesh;
   mesh.triangles.reserve(n);
   mesh.triangle_values.reserve(n);
-  mesh.positions.reserve(position.size());
-  IdMap<std::uint32_t> index;  // vertex id -> 1 + its index in the mesh
-  index.reserve(position.size());
+  mesh.positions.reserve(positions.size());
+  std::vector<std::uint32_t> index(positions.size(), 0);  // slot -> 1 + index in the mesh
   for (std::size_t i = 0; i < n; ++i) {
     if (corners[i][0] == kDropped) continue;
     std::array<std::uint32_t, 3> tri{};
     for (int k = 0; k < 3; ++k) {
       std::uint32_t& at = index[corners[i][k]];
       if (at == 0) {
-        mesh.positions.push_back(*position.find(corners[i][k]));
+        mesh.positions.push_back(positions[corners[i][k]]);
         at = static_cast<std::uint32_t>(mesh.positions.size());
       }
       tri[k] = at - 1;
