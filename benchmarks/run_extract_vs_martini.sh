@@ -186,6 +186,10 @@ collect() {  # SIZE -> $WORK_DIR/size_$n.json
        full_minimal_warm: ratio("full"; "minimal"; "warm"; "triangles_per_second"),
        full_minimal_warm_with_ply: ratio("full"; "minimal"; "warm"; "triangles_per_second_with_ply"),
        full_minimal_hot: ratio("full"; "minimal"; "hot"; "triangles_per_second"),
+       full_minimal_pages_warm: ratio("full"; "minimal-pages"; "warm"; "triangles_per_second"),
+       full_minimal_pages_warm_with_ply:
+         ratio("full"; "minimal-pages"; "warm"; "triangles_per_second_with_ply"),
+       full_minimal_pages_hot: ratio("full"; "minimal-pages"; "hot"; "triangles_per_second"),
        full_reduced_warm: ratio("full"; "reduced"; "warm"; "triangles_per_second"),
        full_reduced_warm_with_ply: ratio("full"; "reduced"; "warm"; "triangles_per_second_with_ply"),
        full_reduced_hot: ratio("full"; "reduced"; "hot"; "triangles_per_second"),
