@@ -41,7 +41,8 @@ int main(int argc, char** argv) {
       const auto db = smr::Database::open(db_path, {});
       smr::Crmr crmr;
       crmr.header = db->info();
-      for (std::uint64_t i = 0; i < db->op_count(); ++i) crmr.ops.push_back(smr::to_op(*db->op(smr::OpId(i))));
+      for (std::uint64_t i = 0; i < db->op_count(); ++i)
+        crmr.ops.push_back(smr::to_op(*db->op(smr::OpId(i))));
       mesh = smr::bench::finest_mesh(crmr, dem);
       // The database's heights are quantized (by at most the z_shift in its meta): check the
       // finest mesh's triangles with the DEM's heights at their corners, the TIN that was built.
