@@ -94,7 +94,8 @@ Extraction extract_reduced(const OpSource& source, const Rcf& rcf,
 std::vector<TriRef> set_formula(const OpSource& source, std::span<const OpId> x) {
   std::unordered_set<TriRef> replaced;
   for (OpId id : x) {
-    for (const TriRef& t : source.op(id)->pre) replaced.insert(t);
+    const OpRef op = source.op(id);  // holds the op while its PreF is read
+    for (const TriRef& t : op->pre) replaced.insert(t);
   }
   std::vector<TriRef> out;
   for (OpId id : x) {
