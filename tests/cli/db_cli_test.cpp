@@ -22,6 +22,7 @@
 #include <future>
 #include <iterator>
 #include <random>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -446,6 +447,46 @@ TEST_F(DbCli, HeldMbChangesTheReadsNotTheMesh) {
   const auto h = nlohmann::json::parse(held.out)["extraction"]["held_bytes_peak"];
   EXPECT_LT(n.get<std::uint64_t>(), h.get<std::uint64_t>());
   EXPECT_NE(smrdb("extract --help").out.find("--held-mb"), std::string::npos);
+}
+
+// --order pages: the same mesh up to the order of its triangles (its vertices are numbered by
+// first use, so they are compared as sets too), the same |X|, no fans; only for minimal surface.
+TEST_F(DbCli, OrderPagesGivesTheSameMesh) {
+  const std::string e = "extract " + db() + " --floor 0.7 -q --json --verify ";
+  const CliRun fronts = smrdb(e + "-o " + path("fronts.obj"));
+  ASSERT_EQ(fronts.code, 0) << fronts.out;
+  const CliRun pages = smrdb(e + "--order pages -o " + path("pages.obj"));
+  ASSERT_EQ(pages.code, 0) << pages.out;
+  const auto f = nlohmann::json::parse(fronts.out), p = nlohmann::json::parse(pages.out);
+  EXPECT_EQ(f["extraction"]["x"], p["extraction"]["x"]);
+  EXPECT_EQ(f["output"]["triangles"], p["output"]["triangles"]);
+  EXPECT_EQ(f["output"]["vertices"], p["output"]["vertices"]);
+  EXPECT_GT(f["extraction"]["fans"].get<std::uint64_t>(), 0u);
+  EXPECT_EQ(p["extraction"]["fans"].get<std::uint64_t>(), 0u);
+  EXPECT_EQ(p["extraction"]["order"], "pages");
+  // The same vertex lines and the same triangles as sets of corner positions.
+  const auto faces = [](const std::string& obj) {
+    std::vector<std::string> v;
+    std::vector<std::array<std::string, 3>> tris;
+    std::istringstream in(obj);
+    for (std::string line; std::getline(in, line);) {
+      if (line.rfind("v ", 0) == 0) v.push_back(line);
+      if (line.rfind("f ", 0) != 0) continue;
+      std::istringstream corners(line.substr(2));
+      std::array<std::size_t, 3> c{};
+      corners >> c[0] >> c[1] >> c[2];
+      std::array<std::string, 3> t{v.at(c[0] - 1), v.at(c[1] - 1), v.at(c[2] - 1)};
+      std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());  // keeps winding
+      tris.push_back(t);
+    }
+    std::sort(tris.begin(), tris.end());
+    return tris;
+  };
+  EXPECT_EQ(faces(read_file(path("fronts.obj"))), faces(read_file(path("pages.obj"))));
+  expect_user_error(
+      "extract " + db() + " --floor 1 --order pages --algorithm reduced -o " + path("x.obj"),
+      "--order pages");
+  expect_user_error("extract " + db() + " --floor 1 --order spiral -o " + path("x.obj"), "--order");
 }
 
 // --cache-mb 4 on a database over 20 times larger (lossless, raw pages): the same output as with

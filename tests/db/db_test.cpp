@@ -2,6 +2,7 @@
 // built, extraction from disk equals extraction in memory triangle for triangle and meets every
 // invariant, no cracks across pages, byte-identical files, atomic creation, the cache budget.
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <unistd.h>
 
@@ -21,6 +22,8 @@
 #include "smr/db/writer.h"
 #include "smr/extract/extract.h"
 #include "smr/query/indexed_source.h"
+#include "storage/checksum.h"
+#include "storage/lmdb_env.h"
 #include "tests/support/datasets.h"
 #include "tests/support/files.h"
 #include "tests/support/meshes.h"
@@ -192,6 +195,43 @@ TEST(Database, OpeningSomethingElseFailsClearly) {
   EXPECT_THROW(Database::open(dir.file("empty.smrdb"), {}), Error);
   const VerifyReport v = verify_database(dir.file("text.smrdb"), nullptr);
   EXPECT_FALSE(v.ok());
+}
+
+// A database of another format (here format 2, whose op locators' table was "nodes", or a
+// format-3 file whose meta says another version) is refused with a message naming the format and
+// the command that rebuilds it from its source; nothing is read beyond the meta record.
+TEST(Database, OtherFormatsAreRefusedNamingTheRebuildCommand) {
+  TempDir dir;
+  const auto write = [&](const std::string& path, std::span<const std::string_view> tables,
+                         int version) {
+    storage::DatabaseWriter w(path, tables, false);
+    const std::string meta =
+        nlohmann::json{
+            {"format", "smrdb"}, {"version", version}, {"model", {{"source", "dem.npy"}}}}
+            .dump();
+    w.put(Table::kMeta, "meta", storage::seal(storage::as_bytes(meta)));
+    w.finish();
+  };
+  constexpr std::array<std::string_view, 5> kFormat2 = {"meta", "nodes", "pages", "rtree", "aux"};
+  const std::string old = dir.file("old.smrdb"), future = dir.file("future.smrdb");
+  write(old, kFormat2, 2);
+  write(future, kTableNames, kDatabaseFormat + 1);
+  for (const auto& [path, version] : {std::pair{old, 2}, {future, kDatabaseFormat + 1}}) {
+    try {
+      Database::open(path, {});
+      ADD_FAILURE() << path << " opened";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kInvalidInput);
+      const std::string what = e.what();
+      EXPECT_NE(what.find(path + ": database format " + std::to_string(version) +
+                          " is not supported (this smrdb reads format " +
+                          std::to_string(kDatabaseFormat) + ")"),
+                std::string::npos)
+          << what;
+      EXPECT_NE(what.find("smrdb ingest dem.npy -o " + path + " --force"), std::string::npos)
+          << what;
+    }
+  }
 }
 
 TEST(Database, OpsOutOfRangeAreAnErrorNotACrash) {

@@ -39,6 +39,17 @@ TEST_P(Spread, MinimalSurfaceAndReducedExtractionMeetEveryInvariant) {
     test::expect_terrain_cut_invariants(m, e, rcf, ns.spec, d.dem);
     EXPECT_EQ(e.stats.triangles, e.triangles.size());
 
+    // The set-formula extraction (ExpansionOptions::fronts false): the same X, the same
+    // triangles, each once, and the same mesh up to the order of its triangles.
+    const Extraction pages = extract_minimal_surface(m, rcf, {.fronts = false});
+    EXPECT_EQ(pages.x, e.x);
+    std::vector<TriRef> a = e.triangles, b = pages.triangles;
+    std::sort(a.begin(), a.end());
+    std::sort(b.begin(), b.end());
+    EXPECT_EQ(a, b);
+    EXPECT_EQ(pages.stats.triangles, pages.triangles.size());
+    EXPECT_EQ(pages.stats.void_triangles, e.stats.void_triangles);
+
     // X is exactly Brown 5.1.1's set.
     const test::OracleResult xdef = test::check_x_definition(m, e.x, rcf, true);
     EXPECT_TRUE(xdef.ok()) << xdef.first_failure;
