@@ -158,8 +158,8 @@ nlohmann::json run_extract(const Database& db, const Heightfield* dem, const Rcf
   expansion.max_held_bytes = a.held_mb << 20;
   expansion.fronts = a.order == "fronts";
   const IndexedSource source(db);  // the R-tree answers the RCF's queries
-  const Extraction e = a.algorithm == "reduced" ? extract_reduced(source, rcf, expansion)
-                                                : extract_minimal_surface(source, rcf, expansion);
+  Extraction e = a.algorithm == "reduced" ? extract_reduced(source, rcf, expansion)
+                                          : extract_minimal_surface(source, rcf, expansion);
   report["rcf"] = rcf.describe();
   report["extraction"] = e.stats;
   report["extraction"]["algorithm"] = a.algorithm;
@@ -173,6 +173,10 @@ nlohmann::json run_extract(const Database& db, const Heightfield* dem, const Rcf
   }
   const TriangleMesh mesh = to_mesh(db, e.triangles);
   report["io"] = db.stats();
+  // Neither the triangle list nor the decoded pages are needed to write the mesh: let them go
+  // before the writer's buffers come (the memory bound is cache + output + a margin).
+  e = Extraction{};
+  db.clear_cache();
   write_mesh(a.out, mesh);
   report["output"] = {
       {"path", a.out}, {"vertices", mesh.positions.size()}, {"triangles", mesh.triangles.size()}};

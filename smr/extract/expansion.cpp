@@ -461,8 +461,9 @@ class Expander {
   ChunkedVector<TriRef> triangles_;   // out_.triangles while expanding
   IdMap<std::uint8_t> in_x_;          // X, then X+ (a set: the values are unused)
   std::vector<std::uint64_t> queue_;  // max-heap of op ids: finest first
-  FlatMap<FrontKey, FrontEntry, FrontKeys> front_;
-  IdMap<std::vector<FrontKey>> stacks_;
+  // Filled to 75 %: a whole-model front holds ~10^5 edges, and the output's memory bound counts.
+  FlatMap<FrontKey, FrontEntry, FrontKeys> front_{75};
+  IdMap<std::vector<FrontKey>> stacks_{75};
   std::vector<std::uint8_t> expanded_;
   std::vector<std::array<std::int32_t, 3>> nbr_;  // the infilled op's fragment neighbours
   std::unique_ptr<DomainIndex> domain_;

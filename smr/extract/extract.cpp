@@ -135,8 +135,8 @@ TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles, 
   constexpr std::uint32_t kDropped = ~std::uint32_t{0};
   std::vector<std::array<std::uint32_t, 3>> corners(n);  // slots; kDropped: a void triangle
   std::vector<float> values(n);
-  std::vector<Vec3> positions;   // by slot
-  IdMap<std::uint32_t> slot_of;  // vertex id -> 1 + slot
+  std::vector<Vec3> positions;       // by slot
+  IdMap<std::uint32_t> slot_of(75);  // vertex id -> 1 + slot (75 %: half the table of 50 %)
   // A triangulated surface has about half as many vertices as triangles (Euler), plus its
   // boundary: sized once, since growing by doubling would hold up to twice the output a moment.
   const std::size_t vertices = n / 2 + 4 * static_cast<std::size_t>(std::sqrt(double(n))) + 16;
