@@ -122,7 +122,7 @@ void ExtractArgs::add_to(CLI::App& app, bool with_budgets) {
   if (with_budgets) {
     app.add_option("--cache-mb", cache_mb, "Page cache budget in MiB")->capture_default_str();
     app.add_option("--held-mb", held_mb,
-                   "Budget in MiB of the ops copied out of pages while they wait for the "
+                   "Budget in MiB of the decoded pages held by ops waiting for the "
                    "expansion; beyond it, ops are read through the page cache one by one")
         ->capture_default_str();
     app.add_option("--dem", dem, "The source DEM (needed by --critical-lines)");

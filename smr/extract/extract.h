@@ -24,7 +24,7 @@ struct ExtractStats {
   std::uint64_t starting_points = 0;
   std::uint64_t domain_tests = 0;     // reduced extraction's geometric starting-point tests
   std::uint64_t held_ops_peak = 0;    // most ops of X held between their page's read and infill
-  std::uint64_t held_bytes_peak = 0;  // their bytes (copies out of cached pages)
+  std::uint64_t held_bytes_peak = 0;  // the decoded pages they hold, in bytes
   double triangles_per_fan() const { return fans == 0 ? 0.0 : double(triangles) / double(fans); }
   double extract_seconds = 0.0;  // refinement operation extraction
   double expand_seconds = 0.0;   // surface expansion
@@ -41,8 +41,9 @@ struct ExpansionOptions {
   /// Stop the expansion after this many triangles (0 = no limit). The part expanded first is the
   /// highest-resolution part (Brown 5.1.2); a stopped expansion does not tile the domain.
   std::uint64_t max_triangles = 0;
-  /// Ops of X copied out of cached pages while they wait for their turn (expansion.cpp, HeldOps):
-  /// beyond this, pages are no longer read whole for X and ops come through the source's cache.
+  /// The decoded pages that ops of X hold while they wait for their turn (expansion.cpp,
+  /// HeldOps): beyond this, pages are no longer read whole for X and ops come through the
+  /// source's cache.
   std::uint64_t max_held_bytes = std::uint64_t{512} << 20;
   /// Minimal surface only: false outputs the same triangles (Lemma 5.1.1: for an ancestor-closed
   /// X the set formula is the minimal surface) from one pass over X's ops, page by page, with no

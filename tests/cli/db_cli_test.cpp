@@ -433,7 +433,7 @@ Measured measure_smrdb(std::vector<std::string> args, const std::string& out) {
 // ASan's shadow memory and quarantine make RSS meaningless: the RSS checks need a plain build.
 using smr::test::kSanitized;
 
-// --held-mb bounds the ops of X copied out of pages while they wait for the expansion
+// --held-mb bounds the decoded pages held by ops of X while they wait for the expansion
 // (ExpansionOptions::max_held_bytes): with none held beyond the first page the mesh is the same,
 // and fewer bytes were held.
 TEST_F(DbCli, HeldMbChangesTheReadsNotTheMesh) {
