@@ -9,11 +9,20 @@
 
 namespace smr {
 
-const CoarserLink* Op::coarser_link(std::uint32_t tri, std::uint8_t edge) const {
-  for (const CoarserLink& l : coarser) {
+namespace {
+
+const CoarserLink* find_link(std::span<const CoarserLink> links, std::uint32_t tri,
+                             std::uint8_t edge) {
+  for (const CoarserLink& l : links) {
     if (l.tri == tri && l.edge == edge) return &l;
   }
   return nullptr;
+}
+
+}  // namespace
+
+const CoarserLink* Op::coarser_link(std::uint32_t tri, std::uint8_t edge) const {
+  return find_link(coarser, tri, edge);
 }
 
 OpView::OpView(const Op& op)
@@ -34,10 +43,7 @@ OpView::OpView(const Op& op)
       subtree_cone(op.subtree_cone) {}
 
 const CoarserLink* OpView::coarser_link(std::uint32_t tri, std::uint8_t edge) const {
-  for (const CoarserLink& l : coarser) {
-    if (l.tri == tri && l.edge == edge) return &l;
-  }
-  return nullptr;
+  return find_link(coarser, tri, edge);
 }
 
 const FragmentTriangle& OpView::triangle(std::uint32_t i) const {
@@ -116,16 +122,12 @@ void derive_fragment_neighbours(Op& op) {
   derive_fragment_neighbours(std::span<FragmentTriangle>(op.fragment));
 }
 
-void derive_fragment_neighbours(std::span<FragmentTriangle> fragment) {
-  thread_local std::vector<std::array<std::int32_t, 3>> nbr;
-  fragment_neighbours(fragment, nbr);
-  for (std::size_t i = 0; i < fragment.size(); ++i) fragment[i].nbr = nbr[i];
-}
+namespace {
 
-void fragment_neighbours(std::span<const FragmentTriangle> fragment,
-                         std::vector<std::array<std::int32_t, 3>>& nbr) {
+// set(i, k, j): across edge k of triangle i lies triangle j (kNoNeighbour if none).
+template <class Set>
+void for_each_neighbour(std::span<const FragmentTriangle> fragment, Set&& set) {
   const std::size_t n = fragment.size();
-  nbr.resize(n);
   if (n > 64) {
     std::unordered_map<std::uint64_t, std::int32_t> by_edge;
     by_edge.reserve(n * 3);
@@ -138,7 +140,7 @@ void fragment_neighbours(std::span<const FragmentTriangle> fragment,
       const auto& v = fragment[i].v;
       for (int k = 0; k < 3; ++k) {
         auto it = by_edge.find((std::uint64_t(v[(k + 1) % 3]) << 32) | v[k]);
-        nbr[i][k] = it == by_edge.end() ? FragmentTriangle::kNoNeighbour : it->second;
+        set(i, k, it == by_edge.end() ? FragmentTriangle::kNoNeighbour : it->second);
       }
     }
     return;
@@ -147,16 +149,31 @@ void fragment_neighbours(std::span<const FragmentTriangle> fragment,
     const auto& v = fragment[i].v;
     for (int k = 0; k < 3; ++k) {
       const std::uint32_t a = v[(k + 1) % 3], b = v[k];  // the reversed edge a -> b
-      nbr[i][k] = FragmentTriangle::kNoNeighbour;
+      std::int32_t found = FragmentTriangle::kNoNeighbour;
       for (std::size_t j = 0; j < n; ++j) {
         const auto& u = fragment[j].v;
         if ((u[0] == a && u[1] == b) || (u[1] == a && u[2] == b) || (u[2] == a && u[0] == b)) {
-          nbr[i][k] = std::int32_t(j);
+          found = std::int32_t(j);
           break;
         }
       }
+      set(i, k, found);
     }
   }
+}
+
+}  // namespace
+
+void derive_fragment_neighbours(std::span<FragmentTriangle> fragment) {
+  // Only corners are read and only nbr written: filling in place is safe.
+  for_each_neighbour(fragment,
+                     [&](std::size_t i, int k, std::int32_t j) { fragment[i].nbr[k] = j; });
+}
+
+void fragment_neighbours(std::span<const FragmentTriangle> fragment,
+                         std::vector<std::array<std::int32_t, 3>>& nbr) {
+  nbr.resize(fragment.size());
+  for_each_neighbour(fragment, [&](std::size_t i, int k, std::int32_t j) { nbr[i][k] = j; });
 }
 
 void compute_op_bounds(Op& op) {

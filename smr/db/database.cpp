@@ -66,8 +66,31 @@ auto naming_file(const std::string& path, F&& f) -> decltype(f()) {
               "); rebuild it from its source: smrdb ingest " + source + " -o " + path + " --force");
 }
 
+// The meta record, parsed: a file that is not a complete smrdb database, or one of another
+// format (refuse_format), throws naming the path.
+json read_meta(const storage::Env& env, const std::string& path) {
+  const storage::ReadTxn txn = env.read();
+  const auto meta = txn.get(Table::kMeta, "meta");
+  if (!meta) {
+    throw_input(path +
+                ": not a complete smrdb database (no meta record; an ingest was "
+                "interrupted or this is another LMDB file)");
+  }
+  const ByteView text =
+      naming_file(path, [&] { return storage::unseal(*meta, table_name(Table::kMeta), "meta"); });
+  try {
+    json j = json::parse(text.begin(), text.end());
+    if (j.at("format").get<std::string>() != "smrdb") throw_input(path + ": not an smrdb database");
+    if (j.at("version").get<int>() != kDatabaseFormat)
+      refuse_format(path, j.at("version").get<int>(), j);
+    return j;
+  } catch (const json::exception& e) {
+    throw Error(ErrorKind::kCorrupt, path + ": meta record is malformed: " + e.what());
+  }
+}
+
 // Opens the file's tables. A format-2 database (its op locators' table was "nodes") is refused
-// by refuse_format; any other failure is the first open's.
+// by read_meta; any other failure is the first open's.
 std::unique_ptr<storage::Env> open_env(const std::string& path) {
   try {
     return std::make_unique<storage::Env>(storage::Env::open_read_only(path, kTableNames));
@@ -81,18 +104,8 @@ std::unique_ptr<storage::Env> open_env(const std::string& path) {
     } catch (const Error&) {
       throw first;
     }
-    const storage::ReadTxn txn = old->read();
-    const auto meta = txn.get(Table::kMeta, "meta");
-    if (!meta) throw first;
-    json j;
-    try {
-      const ByteView text = storage::unseal(*meta, table_name(Table::kMeta), "meta");
-      j = json::parse(text.begin(), text.end());
-      if (!j.at("version").is_number_integer()) throw first;
-    } catch (const std::exception&) {
-      throw first;
-    }
-    refuse_format(path, j.at("version").get<int>(), j);
+    (void)read_meta(*old, path);  // throws for every file but a format-3 one
+    throw first;                  // format 3 under format 2's table names: damaged
   }
 }
 
@@ -127,20 +140,8 @@ std::unique_ptr<Database> Database::open(const std::string& path, const Options&
   db->env_ = open_env(path);
   db->cache_ = std::make_unique<storage::PageCache<CacheItem>>(options.cache_bytes);
   db->instance_.store(next_instance.fetch_add(1));
-  const storage::ReadTxn txn = db->env_->read();
-  const auto meta = txn.get(Table::kMeta, "meta");
-  if (!meta) {
-    throw_input(path +
-                ": not a complete smrdb database (no meta record; an ingest was "
-                "interrupted or this is another LMDB file)");
-  }
-  const ByteView text =
-      naming_file(path, [&] { return storage::unseal(*meta, table_name(Table::kMeta), "meta"); });
+  const json j = read_meta(*db->env_, path);
   try {
-    const json j = json::parse(text.begin(), text.end());
-    if (j.at("format").get<std::string>() != "smrdb") throw_input(path + ": not an smrdb database");
-    if (j.at("version").get<int>() != kDatabaseFormat)
-      refuse_format(path, j.at("version").get<int>(), j);
     db->info_ = json_info(j.at("model"));
     db->grid_.origin = json_vec(j.at("grid").at("origin"));
     db->grid_.step = json_vec(j.at("grid").at("step"));
@@ -150,6 +151,7 @@ std::unique_ptr<Database> Database::open(const std::string& path, const Options&
   } catch (const json::exception& e) {
     throw Error(ErrorKind::kCorrupt, path + ": meta record is malformed: " + e.what());
   }
+  const storage::ReadTxn txn = db->env_->read();
   const auto header = txn.get(Table::kRtree, kRtreeHeaderKey);
   if (!header) throw Error(ErrorKind::kCorrupt, path + ": the R-tree header is missing");
   const Database* self = db.get();
