@@ -44,7 +44,8 @@ struct MorphMesh {
   /// start at the nearest vertex of their op's PreF instead).
   std::uint64_t inexact_vertices = 0;
 
-  Vec3 at(std::size_t v, double t) const { return start[v] + t * (end[v] - start[v]); }
+  /// Vertex v at time t in [0, 1]: exactly `start` at t = 0 and exactly `end` at t = 1.
+  Vec3 at(std::size_t v, double t) const { return (1.0 - t) * start[v] + t * end[v]; }
 };
 
 /// 2.5-D: the morph from the surface of `out` (t = 0) to that of `in` (t = 1). Both must cover the
