@@ -82,13 +82,13 @@ class RecordingSource final : public smr::OpSource, public smr::RcfIndexedSource
     ops.push_back(id.value);
     return db_.op(id);
   }
-  std::vector<smr::OpId> not_completely_finer(const smr::Rcf& rcf) const override {
+  std::vector<smr::OpId> not_completely_finer(const smr::RcfOracle& rcf) const override {
     for (const smr::index::Hit& h : db_.rcf_hits(rcf)) {
       if (leaves.empty() || leaves.back() != h.leaf) leaves.push_back(h.leaf);
     }
     return db_.not_completely_finer(rcf);
   }
-  std::vector<smr::OpId> maybe_not_completely_finer(const smr::Rcf& rcf) const override {
+  std::vector<smr::OpId> maybe_not_completely_finer(const smr::RcfOracle& rcf) const override {
     return db_.maybe_not_completely_finer(rcf);  // reads no page
   }
   mutable std::vector<std::uint64_t> ops;

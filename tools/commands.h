@@ -61,7 +61,9 @@ struct ExtractArgs {
   std::string algorithm = "minimal", out, png, dem;
   std::string order = "fronts";  // ExpansionOptions::fronts: "fronts" or "pages"
   std::uint64_t cache_mb = 64;
-  std::uint64_t held_mb = 512;  // ExpansionOptions::max_held_bytes, in MiB
+  std::uint64_t held_mb = 512;      // ExpansionOptions::max_held_bytes, in MiB
+  std::uint64_t max_triangles = 0;  // SessionBudget (smr/extract/session.h); 0 = none
+  double max_ms = 0.0;
 
   void add_to(CLI::App& app, bool with_budgets);
   void validate() const;

@@ -8,9 +8,11 @@
 #include <nlohmann/json.hpp>
 
 #include "base/error.h"
+#include "smr/core/clock.h"
 #include "smr/core/invariants.h"
 #include "smr/db/database.h"
 #include "smr/extract/extract.h"
+#include "smr/extract/session.h"
 #include "smr/io/dem_reader.h"
 #include "smr/io/mesh_writer.h"
 #include "smr/io/render.h"
@@ -31,6 +33,30 @@ Vec3 parse_vec3(const std::string& text, const std::string& option) {
 AoiSpec parse_aoi(const std::string& text, const std::string& option) {
   const auto v = parse_numbers(text, 4, option, "x,y,radius,level");
   return {v[0], v[1], v[2], v[3]};
+}
+
+// A budgeted one-shot extraction (smr/extract/session.h): X refined lowest resolution first
+// until the budget, then expanded as usual. The report says where it stopped and what that means.
+Extraction extract_budgeted(const OpSource& source, const Rcf& rcf, const SessionBudget& budget,
+                            const ExpansionOptions& expansion, nlohmann::json& report) {
+  const auto t0 = Clock::now();
+  FrameStats fs;
+  const std::vector<OpId> x = add_to_list_budgeted(source, rcf, budget, &fs);
+  const double t_extract = seconds_since(t0);
+  const auto t1 = Clock::now();
+  Extraction e = expansion.fronts ? expand(source, x, expansion) : extract_set_formula(source, x);
+  e.stats.expand_seconds = seconds_since(t1);
+  e.stats.extract_seconds = t_extract;
+  report = {{"max_triangles", budget.max_triangles},
+            {"max_ms", budget.max_period_ms},
+            {"complete", fs.complete},
+            {"stop_resolution", fs.stop_resolution},
+            {"stop_error", source.error_at(fs.stop_resolution)},
+            {"pending_refinings", fs.pending_refinings},
+            {"meaning", fs.complete
+                            ? "not stopped: the mesh meets the RCF"
+                            : "stopped: every triangle meets the RCF or has error <= stop_error"}};
+  return e;
 }
 
 }  // namespace
@@ -126,6 +152,11 @@ void ExtractArgs::add_to(CLI::App& app, bool with_budgets) {
                    "expansion; beyond it, ops are read through the page cache one by one")
         ->capture_default_str();
     app.add_option("--dem", dem, "The source DEM (needed by --critical-lines)");
+    app.add_option("--max-triangles", max_triangles,
+                   "Refine lowest resolution first and stop before the mesh exceeds N "
+                   "triangles: a valid mesh meeting the RCF capped at the resolution reported");
+    app.add_option("--max-ms", max_ms,
+                   "The same, stopping when the refinement has run this many milliseconds");
   }
 }
 
@@ -146,6 +177,9 @@ void ExtractArgs::validate() const {
   if (cache_mb < 1 || cache_mb > (std::uint64_t{1} << 20))
     throw_input("--cache-mb must be in [1, 1048576]");
   if (held_mb > (std::uint64_t{1} << 20)) throw_input("--held-mb must be in [0, 1048576]");
+  if (!(max_ms >= 0.0) || max_ms > 1e9) throw_input("--max-ms must be in [0, 1e9]");
+  if ((max_triangles != 0 || max_ms > 0.0) && algorithm != "minimal")
+    throw_input("--max-triangles and --max-ms need --algorithm minimal");
 }
 
 nlohmann::json run_extract(const Database& db, const Heightfield* dem, const RcfSpec& spec,
@@ -158,8 +192,14 @@ nlohmann::json run_extract(const Database& db, const Heightfield* dem, const Rcf
   expansion.max_held_bytes = a.held_mb << 20;
   expansion.fronts = a.order == "fronts";
   const IndexedSource source(db);  // the R-tree answers the RCF's queries
-  Extraction e = a.algorithm == "reduced" ? extract_reduced(source, rcf, expansion)
-                                          : extract_minimal_surface(source, rcf, expansion);
+  Extraction e;
+  if (a.max_triangles != 0 || a.max_ms > 0.0) {
+    e = extract_budgeted(source, rcf, {.max_period_ms = a.max_ms, .max_triangles = a.max_triangles},
+                         expansion, report["budget"]);
+  } else {
+    e = a.algorithm == "reduced" ? extract_reduced(source, rcf, expansion)
+                                 : extract_minimal_surface(source, rcf, expansion);
+  }
   report["rcf"] = rcf.describe();
   report["extraction"] = e.stats;
   report["extraction"]["algorithm"] = a.algorithm;
@@ -204,6 +244,11 @@ int cmd_extract(const std::string& db_path, const RcfOptions& rcf, const Extract
         static_cast<unsigned long long>(r["output"]["triangles"].get<std::uint64_t>()),
         static_cast<unsigned long long>(r["extraction"]["x"].get<std::uint64_t>()),
         static_cast<unsigned long long>(r["io"]["pages_read"].get<std::uint64_t>()), a.out.c_str());
+    if (r.contains("budget") && !r["budget"]["complete"].get<bool>())
+      std::fprintf(stderr,
+                   "%s: the budget stopped the refinement: every triangle meets the RCF or has "
+                   "error <= %g\n",
+                   db_path.c_str(), r["budget"]["stop_error"].get<double>());
   }
   return 0;
 }

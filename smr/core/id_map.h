@@ -92,6 +92,10 @@ class FlatMap {
     while (n * 100 > capacity * max_load_) capacity *= 2;
     if (capacity > keys_.size()) rehash(capacity);
   }
+  /// The bytes of its two arrays.
+  std::size_t memory_bytes() const {
+    return keys_.capacity() * sizeof(K) + values_.capacity() * sizeof(V);
+  }
   /// Calls f(id, value) for every entry, in no particular order.
   template <class F>
   void for_each(F&& f) const {

@@ -16,7 +16,7 @@ namespace {
 // X is every op.
 class OpFlags {
  public:
-  OpFlags(const OpSource& s, const Rcf& r) : source_(s), rcf_(r) {}
+  OpFlags(const OpSource& s, const RcfOracle& r) : source_(s), rcf_(r) {}
   bool finer(const OpView& op) { return get(op, 0); }
   bool completely_finer(const OpView& op) { return get(op, 1); }
   bool in_x(OpId id) const {
@@ -44,11 +44,11 @@ class OpFlags {
     return (e & value) != 0;
   }
   const OpSource& source_;
-  const Rcf& rcf_;
+  const RcfOracle& rcf_;
   IdMap<std::uint8_t> flags_;
 };
 
-std::vector<OpId> traverse(const OpSource& source, const Rcf& rcf, bool with_ancestors) {
+std::vector<OpId> traverse(const OpSource& source, const RcfOracle& rcf, bool with_ancestors) {
   OpFlags flags(source, rcf);
   // With an index, a child outside its conservative candidates (Maheshwari 4.4's query over
   // the ops' boxes) is completely finer and is not fetched; only candidates are read and tested
@@ -123,10 +123,10 @@ std::vector<OpId> traverse(const OpSource& source, const Rcf& rcf, bool with_anc
 
 }  // namespace
 
-std::vector<OpId> add_to_list(const OpSource& source, const Rcf& rcf) {
+std::vector<OpId> add_to_list(const OpSource& source, const RcfOracle& rcf) {
   return traverse(source, rcf, true);
 }
-std::vector<OpId> add_to_list_reduced(const OpSource& source, const Rcf& rcf) {
+std::vector<OpId> add_to_list_reduced(const OpSource& source, const RcfOracle& rcf) {
   // Lemma 5.2.1's form of Eq. 5.5: R^0 and every op not completely finer. The two agree when the
   // RCF bisects the Hypermesh (Brown 5.2); with screen-space tolerances the traversal of Eq. 5.5
   // can miss such an op behind a completely-finer-but-not-finer parent, and the output would then

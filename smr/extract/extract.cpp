@@ -22,7 +22,7 @@ Extraction expand(const OpSource& source, std::span<const OpId> x,
   return run_expansion(source, x, false, options);
 }
 
-Extraction extract_minimal_surface(const OpSource& source, const Rcf& rcf,
+Extraction extract_minimal_surface(const OpSource& source, const RcfOracle& rcf,
                                    const ExpansionOptions& options) {
   auto t0 = Clock::now();
   const std::vector<OpId> x = add_to_list(source, rcf);
@@ -72,7 +72,7 @@ Extraction extract_set_formula(const OpSource& source, std::span<const OpId> x) 
   return e;
 }
 
-Extraction extract_reduced(const OpSource& source, const Rcf& rcf,
+Extraction extract_reduced(const OpSource& source, const RcfOracle& rcf,
                            const ExpansionOptions& options) {
   if (source.info().kind != ModelKind::kTerrain) {
     // Its starting-point test compares xy-domains (Brown 5.2: 2.5-D models).

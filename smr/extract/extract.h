@@ -60,26 +60,26 @@ class RcfIndexedSource {
   virtual ~RcfIndexedSource() = default;
   /// Exactly the ops that are not completely finer than `rcf` (R^0 may be omitted; it is always
   /// added): reduced extraction's X.
-  virtual std::vector<OpId> not_completely_finer(const Rcf& rcf) const = 0;
+  virtual std::vector<OpId> not_completely_finer(const RcfOracle& rcf) const = 0;
   /// A superset of not_completely_finer() found without reading ops (a conservative test on
   /// index entries), so that AddToList can rule out children without fetching them.
-  virtual std::vector<OpId> maybe_not_completely_finer(const Rcf& rcf) const = 0;
+  virtual std::vector<OpId> maybe_not_completely_finer(const RcfOracle& rcf) const = 0;
 };
 
 /// Brown 5.1.1 (Fig. 5.2): the smallest X containing R^0, the children of its non-finer members
 /// that are not completely finer, and all ancestors of its members. Sorted descending.
-std::vector<OpId> add_to_list(const OpSource& source, const Rcf& rcf);
+std::vector<OpId> add_to_list(const OpSource& source, const RcfOracle& rcf);
 
 /// Reduced extraction's X (Brown Eq. 5.5 in the form of Lemma 5.2.1): R^0 and every op that is
 /// not completely finer than the RCF. Scans every op, unless the source is an RcfIndexedSource.
-std::vector<OpId> add_to_list_reduced(const OpSource& source, const Rcf& rcf);
+std::vector<OpId> add_to_list_reduced(const OpSource& source, const RcfOracle& rcf);
 
 /// Minimal surface SMR (Brown 5.1).
-Extraction extract_minimal_surface(const OpSource& source, const Rcf& rcf,
+Extraction extract_minimal_surface(const OpSource& source, const RcfOracle& rcf,
                                    const ExpansionOptions& options = {});
 
 /// Reduced extraction SMR (Brown 5.2), 2.5-D only: a 3-D mesh source is kInvalidInput.
-Extraction extract_reduced(const OpSource& source, const Rcf& rcf,
+Extraction extract_reduced(const OpSource& source, const RcfOracle& rcf,
                            const ExpansionOptions& options = {});
 
 /// Surface expansion of an ancestor-closed X (Brown 5.1.2). `x` in any order.

@@ -17,7 +17,7 @@ namespace {
 // birth_res: conservative and monotone); an entry passing its box test is then judged exactly.
 class RcfVisitor final : public index::Visitor {
  public:
-  RcfVisitor(const Rcf& rcf, const CrmrInfo& info) : rcf_(rcf), info_(info) {}
+  RcfVisitor(const RcfOracle& rcf, const CrmrInfo& info) : rcf_(rcf), info_(info) {}
   bool enter(const index::Summary& s) override {
     return !rcf_.region_completely_finer(from_index(s.box), s.min_res, info_);
   }
@@ -26,24 +26,24 @@ class RcfVisitor final : public index::Visitor {
   }
 
  private:
-  const Rcf& rcf_;
+  const RcfOracle& rcf_;
   const CrmrInfo& info_;
 };
 
 }  // namespace
 
-std::vector<index::Hit> IndexedSource::rcf_hits(const Rcf& rcf) const {
+std::vector<index::Hit> IndexedSource::rcf_hits(const RcfOracle& rcf) const {
   RcfVisitor visitor(rcf, db_.info());
   return db_.rtree_query(visitor);
 }
 
-std::vector<OpId> IndexedSource::maybe_not_completely_finer(const Rcf& rcf) const {
+std::vector<OpId> IndexedSource::maybe_not_completely_finer(const RcfOracle& rcf) const {
   std::vector<OpId> ids;
   for (const index::Hit& h : rcf_hits(rcf)) ids.push_back(OpId{h.id});
   return ids;
 }
 
-std::vector<OpId> IndexedSource::not_completely_finer(const Rcf& rcf) const {
+std::vector<OpId> IndexedSource::not_completely_finer(const RcfOracle& rcf) const {
   std::vector<OpId> x;
   std::shared_ptr<const DecodedPage> ops;
   std::uint64_t current = ~0ull;

@@ -32,11 +32,11 @@ class IndexedSource final : public OpSource, public RcfIndexedSource {
 
   /// Reduced extraction's X from the R-tree: every op not completely finer than `rcf`. Reads
   /// the R-tree nodes the query enters and the data pages of the entries it accepts.
-  std::vector<OpId> not_completely_finer(const Rcf& rcf) const override;
+  std::vector<OpId> not_completely_finer(const RcfOracle& rcf) const override;
   /// The entries the R-tree query accepts (a superset of not_completely_finer), reading no page.
-  std::vector<OpId> maybe_not_completely_finer(const Rcf& rcf) const override;
+  std::vector<OpId> maybe_not_completely_finer(const RcfOracle& rcf) const override;
   /// The R-tree query behind both: accepted entries, grouped by leaf (= data page).
-  std::vector<index::Hit> rcf_hits(const Rcf& rcf) const;
+  std::vector<index::Hit> rcf_hits(const RcfOracle& rcf) const;
 
   const Database& database() const { return db_; }
 

@@ -81,25 +81,29 @@ std::array<Plane, 6> Camera::planes() const {
   return p;
 }
 
-bool sphere_outside(const Camera& cam, const Sphere& s) {
-  const auto planes = cam.planes();
-  for (int i = 0; i < cam.plane_count(); ++i) {
-    if (planes[i].signed_distance(s.center) < -s.radius) return true;
+bool sphere_outside(const Frustum& f, const Sphere& s) {
+  for (int i = 0; i < f.count; ++i) {
+    if (f.planes[i].signed_distance(s.center) < -s.radius) return true;
   }
   return false;
 }
+bool sphere_outside(const Camera& cam, const Sphere& s) {
+  return sphere_outside(Frustum(cam), s);
+}
 
-bool box_outside(const Camera& cam, const Box3& b) {
+bool box_outside(const Frustum& f, const Box3& b) {
   if (b.empty()) return true;
-  const auto planes = cam.planes();
-  for (int i = 0; i < cam.plane_count(); ++i) {
-    const Plane& pl = planes[i];
+  for (int i = 0; i < f.count; ++i) {
+    const Plane& pl = f.planes[i];
     // The corner farthest along the plane normal.
     const Vec3 far{pl.n.x >= 0 ? b.hi.x : b.lo.x, pl.n.y >= 0 ? b.hi.y : b.lo.y,
                    pl.n.z >= 0 ? b.hi.z : b.lo.z};
     if (pl.signed_distance(far) < 0.0) return true;
   }
   return false;
+}
+bool box_outside(const Camera& cam, const Box3& b) {
+  return box_outside(Frustum(cam), b);
 }
 
 bool backfacing(const Camera& cam, const Sphere& s, const NormalCone& cone) {

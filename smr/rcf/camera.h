@@ -41,9 +41,17 @@ struct Camera {
   int plane_count() const { return far_distance > 0.0 ? 6 : 5; }
 };
 
+/// A camera's frustum planes, computed once (Camera::planes() works them out on every call).
+struct Frustum {
+  explicit Frustum(const Camera& cam) : planes(cam.planes()), count(cam.plane_count()) {}
+  std::array<Plane, 6> planes;
+  int count;
+};
 /// True when the whole sphere lies outside one frustum plane.
+bool sphere_outside(const Frustum& f, const Sphere& s);
 bool sphere_outside(const Camera& cam, const Sphere& s);
 /// True when all eight corners of the box lie outside one frustum plane.
+bool box_outside(const Frustum& f, const Box3& b);
 bool box_outside(const Camera& cam, const Box3& b);
 /// True when every normal of the cone faces away from the eye at every point of the sphere:
 /// angle(axis, c - eye) + cone half-angle + asin(r / |c - eye|) < pi/2 (Hoppe 97's test, exact).

@@ -1,6 +1,7 @@
 // Brown 4.6: RCF composition and the frustum, back-face, object- and screen-space components.
 #include "smr/rcf/rcf.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -25,14 +26,14 @@ Box3 triangle_box(const Triangle3& v) {
 
 // ---- culling ----
 bool FrustumCulling::culls(const OpView& op) const {
-  return sphere_outside(cam_, op.sphere) || box_outside(cam_, op.box);
+  return sphere_outside(frustum_, op.sphere) || box_outside(frustum_, op.box);
 }
 
 bool FrustumCulling::culls_triangle(const Triangle3& v) const {
   // Every corner strictly outside one plane. A sphere or box outside that plane holds no point
   // inside it, so culls(op) implies this for each triangle of the op.
-  const auto planes = cam_.planes();
-  for (int i = 0; i < cam_.plane_count(); ++i) {
+  const auto& planes = frustum_.planes;
+  for (int i = 0; i < frustum_.count; ++i) {
     if (planes[i].signed_distance(v[0]) < 0 && planes[i].signed_distance(v[1]) < 0 &&
         planes[i].signed_distance(v[2]) < 0)
       return true;
@@ -168,8 +169,23 @@ bool Rcf::triangle_culled(const Triangle3& v) const {
   return false;
 }
 
+// Both tests first ask each similarity component about the op's box at the op's least
+// resolution (conservative: true only if every triangle in the box at that resolution or more
+// satisfies it), which settles most ops far from the requirement without a triangle's test.
+bool Rcf::region_satisfied(const Box3& box, double min_res, const CrmrInfo& info) const {
+  for (const auto& s : similarity_) {
+    if (!s->region_satisfies(box, min_res, info)) return false;
+  }
+  return true;
+}
+
 bool Rcf::is_finer(const OpView& op, const OpSource& source) const {
   if (culled(op)) return true;
+  double least = 1.0;
+  for (const FragmentTriangle& t : op.fragment) {
+    if (!is_final_or_void(t)) least = std::min(least, t.death_res);
+  }
+  if (region_satisfied(op.box, least, source.info())) return true;
   for (const FragmentTriangle& t : op.fragment) {
     if (is_final_or_void(t)) continue;
     const Triangle3 v = corners(op, t);
@@ -186,6 +202,7 @@ bool Rcf::is_completely_finer(const OpView& op, const OpSource& source) const {
   if (similarity_.empty()) return true;
   if (op.pre_tris.size() != op.pre.size())
     throw_internal("op " + std::to_string(op.id.value) + " has no PreF corners (link_dag not run)");
+  if (region_satisfied(op.box, op.birth_res, source.info())) return true;
   for (const PreTriangle& t : op.pre_tris) {
     if (t.is_void()) continue;
     const Triangle3 v = corners(op, t);

@@ -57,14 +57,15 @@ class SimilarityComponent {
 
 class FrustumCulling final : public CullingComponent {
  public:
-  explicit FrustumCulling(Camera cam) : cam_(std::move(cam)) {}
+  explicit FrustumCulling(Camera cam) : cam_(std::move(cam)), frustum_(cam_) {}
   std::string describe() const override { return "frustum-culling"; }
   bool culls(const OpView& op) const override;
-  bool culls_region(const Box3& box) const override { return box_outside(cam_, box); }
+  bool culls_region(const Box3& box) const override { return box_outside(frustum_, box); }
   bool culls_triangle(const Triangle3& v) const override;
 
  private:
   Camera cam_;
+  Frustum frustum_;
 };
 
 class BackfaceCulling final : public CullingComponent {
@@ -161,7 +162,21 @@ class ScreenSpaceCriterion final : public SimilarityComponent {
   bool vertical_;
 };
 
-class Rcf {
+/// What extraction asks of an RCF (Brown 4.6, Fig. 4.19): IsFiner, IsCompletelyFiner, and the
+/// conservative test on an index entry. Rcf (below) composes them from components; a session's
+/// common-denominator RCF (Brown Theorem 6.4.1) combines two.
+class RcfOracle {
+ public:
+  virtual ~RcfOracle() = default;
+  virtual bool is_finer(const OpView& op, const OpSource& source) const = 0;
+  virtual bool is_completely_finer(const OpView& op, const OpSource& source) const = 0;
+  /// Conservative: true only if every op whose box lies in `box` and whose birth_res >=
+  /// min_birth_res is completely finer.
+  virtual bool region_completely_finer(const Box3& box, double min_birth_res,
+                                       const CrmrInfo& info) const = 0;
+};
+
+class Rcf final : public RcfOracle {
  public:
   void add(std::shared_ptr<const CullingComponent> c) { culling_.push_back(std::move(c)); }
   void add(std::shared_ptr<const SimilarityComponent> s) { similarity_.push_back(std::move(s)); }
@@ -170,15 +185,16 @@ class Rcf {
   bool triangle_culled(const Triangle3& v) const;
   /// Every triangle of F(op) that is not final or void satisfies every similarity component at
   /// its death_res, or op is culled.
-  bool is_finer(const OpView& op, const OpSource& source) const;
+  bool is_finer(const OpView& op, const OpSource& source) const override;
   /// op is not R^0, and op is culled or every non-void triangle t of PreF(op) is culled (its own
   /// corners) or satisfies every component at birth_res(op). Judging PreF triangle by
   /// triangle, like IsFiner judges F, makes "all parents finer => completely finer" exact, which
   /// Lemma 5.2.1 (reduced extraction) needs.
-  bool is_completely_finer(const OpView& op, const OpSource& source) const;
+  bool is_completely_finer(const OpView& op, const OpSource& source) const override;
   /// Conservative test for an index entry: true only if every op whose box lies in `box` and whose
   /// birth_res >= min_birth_res is completely finer than the RCF.
-  bool region_completely_finer(const Box3& box, double min_birth_res, const CrmrInfo& info) const;
+  bool region_completely_finer(const Box3& box, double min_birth_res,
+                               const CrmrInfo& info) const override;
 
   const std::vector<std::shared_ptr<const CullingComponent>>& culling() const { return culling_; }
   const std::vector<std::shared_ptr<const SimilarityComponent>>& similarity() const {
@@ -187,8 +203,33 @@ class Rcf {
   std::string describe() const;
 
  private:
+  bool region_satisfied(const Box3& box, double min_res, const CrmrInfo& info) const;
+
   std::vector<std::shared_ptr<const CullingComponent>> culling_;
   std::vector<std::shared_ptr<const SimilarityComponent>> similarity_;
+};
+
+/// Brown Theorem 6.4.1's "common denominator" of two RCFs: an op is finer (completely finer) than
+/// it exactly when it is finer (completely finer) than both. A session's X after its coarsening
+/// step is the minimal-surface X of this RCF for the old and the new RCF.
+class CommonDenominatorRcf final : public RcfOracle {
+ public:
+  CommonDenominatorRcf(const RcfOracle& a, const RcfOracle& b) : a_(a), b_(b) {}
+  bool is_finer(const OpView& op, const OpSource& source) const override {
+    return a_.is_finer(op, source) && b_.is_finer(op, source);
+  }
+  bool is_completely_finer(const OpView& op, const OpSource& source) const override {
+    return a_.is_completely_finer(op, source) && b_.is_completely_finer(op, source);
+  }
+  bool region_completely_finer(const Box3& box, double min_birth_res,
+                               const CrmrInfo& info) const override {
+    return a_.region_completely_finer(box, min_birth_res, info) &&
+           b_.region_completely_finer(box, min_birth_res, info);
+  }
+
+ private:
+  const RcfOracle& a_;
+  const RcfOracle& b_;
 };
 
 /// Corners of a triangle of F(op) or PreF(op).

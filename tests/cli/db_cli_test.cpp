@@ -489,6 +489,38 @@ TEST_F(DbCli, OrderPagesGivesTheSameMesh) {
   expect_user_error("extract " + db() + " --floor 1 --order spiral -o " + path("x.obj"), "--order");
 }
 
+// --max-triangles: a valid (tiling, --verify) mesh within the budget, and a report of where the
+// refinement stopped; a budget above the full output changes nothing.
+TEST_F(DbCli, MaxTrianglesGivesAValidMeshWithinTheBudget) {
+  const std::string e = "extract " + db() + " --floor 1 -q --json --verify ";
+  const CliRun full = smrdb(e + "-o " + path("full.ply"));
+  ASSERT_EQ(full.code, 0) << full.out;
+  const auto f = nlohmann::json::parse(full.out);
+  const std::uint64_t all = f["output"]["triangles"].get<std::uint64_t>();
+  ASSERT_GT(all, 100u);
+  const std::uint64_t budget = all / 3;
+  const CliRun part =
+      smrdb(e + "--max-triangles " + std::to_string(budget) + " -o " + path("part.ply"));
+  ASSERT_EQ(part.code, 0) << part.out;
+  const auto p = nlohmann::json::parse(part.out);
+  EXPECT_LE(p["output"]["triangles"].get<std::uint64_t>(), budget);
+  EXPECT_GT(p["output"]["triangles"].get<std::uint64_t>(), budget / 2);
+  EXPECT_FALSE(p["budget"]["complete"].get<bool>());
+  EXPECT_GT(p["budget"]["stop_error"].get<double>(), 0.0);
+  EXPECT_GT(p["budget"]["pending_refinings"].get<std::uint64_t>(), 0u);
+  const CliRun roomy =
+      smrdb(e + "--max-triangles " + std::to_string(all * 2) + " -o " + path("roomy.ply"));
+  ASSERT_EQ(roomy.code, 0) << roomy.out;
+  const auto r = nlohmann::json::parse(roomy.out);
+  EXPECT_TRUE(r["budget"]["complete"].get<bool>());
+  EXPECT_EQ(r["output"]["triangles"], f["output"]["triangles"]);
+  EXPECT_EQ(r["extraction"]["x"], f["extraction"]["x"]);
+  expect_user_error("extract " + db() + " --floor 1 --max-ms -3 -o " + path("x.ply"), "--max-ms");
+  expect_user_error(
+      "extract " + db() + " --floor 1 --max-triangles 10 --algorithm reduced -o " + path("x.ply"),
+      "--max-triangles");
+}
+
 // --cache-mb 4 on a database over 20 times larger (lossless, raw pages): the same output as with
 // a cache that holds everything, a tiling output, a cache that never held more than 4 MiB, and a
 // peak RSS within the budget: what an idle smrdb process maps (its libraries) + 4 MiB + the

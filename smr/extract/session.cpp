@@ -1,0 +1,350 @@
+// Geomorphing sessions (session.h; Brown 6.3, 6.4).
+#include "smr/extract/session.h"
+
+#include <algorithm>
+#include <functional>
+#include <queue>
+#include <string>
+#include <tuple>
+#include <utility>
+
+#include "base/error.h"
+#include "smr/core/clock.h"
+#include "smr/extract/extract.h"
+
+namespace smr {
+
+// Net changes of one update: +1 per insertion, -1 per removal (an op removed by the coarsening
+// can come back as an ancestor in the refining; a triangle can go out and in again).
+struct Session::Changes {
+  FlatMap<TriRef, int, TriKeys> triangles;
+  IdMap<int> ops;
+};
+
+namespace {
+
+struct Candidate {
+  double res;
+  std::uint64_t id;
+  bool test;  // reached as a child: joins X only if not completely finer
+};
+struct LowestFirst {
+  bool operator()(const Candidate& a, const Candidate& b) const {
+    return std::tie(a.res, a.id) > std::tie(b.res, b.id);
+  }
+};
+struct HighestFirst {
+  bool operator()(const Candidate& a, const Candidate& b) const {
+    return std::tie(a.res, a.id) < std::tie(b.res, b.id);
+  }
+};
+
+double ms_since(Clock::time_point t0) {
+  return 1000.0 * seconds_since(t0);
+}
+
+}  // namespace
+
+Session::Session(const OpSource& source, SessionOptions options)
+    : source_(source), options_(options) {
+  const OpRef base = source_.op(kBaseOp);
+  x_[kBaseOp.value] = {base->birth_res, 0};
+  Changes ignored;
+  for (std::uint32_t i = 0; i < base->fragment.size(); ++i) insert_triangle({kBaseOp, i}, ignored);
+}
+
+void Session::insert_triangle(const TriRef& t, Changes& changes) {
+  std::uint32_t& slot = slot_[t];
+  if (slot != 0)
+    throw_internal("session: triangle " + std::to_string(t.op.value) + "/" +
+                   std::to_string(t.index) + " is in the mesh twice");
+  triangles_.push_back(t);
+  slot = static_cast<std::uint32_t>(triangles_.size());
+  ++changes.triangles[t];
+}
+
+void Session::erase_triangle(const TriRef& t, Changes& changes) {
+  std::uint32_t* slot = slot_.find(t);
+  if (slot == nullptr)
+    throw_internal("session: triangle " + std::to_string(t.op.value) + "/" +
+                   std::to_string(t.index) + " is not in the mesh");
+  const std::uint32_t i = *slot - 1;
+  slot_.erase(t);
+  if (i + 1 != triangles_.size()) {
+    triangles_[i] = triangles_.back();
+    *slot_.find(triangles_[i]) = i + 1;
+  }
+  triangles_.pop_back();
+  --changes.triangles[t];
+}
+
+// Brown 5.1.1: R joins X after its parents; none of its children is in X yet (X stays
+// ancestor-closed), so its whole fragment enters the mesh in place of its PreF.
+void Session::add_op(const OpView& op, Changes& changes) {
+  for (OpId p : op.parents) {
+    XEntry* parent = x_.find(p.value);
+    if (parent == nullptr)
+      throw_internal("session: op " + std::to_string(op.id.value) + " added before its parent " +
+                     std::to_string(p.value));
+    ++parent->children;
+  }
+  x_[op.id.value] = {op.birth_res, 0};
+  for (const TriRef& t : op.pre) erase_triangle(t, changes);
+  for (std::uint32_t i = 0; i < op.fragment.size(); ++i) insert_triangle({op.id, i}, changes);
+  ++changes.ops[op.id.value];
+}
+
+// R is in C (no child in X): its fragment, all in the mesh, gives way to its PreF again.
+void Session::remove_op(const OpView& op, Changes& changes) {
+  for (OpId p : op.parents) --x_.find(p.value)->children;
+  x_.erase(op.id.value);
+  for (std::uint32_t i = 0; i < op.fragment.size(); ++i) erase_triangle({op.id, i}, changes);
+  for (const TriRef& t : op.pre) insert_triangle(t, changes);
+  --changes.ops[op.id.value];
+}
+
+// Brown 6.3, step 1: C in order of decreasing resolution; an op completely finer than the new
+// RCF leaves X, and a parent left with no child in X joins C.
+void Session::coarsen(const RcfOracle& rcf, double deadline_ms, Changes& changes,
+                      FrameStats& stats) {
+  const auto t0 = Clock::now();
+  std::priority_queue<Candidate, std::vector<Candidate>, HighestFirst> c;
+  x_.for_each([&](std::uint64_t id, const XEntry& e) {
+    if (e.children == 0 && id != kBaseOp.value) c.push({e.birth_res, id, true});
+  });
+  while (!c.empty()) {
+    const Candidate top = c.top();
+    const XEntry* e = x_.find(top.id);
+    if (e == nullptr || e->children != 0) {
+      c.pop();
+      continue;
+    }
+    if (deadline_ms > 0.0 && ms_since(t0) >= deadline_ms) {
+      stats.pending_coarsenings = c.size();
+      stats.complete = false;
+      break;
+    }
+    c.pop();
+    const OpRef op = source_.op(OpId{top.id});
+    ++stats.ops_tested;
+    if (!rcf.is_completely_finer(*op, source_)) continue;
+    remove_op(*op, changes);
+    for (OpId p : op->parents) {
+      const XEntry* parent = x_.find(p.value);
+      if (p != kBaseOp && parent->children == 0) c.push({parent->birth_res, p.value, true});
+    }
+  }
+  stats.coarsen_seconds = seconds_since(t0);
+}
+
+// Brown 6.3, step 2: AddToList (5.1.1) for the new RCF, lowest birth_res first, from R^0 over
+// the DAG: ops already in X are traversed (their children offered) without changing the mesh; the
+// others (Brown's set Y) are added with their missing ancestors. The traversal reaches exactly
+// the new minimal-surface X. Brown's coarsening can keep ops the new X lacks (an op of X_old that
+// is not completely finer but no longer reachable: Theorem 6.4.1 assumes otherwise), so when the
+// traversal completes, the ops of X it did not reach are removed too, finest first (each is then
+// a leaf: a child in the new X would make it an ancestor, reached).
+class Session::Refiner {
+ public:
+  /// by_page: with no budget the order does not matter (the traversal reaches the same X), so
+  /// candidates are taken page by page, sweeping upwards through the pages and wrapping around as
+  /// add_to_list does (a page is then decoded about once per sweep; in order of resolution the
+  /// same traversal decodes pages many times over when the cache cannot hold X's pages).
+  Refiner(Session& s, const RcfOracle& rcf, Changes& changes, FrameStats& stats, bool by_page)
+      : s_(s), rcf_(rcf), changes_(changes), stats_(stats), by_page_(by_page) {}
+
+  /// Runs until Y is added or `stop` (given the triangles the next group would add) says no;
+  /// returns the resolution it stopped at (1: done).
+  double run(const std::function<bool(std::int64_t)>& stop) {
+    reach(*s_.source_.op(kBaseOp));
+    while (!queue_.empty()) {
+      const Candidate top = queue_.top();
+      if (reached_.contains(top.id) || rejected_.contains(top.id)) {
+        queue_.pop();
+        continue;
+      }
+      if (by_page_) {
+        round_ = std::uint64_t(top.res) >> kRoundShift;
+        cursor_ = std::uint64_t(top.res) & ((std::uint64_t{1} << kRoundShift) - 1);
+      }
+      const OpRef op = s_.source_.op(OpId{top.id});
+      ++stats_.ops_tested;
+      if (rcf_.is_completely_finer(*op, s_.source_)) {
+        rejected_.insert(top.id);
+        queue_.pop();
+        continue;
+      }
+      std::vector<OpRef> group{op};  // the op and its ancestors not reached yet
+      seen_.insert(top.id);
+      collect_ancestors(*op, group);
+      std::int64_t delta = 0;
+      for (const OpRef& a : group) {
+        if (!s_.x_.contains(a->id.value))
+          delta += std::int64_t(a->fragment.size()) - std::int64_t(a->pre.size());
+      }
+      if (stop(delta)) return stopped(top.res);
+      queue_.pop();
+      std::sort(group.begin(), group.end(),
+                [](const OpRef& a, const OpRef& b) { return a->id < b->id; });  // parents first
+      for (const OpRef& a : group) {
+        if (!s_.x_.contains(a->id.value)) s_.add_op(*a, changes_);
+        reach(*a);
+      }
+    }
+    return 1.0;
+  }
+
+  /// After a complete run: removes the ops of X that the new X lacks.
+  void remove_unreached() {
+    std::vector<OpId> extra;
+    s_.x_.for_each([&](std::uint64_t id, const XEntry&) {
+      if (!reached_.contains(id)) extra.push_back(OpId{id});
+    });
+    std::sort(extra.begin(), extra.end(), std::greater<>());
+    for (OpId id : extra) s_.remove_op(*s_.source_.op(id), changes_);
+    stats_.unreached_coarsenings = extra.size();
+  }
+
+ private:
+  void reach(const OpView& op) {
+    reached_.insert(op.id.value);
+    ++stats_.ops_tested;
+    if (rcf_.is_finer(op, s_.source_)) return;
+    for (const FragmentTriangle& t : op.fragment) {
+      if (!t.killer.valid() || reached_.contains(t.killer.value)) continue;
+      if (queued_.insert(t.killer.value))
+        queue_.push({key(t.killer, t.death_res), t.killer.value, true});
+    }
+  }
+  void collect_ancestors(const OpView& op, std::vector<OpRef>& group) {
+    for (OpId p : op.parents) {
+      if (reached_.contains(p.value) || !seen_.insert(p.value)) continue;
+      group.push_back(s_.source_.op(p));
+      collect_ancestors(*group.back(), group);
+    }
+  }
+  // The queue's order: resolution, or (sweep round, page) packed exactly into a double.
+  static constexpr int kRoundShift = 40;
+  double key(OpId id, double res) const {
+    if (!by_page_) return res;
+    const std::uint64_t place = s_.source_.locality(id) & ((std::uint64_t{1} << kRoundShift) - 1);
+    const std::uint64_t round = round_ + (place < cursor_ ? 1 : 0);
+    return double((round << kRoundShift) | place);
+  }
+  double stopped(double res) {
+    IdMap<std::uint8_t> waiting;
+    while (!queue_.empty()) {
+      const std::uint64_t id = queue_.top().id;
+      queue_.pop();
+      if (!reached_.contains(id) && !rejected_.contains(id) && !s_.x_.contains(id))
+        waiting.insert(id);
+    }
+    stats_.pending_refinings = waiting.size();
+    stats_.complete = false;
+    return res;
+  }
+
+  Session& s_;
+  const RcfOracle& rcf_;
+  Changes& changes_;
+  FrameStats& stats_;
+  std::priority_queue<Candidate, std::vector<Candidate>, LowestFirst> queue_;
+  IdMap<std::uint8_t> queued_, rejected_, seen_, reached_;
+  bool by_page_;
+  std::uint64_t round_ = 0, cursor_ = 0;
+};
+
+void Session::refine(const RcfOracle& rcf, const SessionBudget& budget, double start_ms,
+                     Changes& changes, FrameStats& stats) {
+  const auto t0 = Clock::now();
+  const auto out_of_time = [&] {
+    return budget.max_period_ms > 0.0 && start_ms + ms_since(t0) >= budget.max_period_ms;
+  };
+  if (out_of_time()) {
+    // Brown 6.3: no refining once the period is over; X stays the coarsening's.
+    stats.complete = false;
+    stats.stop_resolution = 0.0;
+  } else {
+    Refiner refiner(*this, rcf, changes, stats,
+                    budget.max_period_ms <= 0.0 && budget.max_triangles == 0);
+    stats.stop_resolution = refiner.run([&](std::int64_t delta) {
+      return out_of_time() ||
+             (budget.max_triangles != 0 && delta > 0 &&
+              std::int64_t(triangles_.size()) + delta > std::int64_t(budget.max_triangles));
+    });
+    if (stats.complete) refiner.remove_unreached();
+  }
+  stats.refine_seconds = seconds_since(t0);
+}
+
+Frame Session::update(const RcfOracle& rcf, const SessionBudget& budget) {
+  const auto t0 = Clock::now();
+  Frame frame;
+  Changes changes;
+  coarsen(rcf, budget.max_period_ms, changes, frame.stats);
+  if (!budget.coarsen_only) refine(rcf, budget, ms_since(t0), changes, frame.stats);
+  const auto t1 = Clock::now();
+  changes.ops.for_each([&](std::uint64_t id, int d) {
+    if (d > 0) frame.ops_added.push_back(OpId{id});
+    if (d < 0) frame.ops_removed.push_back(OpId{id});
+  });
+  changes.triangles.for_each([&](const TriRef& t, int d) {
+    if (d > 0) frame.triangles_in.push_back(t);
+    if (d < 0) frame.triangles_out.push_back(t);
+  });
+  std::sort(frame.ops_added.begin(), frame.ops_added.end());
+  std::sort(frame.ops_removed.begin(), frame.ops_removed.end());
+  std::sort(frame.triangles_in.begin(), frame.triangles_in.end());
+  std::sort(frame.triangles_out.begin(), frame.triangles_out.end());
+  if (options_.morph && !frame.triangles_in.empty()) {
+    if (source_.info().kind == ModelKind::kTerrain) {
+      frame.morph = terrain_morph(source_, frame.triangles_out, frame.triangles_in);
+    } else {
+      IdMap<std::uint8_t> removed;
+      for (OpId id : frame.ops_removed) removed.insert(id.value);
+      const auto in_union = [&](OpId id) {
+        return x_.contains(id.value) || removed.contains(id.value);
+      };
+      frame.morph = mesh_morph(source_, in_union, frame.ops_added, frame.ops_removed);
+    }
+  }
+  FrameStats& s = frame.stats;
+  s.morph_seconds = seconds_since(t1);
+  s.coarsenings = frame.ops_removed.size();
+  s.refinings = frame.ops_added.size();
+  s.x = x_.size();
+  s.triangles = triangles_.size();
+  s.triangles_in = frame.triangles_in.size();
+  s.triangles_out = frame.triangles_out.size();
+  s.morph_triangles = frame.morph.triangles.size();
+  s.morph_vertices = frame.morph.start.size();
+  s.morph_groups = frame.morph.groups;
+  s.seconds = seconds_since(t0);
+  return frame;
+}
+
+std::vector<OpId> Session::x() const {
+  std::vector<OpId> x;
+  x.reserve(x_.size());
+  x_.for_each([&](std::uint64_t id, const XEntry&) { x.push_back(OpId{id}); });
+  std::sort(x.begin(), x.end(), std::greater<>());
+  return x;
+}
+
+TriangleMesh Session::mesh() const {
+  return to_mesh(source_, triangles_);
+}
+
+std::uint64_t Session::memory_bytes() const {
+  return x_.memory_bytes() + slot_.memory_bytes() + triangles_.capacity() * sizeof(TriRef);
+}
+
+std::vector<OpId> add_to_list_budgeted(const OpSource& source, const RcfOracle& rcf,
+                                       const SessionBudget& budget, FrameStats* frame_stats) {
+  Session session(source, SessionOptions{.morph = false});
+  const Frame frame = session.update(rcf, budget);
+  if (frame_stats != nullptr) *frame_stats = frame.stats;
+  return session.x();
+}
+
+}  // namespace smr
