@@ -82,6 +82,22 @@ struct RcfOptions {
   RcfSpec spec() const;
 };
 
+/// `flythrough`: a camera path replayed through a geomorphing session (flythrough_cmd.cpp).
+struct FlythroughArgs {
+  std::string path, line, viewport = "1024x768", png_dir;
+  bool orbit = false, keyframes = false, settle = false, no_cull = false, no_morph = false;
+  bool compare_fresh = false;
+  std::uint64_t frames = 0;  // 0: as many as the path lasts at the speed
+  double fps = 60.0;
+  std::optional<double> speed;  // model units per second
+  double pitch = 20.0;          // --line: degrees below the horizon
+  double max_period_ms = 0.0, pixel_error = 1.0, fov = 60.0;
+  std::uint64_t cache_mb = 64, png_every = 1;
+
+  void add_to(CLI::App& app);
+  void validate() const;
+};
+
 struct SynthArgs {
   int width = 1025, height = 0;  // height 0: = width
   std::uint64_t seed = 1;
@@ -107,5 +123,6 @@ int cmd_build(IngestArgs a, std::string db_path, const RcfOptions& rcf, const Ex
 int cmd_info(const std::string& db_path, bool json);
 int cmd_verify(const std::string& db_path, const CommonFlags& f);
 int cmd_synth(const SynthArgs& a, bool quiet);
+int cmd_flythrough(const std::string& db_path, const FlythroughArgs& a, const CommonFlags& f);
 
 }  // namespace smr::tools

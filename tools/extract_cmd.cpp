@@ -1,7 +1,7 @@
 // smrdb extract: the refinement condition's flags, the extraction and its report.
 #include <cstdio>
 #include <optional>
-#include <sstream>
+#include <tuple>
 #include <utility>
 
 #include <CLI/CLI.hpp>
@@ -97,14 +97,7 @@ RcfSpec RcfOptions::spec() const {
     cam.target = parse_vec3(target, "--target");
     if (!up.empty()) cam.up = parse_vec3(up, "--up");
     cam.fov_y_deg = fov;
-    int w = 0, h = 0;
-    char x = 0, extra = 0;
-    std::stringstream vs(viewport);
-    if (!(vs >> w >> x >> h) || x != 'x' || (vs >> extra)) {
-      throw_input("--viewport expects WxH (e.g. 1920x1080), got '" + viewport + "'");
-    }
-    cam.viewport_w = w;
-    cam.viewport_h = h;
+    std::tie(cam.viewport_w, cam.viewport_h) = parse_viewport(viewport, "--viewport");
     cam.near_distance = near;
     cam.far_distance = far;
     s.camera = cam;

@@ -30,6 +30,7 @@ int main(int argc, char** argv) {
   smr::tools::IngestArgs ingest_args;
   smr::tools::ExtractArgs extract_args;
   smr::tools::SynthArgs synth_args;
+  smr::tools::FlythroughArgs fly_args;
   std::string db_path;
 
   CLI::App* ingest = app.add_subcommand(
@@ -78,6 +79,16 @@ int main(int argc, char** argv) {
   synth_args.add_to(*synth);
   synth->add_flag("-q,--quiet", flags.quiet, "No summary on stderr");
 
+  CLI::App* fly = app.add_subcommand(
+      "flythrough",
+      "Replay a camera path through a geomorphing session (Brown ch. 6): per-frame statistics");
+  fly->add_option("db", db_path, "Database file")->required();
+  fly_args.add_to(*fly);
+  fly->add_flag("--json", flags.json, "Print the per-frame report as JSON on stdout");
+  fly->add_flag("-q,--quiet", flags.quiet, "No progress or summary on stderr");
+  fly->add_flag("--verify", flags.verify,
+                "With --compare-fresh: compare the triangle sets, not only their counts");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -88,7 +99,7 @@ int main(int argc, char** argv) {
     if (app.get_subcommands().empty() && argc > 1 && argv[1][0] != '-') {
       std::fprintf(stderr,
                    "smrdb: error: unknown subcommand '%s' (ingest, extract, info, verify, build, "
-                   "synth; --help lists them)\n",
+                   "synth, flythrough; --help lists them)\n",
                    argv[1]);
       return 1;
     }
@@ -103,6 +114,7 @@ int main(int argc, char** argv) {
     if (*verify) return cmd_verify(db_path, flags);
     if (*build) return cmd_build(ingest_args, db_path, rcf, extract_args, flags);
     if (*synth) return cmd_synth(synth_args, flags.quiet);
+    if (*fly) return cmd_flythrough(db_path, fly_args, flags);
   } catch (const smr::Error& e) {
     std::fprintf(stderr, "smrdb: error: %s\n", e.what());
     return e.exit_code();

@@ -50,6 +50,15 @@ std::vector<double> parse_numbers(const std::string& text, std::size_t count,
   return out;
 }
 
+std::pair<int, int> parse_viewport(const std::string& text, const std::string& option) {
+  int w = 0, h = 0;
+  char x = 0, extra = 0;
+  std::stringstream vs(text);
+  if (!(vs >> w >> x >> h) || x != 'x' || (vs >> extra))
+    throw_input(option + " expects WxH (e.g. 1920x1080), got '" + text + "'");
+  return {w, h};
+}
+
 std::string extension_of(const std::string& path) {
   std::string ext = std::filesystem::path(path).extension().string();
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));

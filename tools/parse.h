@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace smr::tools {
@@ -13,6 +14,9 @@ std::uint64_t parse_bytes(const std::string& text, const std::string& option);
 /// `count` comma-separated finite numbers; `form` names them in the message ("x,y,z").
 std::vector<double> parse_numbers(const std::string& text, std::size_t count,
                                   const std::string& option, const std::string& form);
+
+/// "WxH" (e.g. 1920x1080): width and height in pixels (range checks are Camera::validate's).
+std::pair<int, int> parse_viewport(const std::string& text, const std::string& option);
 
 /// The extension of `path`, lower case, with its dot (".tif").
 std::string extension_of(const std::string& path);
