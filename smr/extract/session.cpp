@@ -157,8 +157,10 @@ class Session::Refiner {
   /// returns the resolution it stopped at (1: done).
   double run(const std::function<bool(std::int64_t)>& stop) {
     reach(*s_.source_.op(kBaseOp));
-    while (!queue_.empty()) {
+    for (std::uint64_t pops = 0; !queue_.empty(); ++pops) {
       const Candidate top = queue_.top();
+      // The walk over ops already in X takes time too: the period bounds it (Brown 6.3).
+      if (pops % 64 == 63 && stop(0)) return stopped(top.res);
       if (reached_.contains(top.id) || rejected_.contains(top.id)) {
         queue_.pop();
         continue;
