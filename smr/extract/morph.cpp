@@ -305,7 +305,8 @@ class TerrainOverlay {
   std::vector<std::int32_t> seed_;    // per added triangle: a removed one overlapping it, or -1
   std::vector<std::uint32_t> stamp_;  // per removed triangle: the added one that last tested it
   std::vector<std::uint32_t> queue_, overlapping_, probed_;
-  FlatMap<PointKey, std::uint32_t, PointKeys> vertices_{75};
+  IdMap<std::uint32_t> grid_vertices_{75};                    // integer point -> 1 + vertex
+  FlatMap<PointKey, std::uint32_t, PointKeys> vertices_{75};  // other points -> 1 + vertex
   MorphMesh mesh_;
 };
 
@@ -377,7 +378,10 @@ void TerrainOverlay::visit(std::uint32_t t) {
 }
 
 std::uint32_t TerrainOverlay::vertex(const RatPoint& p, const TerrainTri& s, const TerrainTri& t) {
-  std::uint32_t& slot = vertices_[key_of(p)];
+  const PointKey key = key_of(p);
+  std::uint32_t& slot = key.d == 1
+                            ? grid_vertices_[pack({std::int64_t(key.x), std::int64_t(key.y)})]
+                            : vertices_[key];
   if (slot != 0) return slot - 1;
   slot = static_cast<std::uint32_t>(mesh_.start.size()) + 1;
   Vec3 a{info_.georef.x0 + double(p.x) / double(p.d) * info_.georef.dx,
@@ -398,12 +402,14 @@ std::uint32_t TerrainOverlay::vertex(const RatPoint& p, const TerrainTri& s, con
 }
 
 void TerrainOverlay::add_piece(const TerrainTri& s, const TerrainTri& t) {
-  Piece piece, next;
-  for (int k = 0; k < 3; ++k) piece.add({t.g[k].x, t.g[k].y, 1}, {t.g[k], t.g[(k + 1) % 3]});
-  for (int k = 0; k < 3 && piece.n > 0; ++k) {
-    clip(piece, {s.g[k], s.g[(k + 1) % 3]}, next);
-    std::swap(piece, next);
+  Piece a, b;
+  for (int k = 0; k < 3; ++k) a.add({t.g[k].x, t.g[k].y, 1}, {t.g[k], t.g[(k + 1) % 3]});
+  Piece *from = &a, *to = &b;
+  for (int k = 0; k < 3 && from->n > 0; ++k) {
+    clip(*from, {s.g[k], s.g[(k + 1) % 3]}, *to);
+    std::swap(from, to);
   }
+  const Piece& piece = *from;
   std::array<std::array<int, 3>, Piece::kMax> tris;
   const int count = triangulate(piece, tris);
   if (count == 0) return;
@@ -424,7 +430,14 @@ MorphMesh TerrainOverlay::run() {
   for (std::uint32_t i = 0; i < out_.size(); ++i) {
     for (const GridPoint& p : out_[i].g) out_at_[pack(p)] = i;
   }
-  vertices_.reserve(out_.size() + in_.size());
+  // About one vertex per changed triangle and three pieces per two (benchmarks: 57 k vertices
+  // and 102 k pieces for 60 k changed triangles).
+  grid_vertices_.reserve((out_.size() + in_.size()) / 2);
+  vertices_.reserve((out_.size() + in_.size()) / 2);
+  mesh_.start.reserve(out_.size() + in_.size());
+  mesh_.end.reserve(out_.size() + in_.size());
+  mesh_.triangles.reserve(2 * (out_.size() + in_.size()));
+  mesh_.flags.reserve(2 * (out_.size() + in_.size()));
   seed_.assign(in_.size(), -1);
   stamp_.assign(out_.size(), ~std::uint32_t{0});
   // Every connected part of the region has a corner both triangulations share: walks start there.

@@ -35,10 +35,10 @@ struct MorphMesh {
   static constexpr std::uint8_t kVoidStart = 1;  // the piece lies in a void triangle at t = 0
   static constexpr std::uint8_t kVoidEnd = 2;    // ... at t = 1
 
-  std::vector<Vec3> start, end;       // per vertex: its position at t = 0 and at t = 1
-  std::vector<std::uint32_t> group;   // per vertex: its morph group (one connected changed region)
+  std::vector<Vec3> start, end;      // per vertex: its position at t = 0 and at t = 1
+  std::vector<std::uint32_t> group;  // per vertex: its morph group (one connected changed region)
   std::vector<std::array<std::uint32_t, 3>> triangles;  // counter-clockwise (from +z / outside)
-  std::vector<std::uint8_t> flags;    // per triangle
+  std::vector<std::uint8_t> flags;                      // per triangle
   std::uint32_t groups = 0;
   /// Vertices whose start or end could not be derived exactly (3-D: no collapse map found; they
   /// start at the nearest vertex of their op's PreF instead).
@@ -50,11 +50,18 @@ struct MorphMesh {
 
 /// 2.5-D: the morph from the surface of `out` (t = 0) to that of `in` (t = 1). Both must cover the
 /// same region of the domain (a session update's triangles out and in); each is conforming.
+/// Vertices are shared (one per point of the plane, corners keep their stored xy); triangles are
+/// the pieces' (an out triangle meets an in one), each with positive area. Linear in the pieces.
+/// Throws smr::Error (kInvalidInput) when an in triangle overlaps no out triangle or a grid
+/// coordinate reaches 2^28.
 MorphMesh terrain_morph(const OpSource& source, std::span<const TriRef> out,
                         std::span<const TriRef> in);
 
 /// 3-D: the morph between the meshes of X_prev and X_new, given `in_union` (membership of
-/// X_prev union X_new), `added` (X_new \ X_prev) and `removed` (X_prev \ X_new).
+/// X_prev union X_new), `added` (X_new \ X_prev) and `removed` (X_prev \ X_new). Triangles: those
+/// of F(R), R added or removed, whose killer is not in the union; one vertex per vertex id. At
+/// t = 0 the non-degenerate ones are the changed part of X_prev's mesh, at t = 1 of X_new's.
+/// Linear interpolation can fold a triangle whose corners head for different originators.
 MorphMesh mesh_morph(const OpSource& source, const std::function<bool(OpId)>& in_union,
                      std::span<const OpId> added, std::span<const OpId> removed);
 

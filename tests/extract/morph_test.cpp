@@ -15,6 +15,8 @@
 #include <set>
 #include <unordered_map>
 
+#include "base/error.h"
+#include "smr/db/database.h"
 #include "smr/extract/extract.h"
 #include "smr/extract/morph.h"
 #include "tests/support/datasets.h"
@@ -244,6 +246,81 @@ bool expect_terrain_morph(const test::Dataset& d, const RcfSpec& from, const Rcf
   return true;
 }
 
+// A terrain "CRMR" whose R^0 holds the triangles of two triangulations (terrain_morph reads
+// triangles only): out = fragment[0, n_out), in = the rest. Heights z = x + 2y on out's corners
+// and z = 10 - y on in's, so each side is one plane.
+struct TwoSides {
+  Crmr crmr;
+  std::vector<TriRef> out, in;
+};
+TwoSides two_sides(const std::vector<std::array<GridPoint, 3>>& out,
+                   const std::vector<std::array<GridPoint, 3>>& in) {
+  TwoSides t;
+  t.crmr.header.kind = ModelKind::kTerrain;
+  t.crmr.header.grid_width = t.crmr.header.grid_height = 9;
+  Op& op = t.crmr.ops.emplace_back();
+  op.id = kBaseOp;
+  for (int side = 0; side < 2; ++side) {
+    for (const auto& tri : side == 0 ? out : in) {
+      FragmentTriangle f;
+      for (int k = 0; k < 3; ++k) {
+        const double x = double(tri[k].x), y = double(tri[k].y);
+        f.v[k] = static_cast<std::uint32_t>(op.vertices.size());
+        op.vertices.push_back(
+            {VertexId{op.vertices.size()}, {x, y, side == 0 ? x + 2 * y : 10 - y}});
+      }
+      (side == 0 ? t.out : t.in).push_back({kBaseOp, std::uint32_t(op.fragment.size())});
+      op.fragment.push_back(f);
+    }
+  }
+  return t;
+}
+
+TEST(TerrainMorphCases, CrossingDiagonalsMeetAtARationalVertex) {
+  // The unit square split by one diagonal, then by the other: four pieces around (1/2, 1/2).
+  const TwoSides s = two_sides({{{{0, 0}, {1, 0}, {1, 1}}}, {{{0, 0}, {1, 1}, {0, 1}}}},
+                               {{{{0, 0}, {1, 0}, {0, 1}}}, {{{1, 0}, {1, 1}, {0, 1}}}});
+  const MorphMesh m = terrain_morph(s.crmr, s.out, s.in);
+  ASSERT_EQ(m.start.size(), 5u);
+  EXPECT_EQ(m.triangles.size(), 4u);
+  EXPECT_EQ(m.groups, 1u);
+  const auto centre = std::find(m.start.begin(), m.start.end(), Vec3{0.5, 0.5, 1.5});
+  ASSERT_NE(centre, m.start.end());
+  EXPECT_EQ(m.end[std::size_t(centre - m.start.begin())], (Vec3{0.5, 0.5, 9.5}));
+  EXPECT_EQ(tiling_problem(s.crmr, m, 0.5, {}), "");
+}
+
+TEST(TerrainMorphCases, KeepsVerticesOnEdgesAndSeparatesGroups) {
+  // One triangle refined at its edge midpoints (the new corners lie on its edges: no piece may
+  // drop them), and apart from it a square whose diagonal flips.
+  const TwoSides s = two_sides(
+      {{{{0, 0}, {4, 0}, {0, 4}}}, {{{6, 0}, {8, 0}, {8, 2}}}, {{{6, 0}, {8, 2}, {6, 2}}}},
+      {{{{0, 0}, {2, 0}, {0, 2}}},
+       {{{2, 0}, {4, 0}, {2, 2}}},
+       {{{0, 2}, {2, 2}, {0, 4}}},
+       {{{2, 0}, {2, 2}, {0, 2}}},
+       {{{6, 0}, {8, 0}, {6, 2}}},
+       {{{8, 0}, {8, 2}, {6, 2}}}});
+  const MorphMesh m = terrain_morph(s.crmr, s.out, s.in);
+  EXPECT_EQ(m.start.size(), 6u + 5u);
+  EXPECT_EQ(m.triangles.size(), 4u + 4u);
+  EXPECT_EQ(m.groups, 2u);
+  for (std::size_t v = 0; v < m.start.size(); ++v) {
+    EXPECT_EQ(m.start[v].z, m.start[v].x + 2 * m.start[v].y);  // exact on this grid
+    EXPECT_EQ(m.end[v].z, 10 - m.end[v].y);
+  }
+  for (const auto& tri : m.triangles) {
+    EXPECT_GT(orient2d(xy(m.start[tri[0]]), xy(m.start[tri[1]]), xy(m.start[tri[2]])), 0.0);
+    EXPECT_EQ(m.group[tri[0]], m.group[tri[1]]);
+  }
+}
+
+TEST(TerrainMorphCases, RefusesAnAddedTriangleOutsideTheRemovedOnes) {
+  const TwoSides s = two_sides({{{{0, 0}, {1, 0}, {0, 1}}}},
+                               {{{{0, 0}, {1, 0}, {0, 1}}}, {{{3, 3}, {4, 3}, {3, 4}}}});
+  EXPECT_THROW(terrain_morph(s.crmr, s.out, s.in), Error);
+}
+
 class TerrainMorph : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(TerrainMorph, IsTheOldSurfaceAtZeroTheNewAtOneAndTilesInBetween) {
@@ -405,6 +482,48 @@ INSTANTIATE_TEST_SUITE_P(CgalMeshes, MeshMorph, ::testing::ValuesIn(meshes()),
                            std::replace(n.begin(), n.end(), '-', '_');
                            return n;
                          });
+
+}  // namespace
+}  // namespace smr
+
+namespace smr {
+namespace {
+
+// Speed, not asserted (run with --gtest_also_run_disabled_tests and SMRDB_MORPH_BENCH_DB set to a
+// terrain database, e.g. benchmarks' fbm4097_seed1_e1.6.smrdb): the morph between the 1 px cuts of
+// two cameras, the second moved a quarter of the domain (a jump). Prints one JSON line.
+TEST(MorphSpeed, DISABLED_TerrainCameraJump) {
+  const char* path = std::getenv("SMRDB_MORPH_BENCH_DB");
+  ASSERT_NE(path, nullptr) << "set SMRDB_MORPH_BENCH_DB to a terrain database";
+  const auto db = Database::open(path, {.cache_bytes = std::size_t{512} << 20});
+  const Box3& b = db->info().bounds;
+  const double w = b.hi.x - b.lo.x, h = b.hi.y - b.lo.y, zr = std::max(1.0, b.hi.z - b.lo.z);
+  const auto cut = [&](double shift) {
+    RcfSpec s;
+    Camera cam;
+    cam.eye = {b.lo.x + (0.2 + shift) * w, b.lo.y + 0.2 * h, b.hi.z + 0.3 * zr};
+    cam.target = {cam.eye.x + 0.3 * w, cam.eye.y + 0.5 * h, b.lo.z};
+    cam.viewport_w = 1920;
+    cam.viewport_h = 1080;
+    s.camera = cam;
+    s.pixel_error = 1.0;
+    return extract_minimal_surface(*db, make_rcf(s, ModelKind::kTerrain, nullptr));
+  };
+  const Change c = change(cut(0.0), cut(0.25));
+  double best = std::numeric_limits<double>::infinity();
+  MorphMesh morph;
+  for (int run = 0; run < 3; ++run) {
+    const auto t0 = std::chrono::steady_clock::now();
+    morph = terrain_morph(*db, c.out, c.in);
+    best = std::min(best,
+                    std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  }
+  std::printf(
+      "{\"out\": %zu, \"in\": %zu, \"pieces\": %zu, \"vertices\": %zu, \"groups\": %u, "
+      "\"seconds\": %.4f, \"pieces_per_second\": %.0f, \"changed_triangles_per_second\": %.0f}\n",
+      c.out.size(), c.in.size(), morph.triangles.size(), morph.start.size(), morph.groups, best,
+      double(morph.triangles.size()) / best, double(c.out.size() + c.in.size()) / best);
+}
 
 }  // namespace
 }  // namespace smr
