@@ -253,6 +253,72 @@ TEST(Session, TriangleBudgetsOnMeshesLeaveAManifoldCutThenCatchUp) {
   EXPECT_GT(stopped, 5);
 }
 
+double xy_area(const Vec3& a, const Vec3& b, const Vec3& c) {
+  return 0.5 * ((b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x));
+}
+
+// A flight of many small camera steps with morphs on: every frame's morph covers exactly the
+// changed region (its pieces' areas sum to the triangles out's and in's, each counter-clockwise),
+// every vertex of the morph at t = 1 sits where the new mesh has it (no drift: positions come
+// from the stored ops, not from the previous frame), and the mesh stays a fresh extraction's.
+TEST(Session, MorphsOfAFlightCoverTheChangedRegionAndEndOnTheStoredMesh) {
+  const test::Dataset& d = test::dataset("fbm129");
+  const Box3 b = d.crmr.header.bounds;
+  const Vec3 c = b.center(), size = b.hi - b.lo;
+  Session session(d.crmr);
+  std::uint64_t morph_frames = 0;
+  constexpr int kFrames = 300;
+  for (int f = 0; f < kFrames; ++f) {
+    SCOPED_TRACE("frame " + std::to_string(f));
+    const double s = double(f) / kFrames;
+    RcfSpec spec;
+    Camera cam;
+    cam.eye = {b.lo.x + s * size.x, b.lo.y - 0.1 * size.y + s * size.y, b.hi.z + 0.3 * size.x};
+    cam.target = {cam.eye.x + 0.2 * size.x, cam.eye.y + 0.5 * size.y, c.z};
+    cam.viewport_w = 800;
+    cam.viewport_h = 600;
+    spec.camera = cam;
+    spec.pixel_error = 0.5;
+    const Rcf rcf = make_rcf(spec, ModelKind::kTerrain, &d.dem);
+    const Frame fr = session.update(rcf);
+    ASSERT_EQ(fr.triangles_in.empty(), fr.morph.triangles.empty());
+    if (fr.triangles_in.empty()) continue;
+    ++morph_frames;
+    double in = 0, out = 0, morph = 0;
+    for (const TriRef& t : fr.triangles_in) {
+      const Triangle3 v = corners(*d.crmr.op(t.op), d.crmr.op(t.op)->fragment[t.index]);
+      in += xy_area(v[0], v[1], v[2]);
+    }
+    for (const TriRef& t : fr.triangles_out) {
+      const Triangle3 v = corners(*d.crmr.op(t.op), d.crmr.op(t.op)->fragment[t.index]);
+      out += xy_area(v[0], v[1], v[2]);
+    }
+    for (const auto& t : fr.morph.triangles) {
+      const double a = xy_area(fr.morph.start[t[0]], fr.morph.start[t[1]], fr.morph.start[t[2]]);
+      EXPECT_GT(a, 0.0);
+      morph += a;
+    }
+    EXPECT_NEAR(morph, in, 1e-9 * in);
+    EXPECT_NEAR(morph, out, 1e-9 * out);
+    EXPECT_GT(fr.morph.groups, 0u);
+    // Every stored corner of the triangles in is a morph vertex ending exactly there.
+    std::set<std::array<double, 3>> ends;
+    for (std::size_t v = 0; v < fr.morph.end.size(); ++v) {
+      const Vec3 e = fr.morph.at(v, 1.0);
+      ends.insert({e.x, e.y, e.z});
+    }
+    for (const TriRef& t : fr.triangles_in) {
+      const Triangle3 v = corners(*d.crmr.op(t.op), d.crmr.op(t.op)->fragment[t.index]);
+      for (const Vec3& p : v) EXPECT_TRUE(ends.count({p.x, p.y, p.z})) << p.x << "," << p.y;
+    }
+    if (f % 50 == 0) {
+      EXPECT_EQ(sorted(session.triangles()),
+                sorted(extract_minimal_surface(d.crmr, rcf).triangles));
+    }
+  }
+  EXPECT_GT(morph_frames, kFrames / 10);
+}
+
 TEST(Session, AnExpiredPeriodChangesNothingAndTheNextUpdateCatchesUp) {
   const test::Dataset& d = test::dataset("fbm129");
   const auto spread = test::rcf_spread(d.crmr.header);
