@@ -151,7 +151,14 @@ class Session::Refiner {
   /// add_to_list does (a page is then decoded about once per sweep; in order of resolution the
   /// same traversal decodes pages many times over when the cache cannot hold X's pages).
   Refiner(Session& s, const RcfOracle& rcf, Changes& changes, FrameStats& stats, bool by_page)
-      : s_(s), rcf_(rcf), changes_(changes), stats_(stats), by_page_(by_page) {}
+      : s_(s), rcf_(rcf), changes_(changes), stats_(stats), by_page_(by_page) {
+    // As in add_to_list: with an index, a child outside its conservative candidates is
+    // completely finer and is not read (reading them all decodes pages the mesh never uses).
+    if (const auto* indexed = dynamic_cast<const RcfIndexedSource*>(&s_.source_)) {
+      indexed_ = true;
+      for (OpId id : indexed->maybe_not_completely_finer(rcf_)) candidates_.insert(id.value);
+    }
+  }
 
   /// Runs until Y is added or `stop` (given the triangles the next group would add) says no;
   /// returns the resolution it stopped at (1: done).
@@ -214,6 +221,7 @@ class Session::Refiner {
     if (rcf_.is_finer(op, s_.source_)) return;
     for (const FragmentTriangle& t : op.fragment) {
       if (!t.killer.valid() || reached_.contains(t.killer.value)) continue;
+      if (indexed_ && !candidates_.contains(t.killer.value)) continue;  // completely finer
       if (queued_.insert(t.killer.value))
         queue_.push({key(t.killer, t.death_res), t.killer.value, true});
     }
@@ -252,7 +260,8 @@ class Session::Refiner {
   FrameStats& stats_;
   std::priority_queue<Candidate, std::vector<Candidate>, LowestFirst> queue_;
   IdMap<std::uint8_t> queued_, rejected_, seen_, reached_;
-  bool by_page_;
+  bool by_page_, indexed_ = false;
+  IdMap<std::uint8_t> candidates_;
   std::uint64_t round_ = 0, cursor_ = 0;
 };
 
