@@ -63,7 +63,8 @@ struct FrameStats {
   std::uint64_t refinings = 0;    // ops added to X (net)
   /// Work left for a later update because a budget stopped this one: ops of C not yet tested for
   /// coarsening (the period ended during coarsening), and ops waiting to be refined (candidates
-  /// not yet tested, so an upper bound on the refinings still needed).
+  /// not yet tested, so an upper bound on the refinings still needed; 0 when the period ended
+  /// before the refining began, stop_resolution 0: then what is pending is not known).
   std::uint64_t pending_coarsenings = 0;
   std::uint64_t pending_refinings = 0;
   /// Ops Brown's coarsening kept that the new X lacks, removed after the refining (session.cpp).

@@ -107,10 +107,13 @@ TEST_F(Flythrough, PeriodLeavesWorkPendingThatAnUnbudgetedUpdateFinishes) {
       continue;
     }
     EXPECT_FALSE(f.contains("fresh_match")) << "frame " << f["frame"];
-    EXPECT_GT(
-        f["pending_coarsenings"].get<std::uint64_t>() + f["pending_refinings"].get<std::uint64_t>(),
-        0u)
-        << "frame " << f["frame"];
+    // A period over before the refining began (stop_resolution 0) leaves its work unknown.
+    if (f["stop_resolution"].get<double>() > 0.0) {
+      EXPECT_GT(f["pending_coarsenings"].get<std::uint64_t>() +
+                    f["pending_refinings"].get<std::uint64_t>(),
+                0u)
+          << "frame " << f["frame"];
+    }
     if (f["triangles"] != f["fresh_triangles"]) ++cut;  // the period really stopped work
   }
   EXPECT_GT(cut, 0);

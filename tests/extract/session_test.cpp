@@ -85,7 +85,8 @@ std::vector<OpId> expected_coarsening(const OpSource& source, const std::vector<
     const OpId id = stack.back();
     stack.pop_back();
     if (!keep.insert(id).second && id != kBaseOp) continue;
-    for (OpId p : source.op(id)->parents) stack.push_back(p);
+    const OpRef op = source.op(id);  // held while its parents are read
+    for (OpId p : op->parents) stack.push_back(p);
   }
   return {keep.rbegin(), keep.rend()};
 }
