@@ -8,7 +8,6 @@
 #include <nlohmann/json.hpp>
 
 #include "base/error.h"
-#include "smr/core/clock.h"
 #include "smr/core/invariants.h"
 #include "smr/db/database.h"
 #include "smr/extract/extract.h"
@@ -33,30 +32,6 @@ Vec3 parse_vec3(const std::string& text, const std::string& option) {
 AoiSpec parse_aoi(const std::string& text, const std::string& option) {
   const auto v = parse_numbers(text, 4, option, "x,y,radius,level");
   return {v[0], v[1], v[2], v[3]};
-}
-
-// A budgeted one-shot extraction (smr/extract/session.h): X refined lowest resolution first
-// until the budget, then expanded as usual. The report says where it stopped and what that means.
-Extraction extract_budgeted(const OpSource& source, const Rcf& rcf, const SessionBudget& budget,
-                            const ExpansionOptions& expansion, nlohmann::json& report) {
-  const auto t0 = Clock::now();
-  FrameStats fs;
-  const std::vector<OpId> x = add_to_list_budgeted(source, rcf, budget, &fs);
-  const double t_extract = seconds_since(t0);
-  const auto t1 = Clock::now();
-  Extraction e = expansion.fronts ? expand(source, x, expansion) : extract_set_formula(source, x);
-  e.stats.expand_seconds = seconds_since(t1);
-  e.stats.extract_seconds = t_extract;
-  report = {{"max_triangles", budget.max_triangles},
-            {"max_ms", budget.max_period_ms},
-            {"complete", fs.complete},
-            {"stop_resolution", fs.stop_resolution},
-            {"stop_error", source.error_at(fs.stop_resolution)},
-            {"pending_refinings", fs.pending_refinings},
-            {"meaning", fs.complete
-                            ? "not stopped: the mesh meets the RCF"
-                            : "stopped: every triangle meets the RCF or has error <= stop_error"}};
-  return e;
 }
 
 }  // namespace
@@ -187,8 +162,18 @@ nlohmann::json run_extract(const Database& db, const Heightfield* dem, const Rcf
   const IndexedSource source(db);  // the R-tree answers the RCF's queries
   Extraction e;
   if (a.max_triangles != 0 || a.max_ms > 0.0) {
-    e = extract_budgeted(source, rcf, {.max_period_ms = a.max_ms, .max_triangles = a.max_triangles},
-                         expansion, report["budget"]);
+    // Refined lowest resolution first until the budget (smr/extract/session.h); the report says
+    // where it stopped and what the mesh then meets.
+    const SessionBudget budget{.max_period_ms = a.max_ms, .max_triangles = a.max_triangles};
+    FrameStats fs;
+    e = extract_budgeted(source, rcf, budget, expansion, &fs);
+    report["budget"] = fs;
+    report["budget"].update({{"max_triangles", budget.max_triangles},
+                             {"max_ms", budget.max_period_ms},
+                             {"stop_error", source.error_at(fs.stop_resolution)},
+                             {"meaning", fs.complete ? "not stopped: the mesh meets the RCF"
+                                                     : "stopped: every triangle meets the RCF "
+                                                       "or has error <= stop_error"}});
   } else {
     e = a.algorithm == "reduced" ? extract_reduced(source, rcf, expansion)
                                  : extract_minimal_surface(source, rcf, expansion);

@@ -261,30 +261,8 @@ nlohmann::json fly_frame(const Flight& f, const Key& k, const SessionBudget& bud
   const Frame frame = f.session.update(rcf, budget);
   const std::uint64_t pages_read = f.db.stats().pages_read - pages_before;
   const FrameStats& s = frame.stats;
-  const std::uint64_t morphs = s.coarsenings + s.refinings;
-  nlohmann::json rec = {{"eye", {k.eye.x, k.eye.y, k.eye.z}},
-                        {"complete", s.complete},
-                        {"stop_resolution", s.stop_resolution},
-                        {"pending_coarsenings", s.pending_coarsenings},
-                        {"pending_refinings", s.pending_refinings},
-                        {"coarsenings", s.coarsenings},
-                        {"refinings", s.refinings},
-                        {"unreached_coarsenings", s.unreached_coarsenings},
-                        {"local_morphs", morphs},
-                        {"local_morphs_pct", s.x == 0 ? 0.0 : 100.0 * double(morphs) / double(s.x)},
-                        {"morph_groups", s.morph_groups},
-                        {"morph_triangles", s.morph_triangles},
-                        {"morph_vertices", s.morph_vertices},
-                        {"triangles", s.triangles},
-                        {"triangles_in", s.triangles_in},
-                        {"triangles_out", s.triangles_out},
-                        {"x", s.x},
-                        {"ops_tested", s.ops_tested},
-                        {"pages_read", pages_read},
-                        {"update_ms", 1000.0 * s.seconds},
-                        {"coarsen_ms", 1000.0 * s.coarsen_seconds},
-                        {"refine_ms", 1000.0 * s.refine_seconds},
-                        {"morph_ms", 1000.0 * s.morph_seconds}};
+  nlohmann::json rec = s;
+  rec.update({{"eye", {k.eye.x, k.eye.y, k.eye.z}}, {"pages_read", pages_read}});
   if (f.args.compare_fresh) compare_fresh(f, rcf, s, rec);
   return rec;
 }

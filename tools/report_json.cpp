@@ -136,6 +136,31 @@ void to_json(json& j, const ExtractStats& s) {
        {"expand_seconds", s.expand_seconds}};
 }
 
+void to_json(json& j, const FrameStats& s) {
+  const std::uint64_t morphs = s.coarsenings + s.refinings;
+  j = {{"complete", s.complete},
+       {"stop_resolution", s.stop_resolution},
+       {"pending_coarsenings", s.pending_coarsenings},
+       {"pending_refinings", s.pending_refinings},
+       {"coarsenings", s.coarsenings},
+       {"refinings", s.refinings},
+       {"unreached_coarsenings", s.unreached_coarsenings},
+       {"local_morphs", morphs},
+       {"local_morphs_pct", s.x == 0 ? 0.0 : 100.0 * double(morphs) / double(s.x)},
+       {"morph_groups", s.morph_groups},
+       {"morph_triangles", s.morph_triangles},
+       {"morph_vertices", s.morph_vertices},
+       {"triangles", s.triangles},
+       {"triangles_in", s.triangles_in},
+       {"triangles_out", s.triangles_out},
+       {"x", s.x},
+       {"ops_tested", s.ops_tested},
+       {"update_ms", 1000.0 * s.seconds},
+       {"coarsen_ms", 1000.0 * s.coarsen_seconds},
+       {"refine_ms", 1000.0 * s.refine_seconds},
+       {"morph_ms", 1000.0 * s.morph_seconds}};
+}
+
 void to_json(json& j, const DatabaseStats& s) {
   j = {{"pages_read", s.pages_read},
        {"page_bytes_read", s.page_bytes_read},

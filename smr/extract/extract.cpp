@@ -24,15 +24,19 @@ Extraction expand(const OpSource& source, std::span<const OpId> x,
 
 Extraction extract_minimal_surface(const OpSource& source, const RcfOracle& rcf,
                                    const ExpansionOptions& options) {
-  auto t0 = Clock::now();
+  const auto t0 = Clock::now();
   const std::vector<OpId> x = add_to_list(source, rcf);
-  const double t_extract = seconds_since(t0);
-  t0 = Clock::now();
+  return expand_minimal(source, x, options, seconds_since(t0));
+}
+
+Extraction expand_minimal(const OpSource& source, std::span<const OpId> x,
+                          const ExpansionOptions& options, double extract_seconds) {
+  const auto t0 = Clock::now();
   Extraction e = options.fronts || options.max_triangles != 0
                      ? run_expansion(source, x, false, options)
                      : extract_set_formula(source, x);
   e.stats.expand_seconds = seconds_since(t0);
-  e.stats.extract_seconds = t_extract;
+  e.stats.extract_seconds = extract_seconds;
   return e;
 }
 

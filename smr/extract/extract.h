@@ -78,6 +78,12 @@ std::vector<OpId> add_to_list_reduced(const OpSource& source, const RcfOracle& r
 Extraction extract_minimal_surface(const OpSource& source, const RcfOracle& rcf,
                                    const ExpansionOptions& options = {});
 
+/// The surface expansion of Brown 5.1 for an X that AddToList (or a session) made, as
+/// `options` asks (advancing front or set formula); `extract_seconds` is reported as the time X
+/// took.
+Extraction expand_minimal(const OpSource& source, std::span<const OpId> x,
+                          const ExpansionOptions& options, double extract_seconds);
+
 /// Reduced extraction SMR (Brown 5.2), 2.5-D only: a 3-D mesh source is kInvalidInput.
 Extraction extract_reduced(const OpSource& source, const RcfOracle& rcf,
                            const ExpansionOptions& options = {});

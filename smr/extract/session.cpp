@@ -358,4 +358,12 @@ std::vector<OpId> add_to_list_budgeted(const OpSource& source, const RcfOracle& 
   return session.x();
 }
 
+Extraction extract_budgeted(const OpSource& source, const RcfOracle& rcf,
+                            const SessionBudget& budget, const ExpansionOptions& options,
+                            FrameStats* frame_stats) {
+  const auto t0 = Clock::now();
+  const std::vector<OpId> x = add_to_list_budgeted(source, rcf, budget, frame_stats);
+  return expand_minimal(source, x, options, seconds_since(t0));
+}
+
 }  // namespace smr

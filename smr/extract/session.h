@@ -38,6 +38,7 @@
 #include "smr/core/id_map.h"
 #include "smr/core/mesh.h"
 #include "smr/core/op_source.h"
+#include "smr/extract/extract.h"
 #include "smr/extract/morph.h"
 #include "smr/rcf/rcf.h"
 
@@ -141,5 +142,9 @@ class Session {
 std::vector<OpId> add_to_list_budgeted(const OpSource& source, const RcfOracle& rcf,
                                        const SessionBudget& budget,
                                        FrameStats* frame_stats = nullptr);
+/// add_to_list_budgeted, then the minimal surface's expansion of that X (expand_minimal).
+Extraction extract_budgeted(const OpSource& source, const RcfOracle& rcf,
+                            const SessionBudget& budget, const ExpansionOptions& options,
+                            FrameStats* frame_stats = nullptr);
 
 }  // namespace smr

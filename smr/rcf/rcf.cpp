@@ -219,10 +219,7 @@ bool Rcf::region_completely_finer(const Box3& box, double min_birth_res,
   for (const auto& c : culling_) {
     if (c->culls_region(box)) return true;
   }
-  for (const auto& s : similarity_) {
-    if (!s->region_satisfies(box, min_birth_res, info)) return false;
-  }
-  return true;
+  return region_satisfied(box, min_birth_res, info);
 }
 
 std::string Rcf::describe() const {
