@@ -1,0 +1,97 @@
+// Elevation by descent through the DAG (elevation.h; Maheshwari et al. 4.1).
+#include "smr/query/elevation.h"
+
+#include <sstream>
+
+#include "base/error.h"
+
+namespace smr::query {
+
+namespace {
+
+std::string where(const Vec2& p) {
+  std::ostringstream os;
+  os.precision(15);
+  os << '(' << p.x << ", " << p.y << ')';
+  return os.str();
+}
+
+}  // namespace
+
+double interpolate(const Triangle3& v, const Vec2& p) {
+  const Vec2 a = xy(v[0]), b = xy(v[1]), c = xy(v[2]);
+  const double area = orient2d(a, b, c);
+  if (area == 0.0) return (v[0].z + v[1].z + v[2].z) / 3.0;
+  const double wa = orient2d(p, b, c) / area;
+  const double wb = orient2d(a, p, c) / area;
+  const double wc = 1.0 - wa - wb;
+  return wa * v[0].z + wb * v[1].z + wc * v[2].z;
+}
+
+int locate_in_fragment(const OpView& op, const Vec2& p) {
+  int best = -1;
+  bool best_void = true;
+  double best_score = -std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < op.fragment.size(); ++i) {
+    const FragmentTriangle& t = op.fragment[i];
+    const Vec2 a = xy(op.position(t, 0)), b = xy(op.position(t, 1)), c = xy(op.position(t, 2));
+    const double area = orient2d(a, b, c);
+    if (!(area > 0.0)) continue;
+    // The smallest barycentric coordinate: >= 0 inside, slightly negative just outside.
+    const double score = std::min({orient2d(p, b, c), orient2d(a, p, c), orient2d(a, b, p)}) / area;
+    if (score < -1e-9) continue;
+    const bool is_void = t.is_void();
+    // Prefer data over void on a shared edge, then the most interior triangle.
+    if (best < 0 || (best_void && !is_void) || (best_void == is_void && score > best_score)) {
+      best = static_cast<int>(i);
+      best_void = is_void;
+      best_score = score;
+    }
+  }
+  return best;
+}
+
+ElevationQuery::ElevationQuery(const OpSource& source)
+    : source_(source), domain_(terrain_domain(source.info())), base_(source.op(kBaseOp)) {}
+
+ElevationAnswer ElevationQuery::at(const Vec2& p, const Accuracy& accuracy) const {
+  if (!std::isfinite(p.x) || !std::isfinite(p.y) || !domain_.contains(p))
+    throw Error(ErrorKind::kInvalidInput, "point " + where(p) +
+                                              " is outside the database's domain " +
+                                              where(domain_.lo) + " .. " + where(domain_.hi));
+  ElevationAnswer ans;
+  ans.p = p;
+  OpRef op = base_;
+  for (;;) {
+    ++ans.ops_read;
+    const int i = locate_in_fragment(*op, p);
+    if (i < 0)
+      throw Error(ErrorKind::kCorrupt, "op " + std::to_string(op->id.value) +
+                                           ": no triangle of its fragment contains " + where(p) +
+                                           ", though its predecessor's did");
+    const FragmentTriangle& t = op->fragment[static_cast<std::size_t>(i)];
+    const double err = triangle_error(source_, t);
+    const bool fine = !t.killer.valid() || (accuracy.max_error && err <= *accuracy.max_error);
+    if (fine) {
+      ans.triangle = TriRef{op->id, static_cast<std::uint32_t>(i)};
+      ans.final = !t.killer.valid();
+      ans.has_data = !t.is_void();
+      ans.error_bound = err;
+      if (ans.has_data)
+        ans.z = interpolate({op->position(t, 0), op->position(t, 1), op->position(t, 2)}, p);
+      return ans;
+    }
+    op = source_.op(t.killer);
+  }
+}
+
+std::vector<ElevationAnswer> elevations(const OpSource& source, std::span<const Vec2> points,
+                                        const Accuracy& accuracy) {
+  const ElevationQuery q(source);
+  std::vector<ElevationAnswer> out;
+  out.reserve(points.size());
+  for (const Vec2& p : points) out.push_back(q.at(p, accuracy));
+  return out;
+}
+
+}  // namespace smr::query

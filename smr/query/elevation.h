@@ -1,0 +1,57 @@
+// Elevation at a point (Maheshwari et al. 4.1: point location is the query of a vertical line).
+// A vertical line needs no mesh around it, only the triangle above the point at each level of
+// the hierarchy, so the query is a descent through the DAG: the triangle of F(R^0) containing the
+// point, then, while it is not fine enough, the triangle of F(killer) containing it (F(K) covers
+// PreF(K)'s domain, 2.5-D ops being complete, Brown 4.5), one op read per level. The answer is a
+// height of a triangle of a valid mesh of the CRMR, with the error that triangle carries: the
+// finest mesh (err_final, 0 for a lossless database) or the first triangle within max_error.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "smr/core/op_source.h"
+#include "smr/query/region.h"
+
+namespace smr::query {
+
+struct ElevationAnswer {
+  Vec2 p{0.0};
+  bool has_data = false;     // false: the point lies on "no data" (a void triangle)
+  double z = 0.0;            // the surface height at p (meaningless without data)
+  double error_bound = 0.0;  // |z - source| <= error_bound at p's grid samples (see header)
+  bool final = false;        // the triangle belongs to the finest mesh
+  TriRef triangle;           // the triangle answering
+  std::uint32_t ops_read = 0;
+};
+
+/// Answers elevation queries on a terrain source (a database, or an in-memory CRMR). Holds the
+/// base op; thread-compatible (one per thread).
+class ElevationQuery {
+ public:
+  /// Throws smr::Error (kInvalidInput) for a 3-D mesh source.
+  explicit ElevationQuery(const OpSource& source);
+  /// The elevation at p in the source's coordinates. A point outside the grid's extent throws
+  /// smr::Error (kInvalidInput) naming it and the extent.
+  ElevationAnswer at(const Vec2& p, const Accuracy& accuracy) const;
+  const Domain& domain() const { return domain_; }
+
+ private:
+  const OpSource& source_;
+  Domain domain_;
+  OpRef base_;
+};
+
+/// Convenience for a batch: one answer per point, in order.
+std::vector<ElevationAnswer> elevations(const OpSource& source, std::span<const Vec2> points,
+                                        const Accuracy& accuracy);
+
+/// The triangle of F(op) whose x-y footprint contains p (closed, with a relative tolerance of
+/// 1e-9 of its size), preferring one with data; -1 if none does.
+int locate_in_fragment(const OpView& op, const Vec2& p);
+
+/// The height at p of the plane through the triangle with corners v.
+double interpolate(const Triangle3& v, const Vec2& p);
+
+}  // namespace smr::query
