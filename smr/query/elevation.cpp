@@ -71,7 +71,10 @@ ElevationAnswer ElevationQuery::at(const Vec2& p, const Accuracy& accuracy) cons
                                            ", though its predecessor's did");
     const FragmentTriangle& t = op->fragment[static_cast<std::size_t>(i)];
     const double err = triangle_error(source_, t);
-    const bool fine = !t.killer.valid() || (accuracy.max_error && err <= *accuracy.max_error);
+    // A void triangle stands for no data only where it is final: a coarse one may still be
+    // replaced by triangles with data (greedy_tin.cpp: a hole's boundary samples become vertices).
+    const bool fine =
+        !t.killer.valid() || (!t.is_void() && accuracy.max_error && err <= *accuracy.max_error);
     if (fine) {
       ans.triangle = TriRef{op->id, static_cast<std::uint32_t>(i)};
       ans.final = !t.killer.valid();
