@@ -98,6 +98,19 @@ struct FlythroughArgs {
   void validate() const;
 };
 
+/// `query`: a GIS query (smr/query) of one kind (query_cmd.cpp).
+struct QueryArgs {
+  std::vector<std::string> args;  // the kind's positional arguments (points, a window...)
+  std::string input, out;
+  std::optional<double> max_error;
+  std::uint64_t cache_mb = 64;
+  bool json = false, quiet = false, clip = false;
+
+  /// Adds a subcommand per kind to `query`.
+  void add_to(CLI::App& query);
+  void add_common(CLI::App& app);
+};
+
 struct SynthArgs {
   int width = 1025, height = 0;  // height 0: = width
   std::uint64_t seed = 1;
@@ -123,6 +136,8 @@ int cmd_build(IngestArgs a, std::string db_path, const RcfOptions& rcf, const Ex
 int cmd_info(const std::string& db_path, bool json);
 int cmd_verify(const std::string& db_path, const CommonFlags& f);
 int cmd_synth(const SynthArgs& a, bool quiet);
+/// `kind`: the name of the query subcommand that was given.
+int cmd_query(const std::string& db_path, const std::string& kind, const QueryArgs& a);
 int cmd_flythrough(const std::string& db_path, const FlythroughArgs& a, const CommonFlags& f);
 
 }  // namespace smr::tools

@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
   smr::tools::ExtractArgs extract_args;
   smr::tools::SynthArgs synth_args;
   smr::tools::FlythroughArgs fly_args;
+  smr::tools::QueryArgs query_args;
   std::string db_path;
 
   CLI::App* ingest = app.add_subcommand(
@@ -89,6 +90,13 @@ int main(int argc, char** argv) {
   fly->add_flag("--verify", flags.verify,
                 "With --compare-fresh: compare the triangle sets, not only their counts");
 
+  CLI::App* query = app.add_subcommand(
+      "query",
+      "Ask a terrain database for elevations, a window, profiles, line of sight or "
+      "contours, each answer with its error bound (Maheshwari et al. 3-4)");
+  query->add_option("db", db_path, "Database file")->required();
+  query_args.add_to(*query);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -99,7 +107,7 @@ int main(int argc, char** argv) {
     if (app.get_subcommands().empty() && argc > 1 && argv[1][0] != '-') {
       std::fprintf(stderr,
                    "smrdb: error: unknown subcommand '%s' (ingest, extract, info, verify, build, "
-                   "synth, flythrough; --help lists them)\n",
+                   "synth, flythrough, query; --help lists them)\n",
                    argv[1]);
       return 1;
     }
@@ -115,6 +123,7 @@ int main(int argc, char** argv) {
     if (*build) return cmd_build(ingest_args, db_path, rcf, extract_args, flags);
     if (*synth) return cmd_synth(synth_args, flags.quiet);
     if (*fly) return cmd_flythrough(db_path, fly_args, flags);
+    if (*query) return cmd_query(db_path, query->get_subcommands().at(0)->get_name(), query_args);
   } catch (const smr::Error& e) {
     std::fprintf(stderr, "smrdb: error: %s\n", e.what());
     return e.exit_code();

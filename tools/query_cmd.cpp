@@ -1,0 +1,307 @@
+// `smrdb query DB KIND ...`: the GIS queries of smr/query (Maheshwari et al. 3-4) from the
+// command line. Coordinates are in the raster's own CRS, as ingest recorded it (`smrdb info`).
+// Answers go to stdout or -o (written atomically); --json prints a report with the answers or a
+// summary, the accuracy, the ops and pages each query read, and the time.
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "base/error.h"
+#include "smr/core/clock.h"
+#include "smr/db/database.h"
+#include "smr/io/atomic_file.h"
+#include "smr/io/mesh_writer.h"
+#include "smr/query/elevation.h"
+#include "smr/query/indexed_source.h"
+#include "smr/query/region.h"
+#include "tools/commands.h"
+#include "tools/parse.h"
+#include "tools/report_json.h"
+
+namespace smr::tools {
+
+namespace {
+
+[[noreturn]] void throw_input(const std::string& m) {
+  throw Error(ErrorKind::kInvalidInput, m);
+}
+
+query::Accuracy accuracy_of(const QueryArgs& a) {
+  if (a.max_error && !(*a.max_error >= 0.0)) throw_input("--max-error expects a number >= 0");
+  return a.max_error ? query::Accuracy::within(*a.max_error) : query::Accuracy::finest();
+}
+
+Vec2 parse_point(const std::string& text, const std::string& what) {
+  const std::vector<double> v = parse_numbers(text, 2, what, "X,Y");
+  return {v[0], v[1]};
+}
+
+// Where answers go: stdout, or a file that appears whole when the query succeeds.
+class Output {
+ public:
+  explicit Output(const std::string& path) {
+    if (!path.empty()) file_.emplace(path);
+  }
+  void write(const std::string& s) {
+    if (file_) {
+      file_->write(s);
+    } else {
+      std::fwrite(s.data(), 1, s.size(), stdout);
+    }
+  }
+  void commit() {
+    if (file_) file_->commit();
+  }
+
+ private:
+  std::optional<AtomicFile> file_;
+};
+
+std::string number(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.10g", v);
+  return buf;
+}
+
+nlohmann::json answer_json(const query::ElevationAnswer& a) {
+  nlohmann::json j = {{"x", a.p.x}, {"y", a.p.y}};
+  j["z"] = a.has_data ? nlohmann::json(a.z) : nlohmann::json(nullptr);
+  j["error"] = a.error_bound;
+  j["final"] = a.final;
+  j["ops_read"] = a.ops_read;
+  return j;
+}
+
+// One "x,y" per line (also "x y", "x;y" or tab-separated); blank lines, '#' comments and a header
+// line whose first field is not a number are skipped.
+class PointReader {
+ public:
+  PointReader(std::istream& in, std::string name) : in_(in), name_(std::move(name)) {}
+  bool next(Vec2& p) {
+    std::string line;
+    while (std::getline(in_, line)) {
+      ++line_no_;
+      for (char& c : line)
+        if (c == ';' || c == '\t' || c == ' ') c = ',';
+      while (!line.empty() && (line.back() == '\r' || line.back() == ',')) line.pop_back();
+      std::size_t s = line.find_first_not_of(',');
+      if (s == std::string::npos || line[s] == '#') continue;
+      line = line.substr(s);
+      if (line_no_ == 1 && !(std::isdigit(static_cast<unsigned char>(line[0])) || line[0] == '-' ||
+                             line[0] == '+' || line[0] == '.'))
+        continue;  // a header
+      const std::vector<double> v = parse_numbers(line, 2, where(), "X,Y");
+      p = {v[0], v[1]};
+      return true;
+    }
+    return false;
+  }
+  std::string where() const { return name_ + " line " + std::to_string(line_no_); }
+
+ private:
+  std::istream& in_;
+  std::string name_;
+  std::uint64_t line_no_ = 0;
+};
+
+// Points of a GeoJSON document: Point and MultiPoint geometries, bare or in features.
+void geojson_points(const nlohmann::json& j, std::vector<Vec2>& out, const std::string& name) {
+  const auto coord = [&](const nlohmann::json& c) {
+    if (!c.is_array() || c.size() < 2 || !c[0].is_number() || !c[1].is_number())
+      throw_input(name + ": a GeoJSON position must be [x, y], got " + c.dump());
+    out.push_back({c[0].get<double>(), c[1].get<double>()});
+  };
+  const std::string type = j.value("type", "");
+  if (type == "FeatureCollection") {
+    for (const auto& f : j.at("features")) geojson_points(f, out, name);
+  } else if (type == "Feature") {
+    if (!j.at("geometry").is_null()) geojson_points(j.at("geometry"), out, name);
+  } else if (type == "Point") {
+    coord(j.at("coordinates"));
+  } else if (type == "MultiPoint") {
+    for (const auto& c : j.at("coordinates")) coord(c);
+  } else {
+    throw_input(name + ": expected GeoJSON Point or MultiPoint geometries, got type '" + type +
+                "'");
+  }
+}
+
+struct ElevationRun {
+  const query::ElevationQuery& q;
+  query::Accuracy acc;
+  bool json;
+  Output& out;
+  nlohmann::json answers = nlohmann::json::array();
+  std::uint64_t count = 0, nodata = 0, ops = 0;
+  double worst_error = 0.0;
+
+  void answer(const Vec2& p, const std::string& where) {
+    query::ElevationAnswer a;
+    try {
+      a = q.at(p, acc);
+    } catch (const Error& e) {
+      if (e.kind() != ErrorKind::kInvalidInput) throw;
+      throw_input(where + ": " + e.what());
+    }
+    ++count;
+    ops += a.ops_read;
+    nodata += a.has_data ? 0 : 1;
+    worst_error = std::max(worst_error, a.error_bound);
+    if (json) {
+      answers.push_back(answer_json(a));
+    } else {
+      out.write(number(p.x) + "," + number(p.y) + "," + (a.has_data ? number(a.z) : "nodata") +
+                "," + number(a.error_bound) + "\n");
+    }
+  }
+};
+
+void read_points_file(const std::string& path, ElevationRun& run) {
+  std::ifstream file;
+  std::istream* in = &std::cin;
+  const std::string name = path == "-" ? "stdin" : path;
+  if (path != "-") {
+    file.open(path);
+    if (!file) throw Error(ErrorKind::kIo, path + ": cannot open the points file");
+    in = &file;
+  }
+  if (in->peek() == '{') {  // GeoJSON
+    nlohmann::json j;
+    try {
+      j = nlohmann::json::parse(*in);
+    } catch (const nlohmann::json::exception& e) {
+      throw_input(name + ": not valid GeoJSON: " + e.what());
+    }
+    std::vector<Vec2> pts;
+    geojson_points(j, pts, name);
+    for (std::size_t i = 0; i < pts.size(); ++i)
+      run.answer(pts[i], name + " point " + std::to_string(i + 1));
+    return;
+  }
+  PointReader reader(*in, name);
+  Vec2 p;
+  while (reader.next(p)) run.answer(p, reader.where());
+}
+
+nlohmann::json query_elevation(const IndexedSource& src, const QueryArgs& a) {
+  if (a.args.empty() && a.input.empty())
+    throw_input("elevation: give points as X,Y arguments or --input FILE (- for stdin)");
+  const query::ElevationQuery q(src);
+  Output out(a.out);
+  ElevationRun run{q, accuracy_of(a), a.json, out};
+  if (!a.json) out.write("x,y,z,error\n");
+  for (std::size_t i = 0; i < a.args.size(); ++i)
+    run.answer(parse_point(a.args[i], "point " + std::to_string(i + 1)),
+               "point " + std::to_string(i + 1) + " (" + a.args[i] + ")");
+  if (!a.input.empty()) read_points_file(a.input, run);
+  nlohmann::json r = {{"points", run.count},
+                      {"no_data", run.nodata},
+                      {"ops_read", run.ops},
+                      {"max_error_bound", run.worst_error}};
+  if (a.json) r["answers"] = std::move(run.answers);
+  out.commit();
+  return r;
+}
+
+nlohmann::json query_window(const IndexedSource& src, const QueryArgs& a) {
+  if (a.args.size() != 1) throw_input("window: expected one XMIN,YMIN,XMAX,YMAX argument");
+  const std::vector<double> w = parse_numbers(a.args[0], 4, "window", "XMIN,YMIN,XMAX,YMAX");
+  if (!(w[0] < w[2]) || !(w[1] < w[3]))
+    throw_input("window " + a.args[0] + " is empty: expected XMIN < XMAX and YMIN < YMAX");
+  const query::Domain dom = query::terrain_domain(src.info());
+  if (w[2] < dom.lo.x || w[0] > dom.hi.x || w[3] < dom.lo.y || w[1] > dom.hi.y) {
+    std::ostringstream os;
+    os << "window " << a.args[0] << " lies outside the database's domain " << dom.lo.x << ','
+       << dom.lo.y << " .. " << dom.hi.x << ',' << dom.hi.y;
+    throw_input(os.str());
+  }
+  const auto region = std::make_shared<query::WindowRegion>(Vec2{w[0], w[1]}, Vec2{w[2], w[3]});
+  const Extraction e = query::refine(src, region, accuracy_of(a));
+  // The triangles meeting the window, and the vertices inside it (Maheshwari Fig. 10's ratio).
+  std::vector<TriRef> meeting;
+  std::uint64_t inside = 0;
+  double worst = 0.0;
+  for (const TriRef& r : e.triangles) {
+    const OpRef op = src.op(r.op);
+    const FragmentTriangle& t = op->fragment[r.index];
+    const Triangle3 v{op->position(t, 0), op->position(t, 1), op->position(t, 2)};
+    if (t.is_void() || !region->triangle_meets(v, 0.0)) continue;
+    meeting.push_back(r);
+    worst = std::max(worst, query::triangle_error(src, t));
+  }
+  const TriangleMesh clipped = to_mesh(src, meeting);
+  for (const Vec3& p : clipped.positions)
+    inside += (p.x >= w[0] && p.x <= w[2] && p.y >= w[1] && p.y <= w[3]) ? 1 : 0;
+  nlohmann::json r = {{"extraction", e.stats},
+                      {"triangles", e.triangles.size() - e.stats.void_triangles},
+                      {"triangles_meeting_window", meeting.size()},
+                      {"vertices_in_window", inside},
+                      {"max_error_in_window", worst}};
+  if (!a.out.empty()) {
+    const TriangleMesh mesh = a.clip ? clipped : to_mesh(src, e.triangles);
+    write_mesh(a.out, mesh);
+    r["output"] = {{"path", a.out},
+                   {"vertices", mesh.positions.size()},
+                   {"triangles", mesh.triangles.size()},
+                   {"clipped", a.clip}};
+  }
+  return r;
+}
+
+}  // namespace
+
+void QueryArgs::add_common(CLI::App& app) {
+  app.add_option("--max-error", max_error,
+                 "Answer from triangles within this error (data units), not the finest mesh "
+                 "(faster; the bound is in every answer)");
+  app.add_option("-o,--output", out, "Write the answers here instead of stdout");
+  app.add_option("--cache-mb", cache_mb, "Page cache budget in MiB")->check(CLI::PositiveNumber);
+  app.add_flag("--json", json, "Print a JSON report (with the answers) on stdout");
+  app.add_flag("-q,--quiet", quiet, "No summary on stderr");
+}
+
+void QueryArgs::add_to(CLI::App& query) {
+  query.require_subcommand(1);
+  CLI::App* elevation = query.add_subcommand(
+      "elevation", "Height at points, with the error bound each answer holds (Maheshwari 4.1)");
+  elevation->add_option("points", args, "X,Y ...");
+  elevation->add_option("--input", input,
+                        "Points from a CSV (x,y per line) or GeoJSON file; - reads stdin");
+  CLI::App* window = query.add_subcommand(
+      "window",
+      "Every triangle meeting a window at full resolution (or --max-error), coarse "
+      "elsewhere (Maheshwari 3.2); a mesh with -o");
+  window->add_option("box", args, "XMIN,YMIN,XMAX,YMAX")->required();
+  window->add_flag("--clip", clip, "Write only the triangles meeting the window");
+  for (CLI::App* sub : {elevation, window}) {
+    add_common(*sub);
+    sub->positionals_at_end(false);
+  }
+}
+
+int cmd_query(const std::string& db_path, const std::string& kind, const QueryArgs& a) {
+  const auto db = Database::open(db_path, {std::size_t(a.cache_mb) << 20});
+  const IndexedSource src(*db);
+  const auto t0 = Clock::now();
+  nlohmann::json r;
+  if (kind == "elevation") r = query_elevation(src, a);
+  if (kind == "window") r = query_window(src, a);
+  r["query"] = kind;
+  r["accuracy"] = accuracy_of(a).describe();
+  r["seconds"] = seconds_since(t0);
+  r["io"] = db->stats();
+  if (a.json) std::printf("%s\n", r.dump(2).c_str());
+  if (!a.json && !a.quiet)
+    std::fprintf(stderr, "%s: %s query (%s) in %.3f s, %llu pages read\n", db_path.c_str(),
+                 kind.c_str(), r["accuracy"].get<std::string>().c_str(), r["seconds"].get<double>(),
+                 static_cast<unsigned long long>(r["io"]["pages_read"].get<std::uint64_t>()));
+  return 0;
+}
+
+}  // namespace smr::tools
