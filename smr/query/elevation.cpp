@@ -1,9 +1,11 @@
 // Elevation by descent through the DAG (elevation.h; Maheshwari et al. 4.1).
 #include "smr/query/elevation.h"
 
+#include <algorithm>
 #include <sstream>
 
 #include "base/error.h"
+#include "index/hilbert.h"
 
 namespace smr::query {
 
@@ -52,16 +54,27 @@ int locate_in_fragment(const OpView& op, const Vec2& p) {
 }
 
 ElevationQuery::ElevationQuery(const OpSource& source)
-    : source_(source), domain_(terrain_domain(source.info())), base_(source.op(kBaseOp)) {}
+    : source_(source), domain_(terrain_domain(source.info())) {}
 
-ElevationAnswer ElevationQuery::at(const Vec2& p, const Accuracy& accuracy) const {
+void ElevationQuery::check_inside(const Vec2& p) const {
   if (!std::isfinite(p.x) || !std::isfinite(p.y) || !domain_.contains(p))
     throw Error(ErrorKind::kInvalidInput, "point " + where(p) +
                                               " is outside the database's domain " +
                                               where(domain_.lo) + " .. " + where(domain_.hi));
+}
+
+OpRef ElevationQuery::fetch(std::size_t level, OpId id) const {
+  if (level < path_.size() && path_[level]->id == id) return path_[level];
+  path_.resize(level);
+  path_.push_back(source_.op(id));
+  return path_.back();
+}
+
+ElevationAnswer ElevationQuery::at(const Vec2& p, const Accuracy& accuracy) const {
+  check_inside(p);
   ElevationAnswer ans;
   ans.p = p;
-  OpRef op = base_;
+  OpRef op = fetch(0, kBaseOp);
   for (;;) {
     ++ans.ops_read;
     const int i = locate_in_fragment(*op, p);
@@ -84,16 +97,26 @@ ElevationAnswer ElevationQuery::at(const Vec2& p, const Accuracy& accuracy) cons
         ans.z = interpolate({op->position(t, 0), op->position(t, 1), op->position(t, 2)}, p);
       return ans;
     }
-    op = source_.op(t.killer);
+    op = fetch(ans.ops_read, t.killer);
   }
 }
 
-std::vector<ElevationAnswer> elevations(const OpSource& source, std::span<const Vec2> points,
-                                        const Accuracy& accuracy) {
-  const ElevationQuery q(source);
-  std::vector<ElevationAnswer> out;
-  out.reserve(points.size());
-  for (const Vec2& p : points) out.push_back(q.at(p, accuracy));
+std::vector<ElevationAnswer> ElevationQuery::at_many(std::span<const Vec2> points,
+                                                     const Accuracy& accuracy) const {
+  for (const Vec2& p : points) check_inside(p);
+  // Hilbert order on a 2^16 x 2^16 lattice over the domain.
+  constexpr double kCells = 65535.0;
+  const Vec2 size = glm::max(domain_.hi - domain_.lo, Vec2{1e-300});
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> order(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const Vec2 c = (points[i] - domain_.lo) / size * kCells;
+    order[i] = {index::hilbert_index(
+                    {static_cast<std::uint32_t>(c.x), static_cast<std::uint32_t>(c.y), 0u}, 2),
+                static_cast<std::uint32_t>(i)};
+  }
+  std::sort(order.begin(), order.end());
+  std::vector<ElevationAnswer> out(points.size());
+  for (const auto& [key, i] : order) out[i] = at(points[i], accuracy);
   return out;
 }
 

@@ -26,8 +26,10 @@ struct ElevationAnswer {
   std::uint32_t ops_read = 0;
 };
 
-/// Answers elevation queries on a terrain source (a database, or an in-memory CRMR). Holds the
-/// base op; thread-compatible (one per thread).
+/// Answers elevation queries on a terrain source (a database, or an in-memory CRMR). Keeps the
+/// ops of the last descent (at most the DAG's depth of them, and the pages they sit in), so the
+/// next point reuses the levels it shares without asking the source: answers are the same as
+/// from a fresh descent. Thread-compatible (one per thread).
 class ElevationQuery {
  public:
   /// Throws smr::Error (kInvalidInput) for a 3-D mesh source.
@@ -35,17 +37,23 @@ class ElevationQuery {
   /// The elevation at p in the source's coordinates. A point outside the grid's extent throws
   /// smr::Error (kInvalidInput) naming it and the extent.
   ElevationAnswer at(const Vec2& p, const Accuracy& accuracy) const;
+  /// A batch: one answer per point, in the points' order, answered in Hilbert order of the
+  /// points so that neighbours share their descents and pages (the page cache then holds the
+  /// working set of a sweep instead of thrashing on random points). Throws like at() for the
+  /// first point (in input order) outside the domain, before answering any.
+  std::vector<ElevationAnswer> at_many(std::span<const Vec2> points,
+                                       const Accuracy& accuracy) const;
   const Domain& domain() const { return domain_; }
+  /// Throws at()'s error if p is outside the domain.
+  void check_inside(const Vec2& p) const;
 
  private:
+  OpRef fetch(std::size_t level, OpId id) const;
+
   const OpSource& source_;
   Domain domain_;
-  OpRef base_;
+  mutable std::vector<OpRef> path_;  // path_[k]: the op read at level k of the last descent
 };
-
-/// Convenience for a batch: one answer per point, in order.
-std::vector<ElevationAnswer> elevations(const OpSource& source, std::span<const Vec2> points,
-                                        const Accuracy& accuracy);
 
 /// The triangle of F(op) whose x-y footprint contains p (closed, with a relative tolerance of
 /// 1e-9 of its size), preferring one with data; -1 if none does.
