@@ -1,9 +1,9 @@
 // Contour queries (smr/query/contours.h) against brute force and against GDAL: at the finest
 // accuracy the lines are exactly the finest mesh's contours (every triangle that matters was
-// found), within an error every point lies within its line's bound of h on the finest TIN, lines
-// are rings or end on the domain boundary or a no-data hole, gdal_contour's lines on the same
-// raster lie within a cell of ours (Hausdorff, both ways), and the GeoJSON records the CRS as
-// GDAL does.
+// found); within an error they are exactly the refined mesh's, each line's bound covers the
+// triangles it crosses and every source sample under them lies within it; lines are rings or end
+// on the domain boundary or a no-data hole; gdal_contour's lines on the same raster lie within a
+// cell of ours (Hausdorff, both ways); the GeoJSON records the CRS as GDAL does.
 #include "smr/query/contours.h"
 
 #include <gtest/gtest.h>
@@ -23,7 +23,6 @@
 #include "smr/db/database.h"
 #include "smr/db/writer.h"
 #include "smr/io/gdal_raster.h"
-#include "smr/query/elevation.h"
 #include "smr/query/geojson.h"
 #include "smr/query/indexed_source.h"
 #include "tests/support/datasets.h"
