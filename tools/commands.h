@@ -103,6 +103,9 @@ struct QueryArgs {
   std::vector<std::string> args;  // the kind's positional arguments (points, a window...)
   std::string input, out;
   std::optional<double> max_error;
+  std::string levels;  // contours: --levels as typed
+  std::optional<double> interval;
+  double base = 0.0;
   std::uint64_t cache_mb = 64;
   bool json = false, quiet = false, clip = false;
 

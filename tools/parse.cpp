@@ -46,7 +46,8 @@ std::vector<double> parse_numbers(const std::string& text, std::size_t count,
                   "' is not a finite number)");
     }
   }
-  if (out.size() != count) throw_input(option + " expects " + form + ", got '" + text + "'");
+  if (count == 0 ? out.empty() : out.size() != count)
+    throw_input(option + " expects " + form + ", got '" + text + "'");
   return out;
 }
 

@@ -11,7 +11,8 @@ namespace smr::tools {
 /// "256M", "2G", "1.5G", "512K" or a plain number of bytes (binary units: M = 2^20).
 std::uint64_t parse_bytes(const std::string& text, const std::string& option);
 
-/// `count` comma-separated finite numbers; `form` names them in the message ("x,y,z").
+/// `count` comma-separated finite numbers (0: one or more); `form` names them in the message
+/// ("x,y,z").
 std::vector<double> parse_numbers(const std::string& text, std::size_t count,
                                   const std::string& option, const std::string& form);
 

@@ -4,6 +4,7 @@
 // summary, the accuracy, the ops and pages each query read, and the time.
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <sstream>
 #include <string>
@@ -17,9 +18,11 @@
 #include "smr/db/database.h"
 #include "smr/io/atomic_file.h"
 #include "smr/io/mesh_writer.h"
+#include "smr/query/contours.h"
 #include "smr/query/elevation.h"
 #include "smr/query/indexed_source.h"
 #include "smr/query/region.h"
+#include "smr/query/sight.h"
 #include "tools/commands.h"
 #include "tools/parse.h"
 #include "tools/report_json.h"
@@ -54,6 +57,20 @@ class Output {
     } else {
       std::fwrite(s.data(), 1, s.size(), stdout);
     }
+  }
+  /// A writer that takes a std::ostream (the GeoJSON writer): the file, or stdout.
+  void write_stream(const std::function<void(std::ostream&)>& writer) {
+    if (!file_) {
+      std::fflush(stdout);
+      writer(std::cout);
+      std::cout.flush();
+      return;
+    }
+    file_->close_stream();
+    std::ofstream os(file_->temp_path(), std::ios::binary | std::ios::trunc);
+    writer(os);
+    os.close();
+    if (!os) throw Error(ErrorKind::kIo, file_->path() + ": cannot write");
   }
   void commit() {
     if (file_) file_->commit();
@@ -266,6 +283,118 @@ nlohmann::json query_window(const IndexedSource& src, const QueryArgs& a) {
   return r;
 }
 
+// "X,Y,Z", or "X,Y,+H": H above the surface (its finest height there).
+Vec3 parse_sight_end(const std::string& text, const std::string& what, const IndexedSource& src) {
+  const std::vector<double> v = parse_numbers(text, 3, what, "X,Y,Z or X,Y,+H");
+  const bool above = text.substr(text.rfind(',') + 1).starts_with('+');
+  if (!above) return {v[0], v[1], v[2]};
+  const query::ElevationAnswer g =
+      query::ElevationQuery(src).at({v[0], v[1]}, query::Accuracy::finest());
+  if (!g.has_data) throw_input(what + " " + text + ": no data there to stand on");
+  return {v[0], v[1], g.z + v[2]};
+}
+
+std::string point_text(const Vec3& p) {
+  return number(p.x) + "," + number(p.y) + "," + number(p.z);
+}
+
+nlohmann::json query_los(const IndexedSource& src, const QueryArgs& a) {
+  if (a.args.size() != 2) throw_input("los: expected two points X1,Y1,Z1 X2,Y2,Z2");
+  const Vec3 p = parse_sight_end(a.args[0], "observer", src);
+  const Vec3 q = parse_sight_end(a.args[1], "target", src);
+  const query::SightAnswer s = query::line_of_sight(src, p, q, accuracy_of(a));
+  nlohmann::json r = {{"answer", query::to_string(s.sight)},
+                      {"from", {p.x, p.y, p.z}},
+                      {"to", {q.x, q.y, q.z}},
+                      {"error_bound", s.error_bound},
+                      {"ops_read", s.ops},
+                      {"triangles_tested", s.triangles_tested}};
+  std::string text = query::to_string(s.sight);
+  if (s.sight == query::Sight::kBlocked) {
+    r["blocked_at"] = {s.blocked_at.x, s.blocked_at.y, s.blocked_at.z};
+    text += " at " + point_text(s.blocked_at);
+  }
+  if (s.undecided_at) {
+    r["undecided_at"] = {s.undecided_at->x, s.undecided_at->y, s.undecided_at->z};
+    text += (s.sight == query::Sight::kUndecided ? " within " : "; undecided before, within ") +
+            number(s.error_bound) + " from " + point_text(*s.undecided_at);
+  }
+  if (s.no_data_at) {
+    r["no_data_at"] = {s.no_data_at->x, s.no_data_at->y, s.no_data_at->z};
+    text += "; no data from " + point_text(*s.no_data_at);
+  }
+  if (!a.json) {
+    Output out(a.out);
+    out.write(text + "\n");
+    out.commit();
+  }
+  return r;
+}
+
+nlohmann::json query_profile(const IndexedSource& src, const QueryArgs& a) {
+  if (a.args.size() < 2) throw_input("profile: expected at least two points X1,Y1 X2,Y2 ...");
+  std::vector<Vec2> line;
+  for (std::size_t i = 0; i < a.args.size(); ++i)
+    line.push_back(parse_point(a.args[i], "profile point " + std::to_string(i + 1)));
+  const query::ProfileResult pr = query::profile(src, line, accuracy_of(a));
+  nlohmann::json r = {{"points", pr.points.size()},
+                      {"error_bound", pr.error_bound},
+                      {"ops_read", pr.ops},
+                      {"triangles", pr.triangles}};
+  if (a.json) {
+    nlohmann::json pts = nlohmann::json::array();
+    for (const query::ProfilePoint& q : pr.points)
+      pts.push_back({{"distance", q.distance},
+                     {"x", q.p.x},
+                     {"y", q.p.y},
+                     {"z", q.has_data ? nlohmann::json(q.p.z) : nlohmann::json(nullptr)},
+                     {"error", q.error_bound}});
+    r["profile"] = std::move(pts);
+    return r;
+  }
+  Output out(a.out);
+  std::string text = "distance,x,y,z,error\n";
+  for (const query::ProfilePoint& q : pr.points)
+    text += number(q.distance) + "," + number(q.p.x) + "," + number(q.p.y) + "," +
+            (std::isnan(q.p.z) ? "nodata" : number(q.p.z)) + "," + number(q.error_bound) + "\n";
+  out.write(text);
+  out.commit();
+  return r;
+}
+
+double max_line_error(const query::ContourResult& c) {
+  double e = 0.0;
+  for (const query::ContourLine& l : c.lines) e = std::max(e, l.error);
+  return e;
+}
+
+nlohmann::json query_contours(const IndexedSource& src, const QueryArgs& a) {
+  query::ContourOptions o;
+  if (!a.levels.empty()) o.levels = parse_numbers(a.levels, 0, "--levels", "H1,H2,...");
+  o.interval = a.interval;
+  o.base = a.base;
+  o.accuracy = accuracy_of(a);
+  if (o.levels.empty() && !o.interval) throw_input("contours: give --levels H,... or --interval D");
+  if (a.json && a.out.empty())
+    throw_input("contours --json prints a report on stdout: give -o FILE.geojson for the lines");
+  const query::ContourResult c = query::contours(src, o);
+  Output out(a.out);
+  out.write_stream([&](std::ostream& os) { query::write_geojson(os, c, src.info().georef); });
+  out.commit();
+  const query::ContourStats& s = c.stats;
+  return {{"levels", s.levels},
+          {"ops", s.ops},
+          {"triangles", s.triangles},
+          {"triangles_marched", s.triangles_marched},
+          {"segments", s.segments},
+          {"lines", s.polylines},
+          {"rings", s.rings},
+          {"points", s.points},
+          {"max_error", max_line_error(c)},
+          {"seconds",
+           {{"refine", s.refine_seconds}, {"march", s.march_seconds}, {"join", s.join_seconds}}}};
+}
+
 }  // namespace
 
 void QueryArgs::add_common(CLI::App& app) {
@@ -291,7 +420,22 @@ void QueryArgs::add_to(CLI::App& query) {
       "elsewhere (Maheshwari 3.2); a mesh with -o");
   window->add_option("box", args, "XMIN,YMIN,XMAX,YMAX")->required();
   window->add_flag("--clip", clip, "Write only the triangles meeting the window");
-  for (CLI::App* sub : {elevation, window}) {
+  CLI::App* los = query.add_subcommand(
+      "los",
+      "Line of sight between two 3-D points: visible, blocked at a point, or undecided "
+      "within the error bound (Maheshwari 4.3)");
+  los->add_option("points", args, "X1,Y1,Z1 X2,Y2,Z2 (Z as +H: H above the ground)")->required();
+  CLI::App* profile = query.add_subcommand(
+      "profile", "The surface's exact piecewise-linear profile along a polyline (CSV)");
+  profile->add_option("points", args, "X1,Y1 X2,Y2 ...")->required();
+  CLI::App* contours =
+      query.add_subcommand("contours",
+                           "Contour lines as GeoJSON, each with its height and error bound "
+                           "(Maheshwari 4.2)");
+  contours->add_option("--levels", levels, "Heights H1,H2,...");
+  contours->add_option("--interval", interval, "Every D (data units)");
+  contours->add_option("--base", base, "With --interval: levels base + k * D (default 0)");
+  for (CLI::App* sub : {elevation, window, los, profile, contours}) {
     add_common(*sub);
     sub->positionals_at_end(false);
   }
@@ -304,6 +448,9 @@ int cmd_query(const std::string& db_path, const std::string& kind, const QueryAr
   nlohmann::json r;
   if (kind == "elevation") r = query_elevation(src, a);
   if (kind == "window") r = query_window(src, a);
+  if (kind == "los") r = query_los(src, a);
+  if (kind == "profile") r = query_profile(src, a);
+  if (kind == "contours") r = query_contours(src, a);
   r["query"] = kind;
   r["accuracy"] = accuracy_of(a).describe();
   r["seconds"] = seconds_since(t0);

@@ -2,11 +2,12 @@
 // whose query region is the plane z = h (here a set of planes), then the triangles of the result
 // that meet a plane, walked into polylines.
 //
-// Refinement (region.h): a triangle whose error band [min z - e, max z + e] holds a level must be
-// final or within Accuracy::max_error; elsewhere the mesh stays coarse. A coarse triangle whose
-// band holds no level cannot hide a contour: every grid sample under it lies within e of it, hence
-// on the same side of every level (the finest triangles under it have such samples as corners).
-// So at Accuracy::finest() the lines are exactly the finest mesh's contours.
+// Refinement (region.h, HeightRegionRcf): an op whose ROI spans a level must be applied unless its
+// error is within Accuracy::max_error; elsewhere the mesh stays coarse. A triangle left coarse has
+// a killer whose ROI (holding every triangle that refines it) spans no level, so nothing finer
+// crosses a level over it: at Accuracy::finest() the lines are exactly the finest mesh's contours.
+// (A triangle's own error band would not do: the finest triangles under a coarse one cross its
+// edges and can leave its band between the samples under it.)
 //
 // Marching: for each level h and each triangle with data, a corner with z >= h counts as above h
 // and one with z < h as below (symbolic perturbation: a corner exactly at h is above). A triangle
@@ -58,6 +59,7 @@ class LevelsRegion final : public Region {
   bool triangle_meets(const Triangle3& v, double error) const override;
   /// Some level lies in [box.lo.z - error, box.hi.z + error].
   bool box_meets(const Box3& box, double error) const override;
+  bool depends_on_height() const override { return true; }
 
   /// Level k (explicit levels: 0 <= k < their count).
   double level(std::int64_t k) const;

@@ -19,10 +19,10 @@ class RcfVisitor final : public index::Visitor {
  public:
   RcfVisitor(const RcfOracle& rcf, const CrmrInfo& info) : rcf_(rcf), info_(info) {}
   bool enter(const index::Summary& s) override {
-    return !rcf_.region_completely_finer(from_index(s.box), s.min_res, info_);
+    return !rcf_.region_completely_finer(from_index(s.box), from_index(s.roi), s.min_res, info_);
   }
   bool accept(const index::Entry& e) override {
-    return !rcf_.region_completely_finer(from_index(e.box), e.res, info_);
+    return !rcf_.region_completely_finer(from_index(e.box), from_index(e.roi), e.res, info_);
   }
 
  private:

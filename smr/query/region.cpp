@@ -74,6 +74,11 @@ std::string point_text(const Vec2& p) {
   return os.str();
 }
 
+void check_accuracy(const Accuracy& accuracy) {
+  if (accuracy.max_error && !(*accuracy.max_error >= 0.0))
+    throw Error(ErrorKind::kInvalidInput, "max error: expected a number >= 0");
+}
+
 }  // namespace
 
 std::string Accuracy::describe() const {
@@ -133,6 +138,12 @@ bool UnionRegion::box_meets(const Box3& box, double error) const {
   return false;
 }
 
+bool UnionRegion::depends_on_height() const {
+  for (const auto& p : parts_)
+    if (p->depends_on_height()) return true;
+  return false;
+}
+
 std::string RegionCriterion::describe() const {
   return region_->describe() + " at " + accuracy_.describe();
 }
@@ -154,18 +165,47 @@ bool RegionCriterion::region_satisfies(const Box3& box, double min_res,
 }
 
 Rcf region_rcf(std::shared_ptr<const Region> region, Accuracy accuracy) {
-  if (accuracy.max_error && !(*accuracy.max_error >= 0.0))
-    throw Error(ErrorKind::kInvalidInput, "max error: expected a number >= 0");
+  check_accuracy(accuracy);
   Rcf rcf;
   rcf.add(std::shared_ptr<const SimilarityComponent>(
       std::make_shared<RegionCriterion>(std::move(region), accuracy)));
   return rcf;
 }
 
+HeightRegionRcf::HeightRegionRcf(std::shared_ptr<const Region> region, Accuracy accuracy)
+    : region_(std::move(region)), accuracy_(accuracy) {
+  check_accuracy(accuracy_);
+}
+
+bool HeightRegionRcf::fine_enough(double error) const {
+  return accuracy_.max_error && error <= *accuracy_.max_error;
+}
+
+bool HeightRegionRcf::is_finer(const OpView& op, const OpSource& source) const {
+  bool all = true;
+  for (const FragmentTriangle& t : op.fragment)
+    all = all && (!t.killer.valid() || fine_enough(source.error_at(t.death_res)));
+  return all || !region_->box_meets(op.roi, 0.0);
+}
+
+bool HeightRegionRcf::is_completely_finer(const OpView& op, const OpSource& source) const {
+  if (op.id == kBaseOp) return false;
+  return fine_enough(source.error_at(op.birth_res)) || !region_->box_meets(op.roi, 0.0);
+}
+
+bool HeightRegionRcf::region_completely_finer(const Box3&, const Box3& roi, double min_birth_res,
+                                              const CrmrInfo& info) const {
+  return fine_enough(error_at(info, min_birth_res)) || !region_->box_meets(roi, 0.0);
+}
+
 Extraction refine(const OpSource& source, std::shared_ptr<const Region> region, Accuracy accuracy) {
-  const Rcf rcf = region_rcf(std::move(region), accuracy);
   ExpansionOptions options;
   options.fronts = false;  // the set formula: same triangles, no fans needed
+  if (region->depends_on_height()) {
+    const HeightRegionRcf rcf(std::move(region), accuracy);
+    return extract_minimal_surface(source, rcf, options);
+  }
+  const Rcf rcf = region_rcf(std::move(region), accuracy);
   return extract_minimal_surface(source, rcf, options);
 }
 

@@ -49,6 +49,7 @@ class SightRegion final : public Region {
   std::string describe() const override;
   bool triangle_meets(const Triangle3& v, double error) const override;
   bool box_meets(const Box3& box, double error) const override;
+  bool depends_on_height() const override { return true; }
 
  private:
   Vec3 p_, q_;

@@ -214,7 +214,7 @@ bool Rcf::is_completely_finer(const OpView& op, const OpSource& source) const {
   return true;
 }
 
-bool Rcf::region_completely_finer(const Box3& box, double min_birth_res,
+bool Rcf::region_completely_finer(const Box3& box, const Box3& /*roi*/, double min_birth_res,
                                   const CrmrInfo& info) const {
   for (const auto& c : culling_) {
     if (c->culls_region(box)) return true;

@@ -170,9 +170,10 @@ class RcfOracle {
   virtual ~RcfOracle() = default;
   virtual bool is_finer(const OpView& op, const OpSource& source) const = 0;
   virtual bool is_completely_finer(const OpView& op, const OpSource& source) const = 0;
-  /// Conservative: true only if every op whose box lies in `box` and whose birth_res >=
-  /// min_birth_res is completely finer.
-  virtual bool region_completely_finer(const Box3& box, double min_birth_res,
+  /// Conservative: true only if every op whose box lies in `box`, whose ROI lies in `roi` and
+  /// whose birth_res >= min_birth_res is completely finer (an index entry or subtree: Rcf judges
+  /// by the boxes; a query about heights, smr/query/region.h, by the ROIs).
+  virtual bool region_completely_finer(const Box3& box, const Box3& roi, double min_birth_res,
                                        const CrmrInfo& info) const = 0;
 };
 
@@ -193,7 +194,7 @@ class Rcf final : public RcfOracle {
   bool is_completely_finer(const OpView& op, const OpSource& source) const override;
   /// Conservative test for an index entry: true only if every op whose box lies in `box` and whose
   /// birth_res >= min_birth_res is completely finer than the RCF.
-  bool region_completely_finer(const Box3& box, double min_birth_res,
+  bool region_completely_finer(const Box3& box, const Box3& roi, double min_birth_res,
                                const CrmrInfo& info) const override;
 
   const std::vector<std::shared_ptr<const CullingComponent>>& culling() const { return culling_; }
@@ -221,10 +222,10 @@ class CommonDenominatorRcf final : public RcfOracle {
   bool is_completely_finer(const OpView& op, const OpSource& source) const override {
     return a_.is_completely_finer(op, source) && b_.is_completely_finer(op, source);
   }
-  bool region_completely_finer(const Box3& box, double min_birth_res,
+  bool region_completely_finer(const Box3& box, const Box3& roi, double min_birth_res,
                                const CrmrInfo& info) const override {
-    return a_.region_completely_finer(box, min_birth_res, info) &&
-           b_.region_completely_finer(box, min_birth_res, info);
+    return a_.region_completely_finer(box, roi, min_birth_res, info) &&
+           b_.region_completely_finer(box, roi, min_birth_res, info);
   }
 
  private:

@@ -62,8 +62,10 @@ class EitherRcf final : public RcfOracle {
   bool is_completely_finer(const OpView& op, const OpSource& s) const override {
     return a_.is_completely_finer(op, s) || b_.is_completely_finer(op, s);
   }
-  bool region_completely_finer(const Box3& box, double r, const CrmrInfo& info) const override {
-    return a_.region_completely_finer(box, r, info) || b_.region_completely_finer(box, r, info);
+  bool region_completely_finer(const Box3& box, const Box3& roi, double r,
+                               const CrmrInfo& info) const override {
+    return a_.region_completely_finer(box, roi, r, info) ||
+           b_.region_completely_finer(box, roi, r, info);
   }
 
  private:

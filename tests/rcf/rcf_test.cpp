@@ -157,7 +157,7 @@ TEST(Rcf, RegionTestIsConservative) {
     std::uint64_t pruned = 0;
     for (const Op& op : m.ops) {
       if (op.id == kBaseOp) continue;
-      if (!rcf.region_completely_finer(op.roi, op.birth_res, m.header)) continue;
+      if (!rcf.region_completely_finer(op.roi, op.roi, op.birth_res, m.header)) continue;
       ++pruned;
       // Every op in the subtree has its box in the ROI and a birth_res >= op.birth_res.
       std::vector<OpId> stack{op.id};
