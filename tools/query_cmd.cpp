@@ -2,6 +2,7 @@
 // command line. Coordinates are in the raster's own CRS, as ingest recorded it (`smrdb info`).
 // Answers go to stdout or -o (written atomically); --json prints a report with the answers or a
 // summary, the accuracy, the ops and pages each query read, and the time.
+#include <charconv>
 #include <cstdio>
 #include <fstream>
 #include <functional>
@@ -82,8 +83,8 @@ class Output {
 
 std::string number(double v) {
   char buf[32];
-  std::snprintf(buf, sizeof buf, "%.10g", v);
-  return buf;
+  const auto r = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::general, 10);
+  return std::string(buf, r.ptr);
 }
 
 nlohmann::json answer_json(const query::ElevationAnswer& a) {

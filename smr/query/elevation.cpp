@@ -43,6 +43,8 @@ int locate_in_fragment(const OpView& op, const Vec2& p) {
     const double score = std::min({orient2d(p, b, c), orient2d(a, p, c), orient2d(a, b, p)}) / area;
     if (score < -1e-9) continue;
     const bool is_void = t.is_void();
+    // Strictly inside a triangle with data: no other triangle of the fragment contains p.
+    if (score > 1e-9 && !is_void) return static_cast<int>(i);
     // Prefer data over void on a shared edge, then the most interior triangle.
     if (best < 0 || (best_void && !is_void) || (best_void == is_void && score > best_score)) {
       best = static_cast<int>(i);
