@@ -56,12 +56,12 @@ std::string ObjectSpaceCriterion::describe() const {
 
 bool ObjectSpaceCriterion::triangle_satisfies(const Triangle3& v, double res,
                                               const CrmrInfo&) const {
-  return res >= g_.max_over_triangle(xy(v[0]), xy(v[1]), xy(v[2]));
+  return meets_level(res, g_.max_over_triangle(xy(v[0]), xy(v[1]), xy(v[2])));
 }
 
 bool ObjectSpaceCriterion::region_satisfies(const Box3& box, double min_res,
                                             const CrmrInfo&) const {
-  return min_res >= g_.max_over_rect(xy(box.lo), xy(box.hi));
+  return meets_level(min_res, g_.max_over_rect(xy(box.lo), xy(box.hi)));
 }
 
 // ---- volumes of significance ----
@@ -89,7 +89,8 @@ double VolumeCriterion::value(const Vec3& p) const {
 
 bool VolumeCriterion::triangle_satisfies(const Triangle3& t, double res, const CrmrInfo&) const {
   for (const Volume& v : volumes_) {
-    if (res < v.at_distance(point_triangle_distance3d(v.center, t[0], t[1], t[2]))) return false;
+    if (!meets_level(res, v.at_distance(point_triangle_distance3d(v.center, t[0], t[1], t[2]))))
+      return false;
   }
   return true;
 }
@@ -97,7 +98,7 @@ bool VolumeCriterion::triangle_satisfies(const Triangle3& t, double res, const C
 bool VolumeCriterion::region_satisfies(const Box3& box, double min_res, const CrmrInfo&) const {
   for (const Volume& v : volumes_) {
     const Vec3 outside = glm::max(glm::max(box.lo - v.center, v.center - box.hi), Vec3(0.0));
-    if (min_res < v.at_distance(glm::length(outside))) return false;
+    if (!meets_level(min_res, v.at_distance(glm::length(outside)))) return false;
   }
   return true;
 }

@@ -44,6 +44,14 @@ inline bool is_final_or_void(const FragmentTriangle& t) {
   return t.is_void() || !t.killer.valid();
 }
 
+/// Whether a triangle that some op replaces, standing for resolution `res`, meets the resolution
+/// level `level` (Brown 4.6.2: res >= level). Level 1 asks for the finest mesh itself, which no
+/// replaced triangle is part of, not even one an op of zero error replaces (its birth_res is 1 as
+/// well): so a full refinement always reaches the source, face for face.
+inline bool meets_level(double res, double level) {
+  return res >= level && level < 1.0;
+}
+
 class SimilarityComponent {
  public:
   virtual ~SimilarityComponent() = default;

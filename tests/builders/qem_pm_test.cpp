@@ -22,6 +22,7 @@
 #include "smr/core/invariants.h"
 #include "smr/extract/extract.h"
 #include "smr/io/mesh_reader.h"
+#include "smr/rcf/spec.h"
 #include "tests/support/datasets.h"
 #include "tests/support/mesh_distance.h"
 #include "tests/support/meshes.h"
@@ -118,6 +119,67 @@ void expect_finest_mesh_is_the_source(const Crmr& crmr, const TriangleMesh& sour
   std::sort(want.begin(), want.end());
   std::sort(got.begin(), got.end());
   EXPECT_EQ(got, want) << "M^m differs from the source mesh";
+  // And a full refinement (level 1 everywhere) reaches M^m, zero-error collapses included.
+  RcfSpec all;
+  all.floor = 1.0;
+  const Extraction e = extract_minimal_surface(crmr, make_rcf(all, ModelKind::kMesh3d, nullptr));
+  std::vector<TriRef> full = e.triangles, finest = level(crmr, true);
+  std::sort(full.begin(), full.end());
+  std::sort(finest.begin(), finest.end());
+  EXPECT_EQ(e.stats.x, crmr.ops.size()) << "a full refinement left ops out";
+  EXPECT_EQ(full, finest) << "a full refinement is not the source mesh";
+}
+
+// A cube whose faces are n x n grids: flat regions everywhere, so most collapses have zero error
+// (their ops' birth_res is 1, like the finest mesh's).
+TriangleMesh subdivided_cube(int n) {
+  TriangleMesh m;
+  std::map<std::array<int, 3>, std::uint32_t> ids;
+  const auto vertex = [&](std::array<int, 3> c) {
+    const auto [it, added] = ids.emplace(c, static_cast<std::uint32_t>(m.positions.size()));
+    if (added) m.positions.push_back(Vec3{double(c[0]), double(c[1]), double(c[2])} / double(n));
+    return it->second;
+  };
+  for (int axis = 0; axis < 3; ++axis) {
+    for (int side = 0; side < 2; ++side) {
+      const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+      const auto at = [&](int i, int j) {
+        std::array<int, 3> c{};
+        c[axis] = side * n;
+        c[u] = i;
+        c[v] = j;
+        return vertex(c);
+      };
+      for (int i = 0; i < n; ++i) {
+        for (int j = 0; j < n; ++j) {
+          const std::uint32_t a = at(i, j), b = at(i + 1, j), c = at(i + 1, j + 1),
+                              d = at(i, j + 1);
+          // Outward: counter-clockwise seen from outside (u x v = +axis on the far side).
+          if (side == 1) {
+            m.triangles.push_back({a, b, c});
+            m.triangles.push_back({a, c, d});
+          } else {
+            m.triangles.push_back({a, c, b});
+            m.triangles.push_back({a, d, c});
+          }
+        }
+      }
+    }
+  }
+  return m;
+}
+
+TEST(PlanarMesh, FullRefinementIsTheSourceWithZeroErrorCollapses) {
+  const TriangleMesh cube = subdivided_cube(12);
+  const Crmr in_core = build_qem_pm(cube, "cube12");
+  EXPECT_TRUE(check_crmr(in_core).ok()) << check_crmr(in_core).summary();
+  std::uint64_t zero = 0;
+  for (const Op& op : in_core.ops) zero += (op.id != kBaseOp && op.birth_res >= 1.0) ? 1 : 0;
+  EXPECT_GT(zero, 10u) << "the cube should have collapses of zero error";
+  expect_finest_mesh_is_the_source(in_core, cube);
+  BlockPmOptions o;
+  o.leaf_triangles = 300;
+  expect_finest_mesh_is_the_source(build_block_pm(MemoryMeshStream(cube, "cube12"), o), cube);
 }
 
 // Union-find over vertices; a triangle joins its three corners.
