@@ -31,9 +31,9 @@ double interpolate(const Triangle3& v, const Vec2& p) {
 }
 
 int locate_in_fragment(const OpView& op, const Vec2& p) {
-  int best = -1;
+  int best = -1, nearest = -1;
   bool best_void = true;
-  double best_score = -std::numeric_limits<double>::infinity();
+  double best_score = -std::numeric_limits<double>::infinity(), nearest_score = best_score;
   for (std::size_t i = 0; i < op.fragment.size(); ++i) {
     const FragmentTriangle& t = op.fragment[i];
     const Vec2 a = xy(op.position(t, 0)), b = xy(op.position(t, 1)), c = xy(op.position(t, 2));
@@ -41,6 +41,10 @@ int locate_in_fragment(const OpView& op, const Vec2& p) {
     if (!(area > 0.0)) continue;
     // The smallest barycentric coordinate: >= 0 inside, slightly negative just outside.
     const double score = std::min({orient2d(p, b, c), orient2d(a, p, c), orient2d(a, b, p)}) / area;
+    if (score > nearest_score) {
+      nearest = static_cast<int>(i);
+      nearest_score = score;
+    }
     if (score < -1e-9) continue;
     const bool is_void = t.is_void();
     // Strictly inside a triangle with data: no other triangle of the fragment contains p.
@@ -52,6 +56,9 @@ int locate_in_fragment(const OpView& op, const Vec2& p) {
       best_score = score;
     }
   }
+  // A point a rounding error outside (on the domain's boundary, where the finer triangles are
+  // smaller, the same distance is a larger share of them): the nearest triangle.
+  if (best < 0 && nearest_score >= -1e-6) return nearest;
   return best;
 }
 

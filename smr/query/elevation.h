@@ -56,7 +56,8 @@ class ElevationQuery {
 };
 
 /// The triangle of F(op) whose x-y footprint contains p (closed, with a relative tolerance of
-/// 1e-9 of its size), preferring one with data; -1 if none does.
+/// 1e-9 of its size), preferring one with data; else the nearest one if p lies within 1e-6 of
+/// its size outside it (rounding on the domain's boundary); -1 if none.
 int locate_in_fragment(const OpView& op, const Vec2& p);
 
 /// The height at p of the plane through the triangle with corners v.

@@ -208,11 +208,13 @@ void SightDescent::settle(const Item& it) {
       t1 = j.enter;
     }
   }
-  // A span clear of the killer's ROI is clear of every triangle refining it. (No data is looked
-  // for below void triangles only: they refine into no data and slivers of data between samples.)
+  // A span clear of the killer's ROI, grown by the finest mesh's own error, is clear of the band
+  // of every triangle refining it. (No data is looked for below void triangles only: they refine
+  // into no data and slivers of data between samples.)
   const OpRef killer = fetch(t.killer);
   const Vec3 a = along(p_, q_, it.t0), b = along(p_, q_, t1);
-  const bool clear = !SightRegion(a, b).box_meets(killer->roi, 0.0) && a.z > killer->roi.hi.z;
+  const double ef = source_.info().err_final;
+  const bool clear = !SightRegion(a, b).box_meets(killer->roi, ef) && a.z > killer->roi.hi.z + ef;
   if (!clear || t.is_void()) push_fragment(killer, it.t0, t1);
 }
 
@@ -249,19 +251,24 @@ SightAnswer SightDescent::answer() const {
   return a;
 }
 
-// Along a leg, one piece per stretch: a piece covered by those before it (a triangle the leg only
-// touches, or the second of two sharing the edge the leg runs along) is dropped, and of two
-// covering the same stretch the one with data is kept.
+// Along a leg, pieces may overlap: a triangle the leg only touches, or two sharing the edge the leg
+// runs along (data on one side, no data on the other, triangulated differently). So the leg is cut
+// at every piece's start and end, and each stretch between cuts (cuts closer than kSameT merged)
+// takes a piece covering it, one with data when any does.
 constexpr double kSameT = 1e-9;
 
-void prefer_data_on_ties(std::vector<Piece>& pieces) {
-  for (std::size_t i = 0; i < pieces.size(); ++i) {
-    for (std::size_t j = i + 1; j < pieces.size() && pieces[j].t0 <= pieces[i].t0 + kSameT; ++j) {
-      if (pieces[i].is_void && !pieces[j].is_void &&
-          std::abs(pieces[j].t1 - pieces[i].t1) <= kSameT)
-        std::swap(pieces[i], pieces[j]);
-    }
+std::vector<double> cuts_of(const std::vector<Piece>& pieces) {
+  std::vector<double> all{0.0, 1.0};
+  for (const Piece& c : pieces) {
+    all.push_back(std::clamp(c.t0, 0.0, 1.0));
+    all.push_back(std::clamp(c.t1, 0.0, 1.0));
   }
+  std::sort(all.begin(), all.end());
+  std::vector<double> cuts;
+  for (double t : all)
+    if (cuts.empty() || t > cuts.back() + kSameT) cuts.push_back(t);
+  cuts.back() = 1.0;
+  return cuts;
 }
 
 struct Leg {
@@ -270,23 +277,32 @@ struct Leg {
   double distance = 0.0;  // of a along the polyline
 };
 
-// Appends the breakpoints of one leg: the start of every piece (a leg's end is the next leg's
-// start, or the profile's last point). `last` is the piece before the leg (or null).
-const Piece* append_leg(const Leg& leg, std::vector<Piece>& pieces, const Piece* last,
+// Appends the breakpoints of one leg: the start of every stretch whose piece differs from the one
+// before (a leg's end is the next leg's start, or the profile's last point). `pieces` are sorted
+// by t0; `last` is the piece before the leg (or null).
+const Piece* append_leg(const Leg& leg, const std::vector<Piece>& pieces, const Piece* last,
                         std::vector<ProfilePoint>& out) {
-  prefer_data_on_ties(pieces);
   const double length = glm::length(leg.b - leg.a);
-  double cursor = -kInf;
-  for (const Piece& c : pieces) {
-    if (c.t1 <= cursor + kSameT) continue;
-    const double t = std::max(c.t0, std::max(cursor, 0.0));
-    const Vec2 at = leg.a + t * (leg.b - leg.a);
-    const Piece* surface = !c.is_void ? &c : (last != nullptr && !last->is_void ? last : nullptr);
+  const std::vector<double> cuts = cuts_of(pieces);
+  std::vector<const Piece*> active;  // pieces begun before the stretch's middle
+  std::size_t next = 0;
+  const Piece* current = nullptr;
+  for (std::size_t i = 0; i + 1 < cuts.size(); ++i) {
+    const double mid = 0.5 * (cuts[i] + cuts[i + 1]);
+    for (; next < pieces.size() && pieces[next].t0 <= mid; ++next) active.push_back(&pieces[next]);
+    std::erase_if(active, [&](const Piece* c) { return c->t1 < mid; });
+    const Piece* best = nullptr;
+    for (const Piece* c : active)
+      if (best == nullptr || (best->is_void && !c->is_void)) best = c;
+    if (best == nullptr || best == current) continue;
+    const Vec2 at = leg.a + cuts[i] * (leg.b - leg.a);
+    const Piece* surface =
+        !best->is_void ? best : (last != nullptr && !last->is_void ? last : nullptr);
     const double z =
         surface != nullptr ? interpolate(surface->v, at) : std::numeric_limits<double>::quiet_NaN();
-    out.push_back({leg.distance + t * length, Vec3{at, z}, leg.index, c.error, !c.is_void});
-    cursor = c.t1;
-    last = &c;
+    out.push_back(
+        {leg.distance + cuts[i] * length, Vec3{at, z}, leg.index, best->error, !best->is_void});
+    current = last = best;
   }
   return last;
 }

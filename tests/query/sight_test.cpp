@@ -188,6 +188,8 @@ void expect_agrees(const SightAnswer& a, const Brute& b, const ElevationQuery& e
       ++tally.visible;
       EXPECT_FALSE(a.undecided_at.has_value());
       EXPECT_TRUE(tie || b.first_below == INFINITY) << describe(a, b);
+      // Visible means above the band: the finest mesh's own error (err_final) too.
+      EXPECT_GT(b.least_gap, err_final - kTie) << describe(a, b);
       break;
     case Sight::kBlocked:
       ++tally.blocked;
@@ -412,22 +414,31 @@ void expect_ordered_along(const ProfileResult& r, std::span<const Vec2> line) {
   }
 }
 
-// Every breakpoint at the finest accuracy is the elevation query's answer there (where data
-// meets no data either answer may come), and between breakpoints the finest surface is linear.
+// Every breakpoint at the finest accuracy is the elevation query's answer there (which prefers
+// data where data meets no data, as the profile does), and between breakpoints the finest
+// surface is linear.
 void expect_finest_profile(const ProfileResult& r, const ElevationQuery& elev,
                            const SameHeight& same) {
   for (std::size_t i = 0; i < r.points.size(); ++i) {
     const ProfilePoint& pt = r.points[i];
     const ElevationAnswer a = elev.at(xy(pt.p), Accuracy::finest());
+    // A breakpoint where data meets no data may be rounded off either side of the shore.
     const bool shore = i > 0 && r.points[i - 1].has_data != pt.has_data;
     if (!shore) {
-      ASSERT_EQ(a.has_data, !std::isnan(pt.p.z)) << "breakpoint " << i;
+      ASSERT_EQ(a.has_data, !std::isnan(pt.p.z))
+          << "breakpoint " << i << " at " << pt.p.x << "," << pt.p.y;
     }
     if (a.has_data && !std::isnan(pt.p.z)) {
       ASSERT_TRUE(same(a.z, pt.p.z)) << "breakpoint " << i << ": " << pt.p.z << " vs " << a.z;
     }
-    if (i + 1 == r.points.size() || !pt.has_data) continue;
+    if (i + 1 == r.points.size()) continue;
     const ProfilePoint& next = r.points[i + 1];
+    if (!pt.has_data) {  // a stretch of no data has none inside (the elevation query prefers data)
+      const Vec2 mid = 0.5 * (xy(pt.p) + xy(next.p));
+      ASSERT_FALSE(elev.at(mid, Accuracy::finest()).has_data)
+          << "no data reported at " << mid.x << "," << mid.y << " (piece " << i << ")";
+      continue;
+    }
     for (double f : {0.25, 0.5, 0.75}) {
       const Vec3 mid = pt.p + f * (next.p - pt.p);
       const ElevationAnswer m = elev.at(xy(mid), Accuracy::finest());
@@ -455,6 +466,25 @@ TEST_P(ProfileOnDem, BreakpointsAreElevationsAndPiecesAreLinear) {
     if (HasFailure()) break;
   }
   EXPECT_GT(points, 40u * 20u);  // the legs cross many triangles
+}
+
+// Along grid rows and columns, legs run on triangle edges, also between data and no data (elev's
+// holes): no stretch with data on one side may come out as no data.
+TEST(Profile, AlongGridLinesDataIsNeverLost) {
+  const test::Dataset& d = dataset("elev");
+  const ElevationQuery elev(d.crmr);
+  const Domain dom = elev.domain();
+  const Georef& g = d.dem.georef;
+  for (int row = 0; row < d.dem.height; row += 2) {
+    const double y = g.y0 + row * g.dy;
+    const std::vector<Vec2> line{{dom.lo.x, y}, {dom.hi.x, y}};
+    expect_finest_profile(profile(d.crmr, line, Accuracy::finest()), elev, SameHeight(d.crmr));
+  }
+  for (int col = 0; col < d.dem.width; col += 2) {
+    const double x = g.x0 + col * g.dx;
+    const std::vector<Vec2> line{{x, dom.lo.y}, {x, dom.hi.y}};
+    expect_finest_profile(profile(d.crmr, line, Accuracy::finest()), elev, SameHeight(d.crmr));
+  }
 }
 
 // Within an error, each breakpoint lies within its piece's bound plus the elevation query's of
