@@ -4,6 +4,7 @@
 // summary, the accuracy, the ops and pages each query read, and the time.
 #include <charconv>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <iostream>
@@ -96,23 +97,39 @@ nlohmann::json answer_json(const query::ElevationAnswer& a) {
   return j;
 }
 
-// One "x,y" per line (also "x y", "x;y" or tab-separated); blank lines, '#' comments and a header
-// line whose first field is not a number are skipped.
+// The shortest text that reads back as the same double (coordinates echo as typed).
+std::string exact(double v) {
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, r.ptr);
+}
+
+// One "x,y" per line (also "x y", "x;y" or tab-separated, runs of separators and spaces around
+// commas being one separator); blank lines, '#' comments and a header (a first line whose first
+// field is not a number) are skipped.
 class PointReader {
  public:
   PointReader(std::istream& in, std::string name) : in_(in), name_(std::move(name)) {}
   bool next(Vec2& p) {
-    std::string line;
-    while (std::getline(in_, line)) {
+    std::string raw;
+    while (std::getline(in_, raw)) {
       ++line_no_;
-      for (char& c : line)
-        if (c == ';' || c == '\t' || c == ' ') c = ',';
-      while (!line.empty() && (line.back() == '\r' || line.back() == ',')) line.pop_back();
-      std::size_t s = line.find_first_not_of(',');
-      if (s == std::string::npos || line[s] == '#') continue;
-      line = line.substr(s);
-      if (line_no_ == 1 && !(std::isdigit(static_cast<unsigned char>(line[0])) || line[0] == '-' ||
-                             line[0] == '+' || line[0] == '.'))
+      std::string line;  // fields joined by single commas
+      for (char c : raw) {
+        const bool sep = c == ',' || c == ';' || c == '\t' || c == ' ' || c == '\r';
+        if (!sep) {
+          line += c;
+        } else if (!line.empty() && line.back() != ',') {
+          line += ',';
+        }
+      }
+      if (!line.empty() && line.back() == ',') line.pop_back();
+      if (line.empty() || line[0] == '#') continue;
+      const bool first = !seen_content_;
+      seen_content_ = true;
+      const char c = line[0];
+      if (first &&
+          !(std::isdigit(static_cast<unsigned char>(c)) || c == '-' || c == '+' || c == '.'))
         continue;  // a header
       const std::vector<double> v = parse_numbers(line, 2, where(), "X,Y");
       p = {v[0], v[1]};
@@ -126,27 +143,43 @@ class PointReader {
   std::istream& in_;
   std::string name_;
   std::uint64_t line_no_ = 0;
+  bool seen_content_ = false;
 };
 
-// Points of a GeoJSON document: Point and MultiPoint geometries, bare or in features.
+// The member `key` of a GeoJSON object, of the expected kind.
+const nlohmann::json& member(const nlohmann::json& j, const char* key, bool array,
+                             const std::string& name) {
+  if (!j.is_object() || !j.contains(key) || (array && !j[key].is_array()))
+    throw_input(name + ": a GeoJSON " + j.value("type", std::string("object")) + " needs " +
+                (array ? "an array " : "a member ") + "\"" + key + "\"");
+  return j[key];
+}
+
+// Points of a GeoJSON document: Point and MultiPoint geometries, bare, in features or in a list.
 void geojson_points(const nlohmann::json& j, std::vector<Vec2>& out, const std::string& name) {
   const auto coord = [&](const nlohmann::json& c) {
     if (!c.is_array() || c.size() < 2 || !c[0].is_number() || !c[1].is_number())
       throw_input(name + ": a GeoJSON position must be [x, y], got " + c.dump());
     out.push_back({c[0].get<double>(), c[1].get<double>()});
   };
-  const std::string type = j.value("type", "");
+  if (j.is_array()) {
+    for (const auto& e : j) geojson_points(e, out, name);
+    return;
+  }
+  const std::string type =
+      j.is_object() && j.contains("type") && j["type"].is_string() ? j["type"] : "";
   if (type == "FeatureCollection") {
-    for (const auto& f : j.at("features")) geojson_points(f, out, name);
+    for (const auto& f : member(j, "features", true, name)) geojson_points(f, out, name);
   } else if (type == "Feature") {
-    if (!j.at("geometry").is_null()) geojson_points(j.at("geometry"), out, name);
+    const nlohmann::json& g = member(j, "geometry", false, name);
+    if (!g.is_null()) geojson_points(g, out, name);
   } else if (type == "Point") {
-    coord(j.at("coordinates"));
+    coord(member(j, "coordinates", true, name));
   } else if (type == "MultiPoint") {
-    for (const auto& c : j.at("coordinates")) coord(c);
+    for (const auto& c : member(j, "coordinates", true, name)) coord(c);
   } else {
-    throw_input(name + ": expected GeoJSON Point or MultiPoint geometries, got type '" + type +
-                "'");
+    throw_input(name + ": expected GeoJSON Point or MultiPoint geometries, got " +
+                (type.empty() ? j.dump().substr(0, 60) : "type '" + type + "'"));
   }
 }
 
@@ -182,7 +215,7 @@ struct ElevationRun {
       if (json) {
         answers.push_back(answer_json(a));
       } else {
-        text += number(a.p.x) + "," + number(a.p.y) + "," + (a.has_data ? number(a.z) : "nodata") +
+        text += exact(a.p.x) + "," + exact(a.p.y) + "," + (a.has_data ? number(a.z) : "nodata") +
                 "," + number(a.error_bound) + "\n";
       }
     }
@@ -196,11 +229,21 @@ void read_points_file(const std::string& path, ElevationRun& run) {
   std::istream* in = &std::cin;
   const std::string name = path == "-" ? "stdin" : path;
   if (path != "-") {
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(path, ec))
+      throw Error(ErrorKind::kIo, path + ": not a readable file of points");
     file.open(path);
     if (!file) throw Error(ErrorKind::kIo, path + ": cannot open the points file");
     in = &file;
   }
-  if (in->peek() == '{') {  // GeoJSON
+  // A UTF-8 byte order mark and leading blanks say nothing of the format.
+  if (in->peek() == 0xEF) {
+    char bom[3];
+    in->read(bom, 3);
+    if (std::string(bom, 3) != "\xEF\xBB\xBF") throw_input(name + ": not UTF-8 text");
+  }
+  while (std::isspace(in->peek())) in->get();
+  if (in->peek() == '{' || in->peek() == '[') {  // GeoJSON
     nlohmann::json j;
     try {
       j = nlohmann::json::parse(*in);
@@ -216,6 +259,7 @@ void read_points_file(const std::string& path, ElevationRun& run) {
   PointReader reader(*in, name);
   Vec2 p;
   while (reader.next(p)) run.add(p, reader.where());
+  if (in->bad()) throw Error(ErrorKind::kIo, name + ": read error");
 }
 
 nlohmann::json query_elevation(const IndexedSource& src, const QueryArgs& a) {
@@ -223,8 +267,10 @@ nlohmann::json query_elevation(const IndexedSource& src, const QueryArgs& a) {
     throw_input("elevation: give points as X,Y arguments or --input FILE (- for stdin)");
   const query::ElevationQuery q(src);
   Output out(a.out);
-  ElevationRun run{q, accuracy_of(a), a.json, out, nlohmann::json::array(), {}, 0, 0, 0, 0.0};
-  if (!a.json) out.write("x,y,z,error\n");
+  // The answers go to -o (or stdout); with --json and no -o, into the report.
+  const bool inline_json = a.json && a.out.empty();
+  ElevationRun run{q, accuracy_of(a), inline_json, out, nlohmann::json::array(), {}, 0, 0, 0, 0.0};
+  if (!inline_json) out.write("x,y,z,error\n");
   for (std::size_t i = 0; i < a.args.size(); ++i)
     run.add(parse_point(a.args[i], "point " + std::to_string(i + 1)),
             "point " + std::to_string(i + 1) + " (" + a.args[i] + ")");
@@ -234,7 +280,7 @@ nlohmann::json query_elevation(const IndexedSource& src, const QueryArgs& a) {
                       {"no_data", run.nodata},
                       {"ops_read", run.ops},
                       {"max_error_bound", run.worst_error}};
-  if (a.json) r["answers"] = std::move(run.answers);
+  if (inline_json) r["answers"] = std::move(run.answers);
   out.commit();
   return r;
 }
@@ -251,6 +297,8 @@ nlohmann::json query_window(const IndexedSource& src, const QueryArgs& a) {
        << dom.lo.y << " .. " << dom.hi.x << ',' << dom.hi.y;
     throw_input(os.str());
   }
+  if (a.out.empty() && !a.json)
+    throw_input("window: give -o FILE.{ply,obj} for the mesh, or --json for the report");
   const auto region = std::make_shared<query::WindowRegion>(Vec2{w[0], w[1]}, Vec2{w[2], w[3]});
   const Extraction e = query::refine(src, region, accuracy_of(a));
   // The triangles meeting the window, and the vertices inside it (Maheshwari Fig. 10's ratio).
@@ -324,7 +372,7 @@ nlohmann::json query_los(const IndexedSource& src, const QueryArgs& a) {
     r["no_data_at"] = {s.no_data_at->x, s.no_data_at->y, s.no_data_at->z};
     text += "; no data from " + point_text(*s.no_data_at);
   }
-  if (!a.json) {
+  if (!a.json || !a.out.empty()) {
     Output out(a.out);
     out.write(text + "\n");
     out.commit();
@@ -342,7 +390,7 @@ nlohmann::json query_profile(const IndexedSource& src, const QueryArgs& a) {
                       {"error_bound", pr.error_bound},
                       {"ops_read", pr.ops},
                       {"triangles", pr.triangles}};
-  if (a.json) {
+  if (a.json && a.out.empty()) {
     nlohmann::json pts = nlohmann::json::array();
     for (const query::ProfilePoint& q : pr.points)
       pts.push_back({{"distance", q.distance},

@@ -259,6 +259,28 @@ std::uint64_t LevelsRegion::count_in(double lo, double hi) const {
   return n > 0 ? std::uint64_t(n) : 0;
 }
 
+namespace {
+
+// Every level is a pass over the marched triangles: refuse what would not end (or not fit).
+void check_level_count(const ContourOptions& o, const Box3& bounds) {
+  constexpr double kMaxLevels = 100000.0;
+  constexpr double kLimit = 4503599627370496.0;  // 2^52: level numbers stay exact
+  require(double(o.levels.size()) <= kMaxLevels, "at most 100000 levels");
+  if (!o.interval || !(*o.interval > 0.0)) return;  // levels_region names a bad interval
+  const double lo = bounds.lo.z, hi = bounds.hi.z, d = *o.interval;
+  require(std::max(std::abs(lo - o.base), std::abs(hi - o.base)) / d < kLimit,
+          "the interval is too small for the base and the data's heights (more than 2^52 steps)");
+  const double n = (hi - lo) / d;
+  if (n > kMaxLevels) {
+    std::ostringstream os;
+    os << "interval " << d << " gives about " << std::llround(n)
+       << " levels over the data's heights " << lo << " .. " << hi << "; at most 100000";
+    require(false, os.str());
+  }
+}
+
+}  // namespace
+
 LevelsRegion levels_region(const ContourOptions& o) {
   require(!o.interval || o.levels.empty(), "give levels or an interval, not both");
   return o.interval ? LevelsRegion::every(*o.interval, o.base) : LevelsRegion::at(o.levels);
@@ -268,6 +290,7 @@ ContourResult contours(const OpSource& src, const ContourOptions& o) {
   const auto t0 = std::chrono::steady_clock::now();
   const CrmrInfo& info = src.info();
   terrain_domain(info);  // kInvalidInput for a 3-D mesh
+  check_level_count(o, info.bounds);
   const auto levels = std::make_shared<const LevelsRegion>(levels_region(o));
   ContourResult r;
   ContourStats& st = r.stats;
