@@ -134,6 +134,19 @@ TEST_F(QueryCli, GeoJsonPointsGiveTheSameAnswers) {
       << a << "],[" << b << "]]}}]}";
   const json geo = query("elevation --input " + path("pts.geojson"));
   EXPECT_EQ(csv["answers"], geo["answers"]);
+  // The same points as a list after blanks, and as a CSV with a BOM, spaces and a late header.
+  std::ofstream(path("list.json")) << "  \n[{\"type\":\"Point\",\"coordinates\":[" << a
+                                   << "]},{\"type\":\"Point\",\"coordinates\":[" << b << "]}]";
+  EXPECT_EQ(query("elevation --input " + path("list.json"))["answers"], csv["answers"]);
+  const auto with = [](const std::string& p, const std::string& separator) {
+    const std::size_t k = p.find(',');
+    return p.substr(0, k) + separator + p.substr(k + 1);
+  };
+  const std::string sa = with(a, " , "), sb = with(b, "\t");
+  std::ofstream(path("odd.csv")) << "\xEF\xBB\xBF# points\n\nlon lat\n"
+                                 << sa << "\r\n"
+                                 << sb << "\n";
+  EXPECT_EQ(query("elevation --input " + path("odd.csv"))["answers"], csv["answers"]);
   // Within an error: bounded, and no more ops read.
   const json coarse = query("elevation " + a + " " + b + " --max-error 50");
   for (const json& ans : coarse["answers"]) EXPECT_LE(ans["error"].get<double>(), 50.0);
@@ -180,6 +193,11 @@ TEST_F(QueryCli, BadInputExitsOneAndLeavesNoFile) {
   expect_user_error("los " + xy(h, 1, 1) + ",500 " + xy(h, 9, 9), "X,Y,Z");
   expect_user_error("profile " + xy(h, 1, 1), "at least two");
   expect_user_error("elevation --input " + path("missing.csv"), "missing.csv");
+  expect_user_error("elevation --input " + dir_->string(), "not a readable file");
+  std::ofstream(path("feature.json")) << "{\"type\":\"Feature\"}";
+  expect_user_error("elevation --input " + path("feature.json"), "\"geometry\"");
+  expect_user_error("contours --interval 0.001 -o " + path("c.geojson"), "at most 100000");
+  expect_user_error("window " + xy(h, 20, 20) + "," + xy(h, 40, 35), "-o FILE");
   // A bad record in the middle of a batch: the message names the line; no partial output.
   std::ofstream(path("bad.csv")) << xy(h, 40, 50) << "\n" << xy(h, 41, 50) << "\nnot,a point\n";
   expect_user_error("elevation --input " + path("bad.csv") + " -o " + path("out.csv"), "line 3");
