@@ -4,7 +4,9 @@
 #   fig       Maheshwari Figs. 10-11 on fBm databases from 33^2 to 32769^2 samples (SIZES): windows
 #             of 1/25 and 1/4 of the area at LOCATIONS random places (seed SEED), |X| / vertices of
 #             the result in the window; point queries at as many places, ops of the descent
-#             (ElevationAnswer::ops_read) and |X| of refine() on the point.
+#             (ElevationAnswer::ops_read) and |X| of refine() on the point. The 32769^2 database
+#             comes from the block builder, the others from the greedy one; BLOCK_SIZES are built
+#             with the block builder too (BLOCK_LOCATIONS places) to tell size from builder.
 #   latency   on the 32769^2 database (1.07 G samples): point elevation warm / cold (clear_cache) /
 #             OS-cold (posix_fadvise, and DROP_ALL points after echo 3 > /proc/sys/vm/drop_caches,
 #             root only), batch at_many over BATCH points, and the same points through
@@ -17,14 +19,16 @@
 #
 # The DEMs: `smrdb synth --size N --seed 1 --range 1600` (spacing 1; octave frequencies are relative
 # to the grid side, so a larger N is a larger, more detailed terrain), ingested with
-# `smrdb ingest --max-error 1.6` (0.1 % of the range; greedy builder). The 32769^2 database
-# (BIG_DB, made with --memory 2G, the block builder) and the 8193^2 one (DB_8193) are reused when
-# they exist. Every file both sides read is read once first (OS page cache warm).
+# `smrdb ingest --max-error 1.6` (0.1 % of the range; greedy builder; with --memory 2G, the block
+# builder, for 32769^2 and BLOCK_SIZES). The 32769^2 database (BIG_DB) and the greedy 8193^2 one
+# (DB_8193) are reused when they exist. Every file both sides read is read once first (OS page
+# cache warm). Each step writes its part to WORK_DIR/parts; the parts are then assembled.
 #
 # Environment: BUILD_DIR (build/release), WORK_DIR ($BUILD_DIR/bench-query), SIZES, LOCATIONS
 # (2500), SEED (1), CACHE_MB (1024: holds every decoded page of the largest database), INTERVAL
-# (50), BATCH (1000000), PAIRS (1000), DROP_ALL (10), BIG_DB, BIG_TIF, DB_8193, STEPS
-# ("latency sight contours fig"); PLOT_ONLY=1 redraws the PNGs from results/query.json.
+# (50), BATCH (1000000), PAIRS (1000), DROP_ALL (10), BLOCK_SIZES ("2049 8193"), BLOCK_LOCATIONS
+# (500), BIG_DB, BIG_TIF, DB_8193, STEPS ("latency sight contours fig"); REUSE=1 keeps the fig
+# parts already in WORK_DIR/parts; PLOT_ONLY=1 redraws the PNGs from results/query.json.
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -44,6 +48,8 @@ DROP_ALL="${DROP_ALL:-10}"
 BIG_DB="${BIG_DB:-/work/main/build/release/bench-query/fbm32769.smrdb}"
 BIG_TIF="${BIG_TIF:-/work/main/build/release/bench-query/fbm32769_seed1.tif}"
 DB_8193="${DB_8193:-/work/main/build/release/bench-martini/fbm8193_seed1_e1.6.smrdb}"
+BLOCK_SIZES="${BLOCK_SIZES-2049 8193}"
+BLOCK_LOCATIONS="${BLOCK_LOCATIONS:-500}"
 STEPS="${STEPS:-latency sight contours fig}"
 RES="$here/results"
 OUT="$RES/query.json"
@@ -54,40 +60,50 @@ has_step() { [[ " $STEPS " == *" $1 "* ]]; }
 
 # ---- plots ----------------------------------------------------------------------------------
 plot() {  # query.json -> query_fig10.png, query_fig11.png
-  local tsv="$WORK_DIR/fig.tsv"
+  local builder
   mkdir -p "$WORK_DIR"
-  jq -r '.fig[] | [.db.vertices, (.windows[] | .ratio.mean, .ratio.p50, .ratio.p99,
-           .introduced_ratio.mean), .points.descent_ops.mean, .points.descent_ops.p50,
-           .points.descent_ops.p99, .points.descent_ops.max, .points.refine_ops.mean,
-           .points.refine_ops.max, .db.samples] | @tsv' "$1" | sort -n >"$tsv"
+  for builder in greedy blocks; do
+    jq -r --arg b "$builder" '.fig[] | select(.builder == $b) | [.db.vertices,
+             (.windows[] | .ratio.mean, .ratio.p50, .ratio.p99, .introduced_ratio.mean),
+             .points.descent_ops.mean, .points.descent_ops.p50, .points.descent_ops.p99,
+             .points.descent_ops.max, .points.refine_ops.mean, .points.refine_ops.max,
+             .db.samples] | @tsv' "$1" | sort -n >"$WORK_DIR/fig_$builder.tsv"
+  done
+  local g="$WORK_DIR/fig_greedy.tsv" b="$WORK_DIR/fig_blocks.tsv"
   gnuplot <<EOF
-set terminal pngcairo size 900,600 font ",10" noenhanced
+set terminal pngcairo size 1000,650 font ",10" noenhanced
 set datafile separator "\t"
 set logscale x
 set grid
 set key top right
-set xlabel "vertices of the database (fBm 33^2 .. 32769^2 samples, 1.6 m)"
+set xrange [700:1e6]
+set xlabel "vertices of the database (fBm 33^2 .. 32769^2 samples at 1.6 m; filled: greedy builder, open: block builder)"
 set output "${RES}/query_fig10.png"
-set title "Maheshwari Fig. 10: ops fetched / vertices of the result in the window (finest, $LOCATIONS windows each)"
+set title "Maheshwari Fig. 10: ops fetched (|X|) / vertices of the result in the window, finest accuracy, random windows"
 set ylabel "ratio"
-set yrange [0:*]
-plot "$tsv" u 1:2 w linespoints lw 2 pt 7 lc rgb "#2c7fb8" t "1/25 of the area: mean", \
+set yrange [0:7]
+plot "$g" u 1:2 w linespoints lw 2 pt 7 lc rgb "#2c7fb8" t "1/25 of the area: mean", \
      "" u 1:4 w lines dt 2 lc rgb "#2c7fb8" t "1/25: p99", \
-     "" u 1:5 w linespoints pt 6 dt 3 lc rgb "#2c7fb8" t "1/25: vertices introduced by X / vertices", \
+     "" u 1:5 w linespoints pt 1 dt 3 lc rgb "#2c7fb8" t "1/25: vertices the ops of X introduce / vertices", \
      "" u 1:6 w linespoints lw 2 pt 5 lc rgb "#d95f0e" t "1/4 of the area: mean", \
      "" u 1:8 w lines dt 2 lc rgb "#d95f0e" t "1/4: p99", \
-     "" u 1:9 w linespoints pt 4 dt 3 lc rgb "#d95f0e" t "1/4: vertices introduced by X / vertices", \
+     "" u 1:9 w linespoints pt 1 dt 3 lc rgb "#d95f0e" t "1/4: vertices the ops of X introduce / vertices", \
+     "$b" u 1:2 w linespoints pt 6 lc rgb "#2c7fb8" t "1/25, block builder: mean", \
+     "" u 1:6 w linespoints pt 4 lc rgb "#d95f0e" t "1/4, block builder: mean", \
      3 w lines lc rgb "black" dt 4 t "paper: < 3"
 set output "${RES}/query_fig11.png"
-set title "Maheshwari Fig. 11: ops fetched by a point query ($LOCATIONS random points each)"
+set title "Maheshwari Fig. 11: ops fetched by a point query, random points"
 set ylabel "ops"
 set logscale y
-set yrange [5:*]
-plot "$tsv" u 1:10 w linespoints lw 2 pt 7 lc rgb "#2c7fb8" t "elevation descent: mean", \
+set yrange [5:1000]
+plot "$g" u 1:10 w linespoints lw 2 pt 7 lc rgb "#2c7fb8" t "elevation descent: mean", \
      "" u 1:12 w lines dt 2 lc rgb "#2c7fb8" t "descent: p99", \
      "" u 1:13 w points pt 2 lc rgb "#2c7fb8" t "descent: max", \
-     "" u 1:14 w linespoints pt 5 lc rgb "#d95f0e" t "refine() of the point window: mean", \
-     "" u 1:15 w points pt 4 lc rgb "#d95f0e" t "refine(): max", \
+     "" u 1:14 w linespoints pt 5 lc rgb "#d95f0e" t "refine() of the point as a window: mean", \
+     "" u 1:15 w points pt 2 lc rgb "#d95f0e" t "refine(): max", \
+     "$b" u 1:10 w linespoints pt 6 lc rgb "#2c7fb8" t "descent, block builder: mean", \
+     "" u 1:13 w points pt 1 lc rgb "#2c7fb8" t "descent, block builder: max", \
+     "" u 1:14 w linespoints pt 4 lc rgb "#d95f0e" t "refine(), block builder: mean", \
      70 w lines lc rgb "black" dt 4 t "paper: <= 70 (up to 50 k vertices)"
 EOF
   echo "wrote $RES/query_fig10.png $RES/query_fig11.png" >&2
@@ -107,32 +123,43 @@ parts="$WORK_DIR/parts"
 mkdir -p "$parts"
 
 # ---- databases ------------------------------------------------------------------------------
-# dem_of N / db_of N: the fBm GeoTIFF and its database (made here unless reused).
+# dem_of N / db_of N / block_db_of N: the fBm GeoTIFF and its databases (made here unless reused).
 dem_of() { if [[ "$1" == 32769 ]]; then echo "$BIG_TIF"; else echo "$WORK_DIR/fbm$1_seed1.tif"; fi; }
 db_of() {
-  if [[ "$1" == 32769 && -f "$BIG_DB" ]]; then echo "$BIG_DB"
+  if [[ "$1" == 32769 ]]; then echo "$BIG_DB"
   elif [[ "$1" == 8193 && -f "$DB_8193" ]]; then echo "$DB_8193"
   else echo "$WORK_DIR/fbm$1_e1.6.smrdb"; fi
 }
-prepare() {  # N: the DEM and the database
-  local n="$1" dem db
-  dem="$(dem_of "$n")"
-  db="$(db_of "$n")"
-  if [[ ! -f "$dem" ]]; then
-    log "synth $n^2 -> $dem"
-    nice "$smrdb" synth --size "$n" --seed 1 --range 1600 -o "$dem" -q
-  fi
-  if [[ ! -f "$db" ]]; then
-    log "ingest $dem -> $db"
-    local memory=()
-    if (( n > 8193 )); then memory=(--memory 2G); fi
-    nice "$smrdb" ingest "$dem" --max-error 1.6 "${memory[@]}" -o "$db" -q
-  fi
+block_db_of() { echo "$WORK_DIR/fbm$1_blocks_e1.6.smrdb"; }
+prepare_dem() {  # N
+  local dem
+  dem="$(dem_of "$1")"
+  [[ -f "$dem" ]] && return
+  log "synth $1^2 -> $dem"
+  nice "$smrdb" synth --size "$1" --seed 1 --range 1600 -o "$dem" -q
 }
-needed="$SIZES"
-has_step latency || has_step sight || has_step contours && needed="$needed 32769"
-has_step contours && needed="$needed 4097"
-for n in $(echo "$needed" | tr ' ' '\n' | sort -nu); do prepare "$n"; done
+prepare_db() {  # N DB [INGEST OPTIONS...]
+  local n="$1" db="$2"
+  shift 2
+  [[ -f "$db" ]] && return
+  prepare_dem "$n"
+  log "ingest $(dem_of "$n") $* -> $db"
+  nice "$smrdb" ingest "$(dem_of "$n")" --max-error 1.6 "$@" -o "$db" -q
+}
+big_step=0
+if has_step latency || has_step sight || has_step contours; then big_step=1; fi
+if has_step fig || (( big_step )); then prepare_db 32769 "$BIG_DB" --memory 2G; fi
+if has_step fig; then
+  for n in $SIZES; do
+    if [[ "$n" == 32769 ]]; then continue; fi
+    prepare_db "$n" "$(db_of "$n")"
+  done
+  for n in $BLOCK_SIZES; do prepare_db "$n" "$(block_db_of "$n")" --memory 2G; done
+fi
+if has_step contours; then
+  prepare_db 4097 "$(db_of 4097)"
+  prepare_dem 32769
+fi
 
 stamp() {  # date, commit, load average
   jq --arg date "$(date -u +%Y-%m-%dT%H:%M:%SZ)" \
@@ -195,23 +222,25 @@ EOF
 gdal_contour_run() {
   local n="$1" out="$WORK_DIR/gdal_$1.geojson"
   rm -f "$out"
-  /usr/bin/time -f '%e %M' -o "$WORK_DIR/gdal_$n.time" \
+  /usr/bin/time -f '%e %M %U %S' -o "$WORK_DIR/gdal_$n.time" \
     nice gdal_contour -q -a elev -i "$INTERVAL" -f GeoJSON "$(dem_of "$n")" "$out"
-  read -r secs kb <"$WORK_DIR/gdal_$n.time"
-  count_geojson "$out" | jq --argjson s "$secs" --argjson kb "$kb" \
-    --arg v "$(gdalinfo --version)" --argjson bytes "$(stat -c %s "$out")" \
-    '. + {seconds: $s, peak_rss_mb: ($kb / 1024), output_bytes: $bytes, version: $v}' \
+  read -r secs kb user sys <"$WORK_DIR/gdal_$n.time"
+  count_geojson "$out" | jq --argjson s "$secs" --argjson kb "$kb" --argjson u "$user" \
+    --argjson sy "$sys" --arg v "$(gdalinfo --version)" --argjson bytes "$(stat -c %s "$out")" \
+    '. + {seconds: $s, cpu_seconds: ($u + $sy), peak_rss_mb: ($kb / 1024), output_bytes: $bytes,
+          version: $v}' \
     >"$parts/gdal_$n.json"
   rm -f "$out"
 }
 # ours_contour_run N CACHE: bench_query contours (a fresh process) -> $parts/ours_N_CACHE.json
 ours_contour_run() {
   local n="$1" cache="$2" out="$WORK_DIR/ours_$1.geojson"
-  /usr/bin/time -f '%e %M' -o "$WORK_DIR/ours.time" nice "$bench" contours "$(db_of "$n")" \
-    --interval "$INTERVAL" --cache-mb "$cache" -o "$out" >"$WORK_DIR/ours.json"
-  read -r secs kb <"$WORK_DIR/ours.time"
-  jq --argjson s "$secs" --argjson kb "$kb" \
-    '. + {process_seconds: $s, process_peak_rss_mb: ($kb / 1024)}' "$WORK_DIR/ours.json" \
+  /usr/bin/time -f '%e %M %U %S' -o "$WORK_DIR/ours.time" nice "$bench" contours \
+    "$(db_of "$n")" --interval "$INTERVAL" --cache-mb "$cache" -o "$out" >"$WORK_DIR/ours.json"
+  read -r secs kb user sys <"$WORK_DIR/ours.time"
+  jq --argjson s "$secs" --argjson kb "$kb" --argjson u "$user" --argjson sy "$sys" \
+    '. + {process_seconds: $s, process_cpu_seconds: ($u + $sy),
+          process_peak_rss_mb: ($kb / 1024)}' "$WORK_DIR/ours.json" \
     >"$parts/ours_${n}_$cache.json"
   rm -f "$out"
 }
@@ -233,25 +262,34 @@ if has_step contours; then
 fi
 
 # ---- fig (Maheshwari Figs. 10-11) ------------------------------------------------------------
-fig_run() {  # N -> $parts/fig_N.json
-  local n="$1"
-  log "fig: $n^2 ($LOCATIONS locations)"
-  nice "$bench" fig "$(db_of "$n")" --locations "$LOCATIONS" --seed "$SEED" \
-    --cache-mb "$CACHE_MB" | stamp >"$parts/fig_$n.json"
+fig_run() {  # NAME DB LOCATIONS -> $parts/fig_NAME.json
+  local part="$parts/fig_$1.json"
+  if [[ "${REUSE:-0}" == 1 ]] && jq -e .windows "$part" >/dev/null 2>&1; then
+    log "fig: $1 (reused $part)"
+    return
+  fi
+  log "fig: $1 ($3 locations)"
+  nice "$bench" fig "$2" --locations "$3" --seed "$SEED" --cache-mb "$CACHE_MB" |
+    stamp >"$part"
+}
+fig_jobs() {  # NAME DB LOCATIONS per line
+  local n
+  for n in $SIZES; do echo "$n $(db_of "$n") $LOCATIONS"; done
+  for n in $BLOCK_SIZES; do echo "${n}_blocks $(block_db_of "$n") $BLOCK_LOCATIONS"; done
 }
 if has_step fig; then
-  # One core runs gdal_contour while it lasts: half of the sizes go there, the rest after it ends.
-  sorted="$(echo "$SIZES" | tr ' ' '\n' | sort -nr | tr '\n' ' ')"
-  first="" second=""
-  i=0
-  for n in $sorted; do
-    if (( i % 2 == 0 )); then first="$first $n"; else second="$second $n"; fi
-    i=$((i + 1))
-  done
-  (for n in $first; do fig_run "$n"; done) &
+  # One core runs gdal_contour while it lasts: every other job (the largest first) goes there,
+  # the rest after it ends.
+  jobs_sorted="$(fig_jobs | sort -t' ' -k1,1nr)"
+  (i=0; while read -r name db locs; do
+     if (( i++ % 2 == 0 )); then fig_run "$name" "$db" "$locs"; fi
+   done <<<"$jobs_sorted") &
   fig_pid=$!
   if [[ -n "$gdal_big_pid" ]]; then wait "$gdal_big_pid"; gdal_big_pid=""; fi
-  for n in $second; do fig_run "$n"; done
+  i=0
+  while read -r name db locs; do
+    if (( i++ % 2 == 1 )); then fig_run "$name" "$db" "$locs"; fi
+  done <<<"$jobs_sorted"
   wait "$fig_pid"
 fi
 if [[ -n "$gdal_big_pid" ]]; then wait "$gdal_big_pid"; fi
@@ -260,9 +298,13 @@ if [[ -n "$gdal_big_pid" ]]; then wait "$gdal_big_pid"; fi
 log "assembling $OUT"
 part() { if [[ -f "$parts/$1.json" ]]; then cat "$parts/$1.json"; else echo null; fi; }
 figs='[]'
-for n in $SIZES; do
-  [[ -f "$parts/fig_$n.json" ]] && figs="$(jq --slurpfile f "$parts/fig_$n.json" '. + $f' <<<"$figs")"
-done
+while read -r name _; do
+  if [[ -f "$parts/fig_$name.json" ]]; then
+    figs="$(jq --slurpfile f "$parts/fig_$name.json" '. + $f' <<<"$figs")"
+  fi
+done < <(fig_jobs)
+figs="$(jq 'map(. + {builder: (if .db.builder | startswith("greedy") then "greedy" else "blocks" end)})
+  | sort_by(.builder != "greedy", .db.vertices)' <<<"$figs")"
 contours='[]'
 for n in 4097 32769; do
   [[ -f "$parts/gdal_$n.json" ]] || continue
@@ -270,7 +312,8 @@ for n in 4097 32769; do
     --slurpfile o64 "$parts/ours_${n}_64.json" --slurpfile ob "$parts/ours_${n}_$CACHE_MB.json" \
     '. + [{size: $n, gdal: $g[0], ours: [$o64[0], $ob[0]] | map(del(.machine)),
            gdal_over_ours: [$o64[0], $ob[0]] | map({cache_mb, ratio: ($g[0].seconds / .seconds),
-             ratio_process: ($g[0].seconds / .process_seconds)})}]' <<<"$contours")"
+             ratio_process: ($g[0].seconds / .process_seconds),
+             ratio_cpu: ($g[0].cpu_seconds / .process_cpu_seconds)})}]' <<<"$contours")"
 done
 jq -n --argjson fig "$figs" --argjson contours "$contours" \
   --argjson latency "$(part latency)" --argjson sight "$(part sight)" \
@@ -279,8 +322,11 @@ jq -n --argjson fig "$figs" --argjson contours "$contours" \
   --arg loadavg "$(cut -d' ' -f1-3 /proc/loadavg)" \
   --argjson params "$(jq -n --arg sizes "$SIZES" --argjson l "$LOCATIONS" --argjson s "$SEED" \
      --argjson c "$CACHE_MB" --argjson i "$INTERVAL" --argjson b "$BATCH" --argjson p "$PAIRS" \
+     --arg bs "$BLOCK_SIZES" --argjson bl "$BLOCK_LOCATIONS" \
      '{sizes: ($sizes | split(" ") | map(tonumber)), locations: $l, seed: $s, cache_mb: $c,
-       interval: $i, batch: $b, pairs: $p, max_error: 1.6, range: 1600}')" '
+       interval: $i, batch: $b, pairs: $p, max_error: 1.6, range: 1600,
+       block_sizes: ($bs | split(" ") | map(select(. != "") | tonumber)),
+       block_locations: $bl}')" '
   {date: $date, commit: $commit, loadavg_after: $loadavg, parameters: $params,
    machine: ([$fig[0], $latency, $sight] | map(select(. != null)) | first | .machine),
    fig: ($fig | map(del(.machine))), latency: ($latency | if . then del(.machine) else . end),
@@ -304,9 +350,10 @@ jq -n --argjson fig "$figs" --argjson contours "$contours" \
       {value: ., met: (map(.ratios[].ratio) | length > 0 and min > 1)})
   }' >"$OUT"
 plot "$OUT"
-jq -r '.fig[] | [.db.grid[0], .db.samples, .db.vertices, (.windows[] | .ratio.mean, .ratio.p99),
-      .points.descent_ops.mean, .points.descent_ops.p99, .points.descent_ops.max] | @tsv' "$OUT" |
-  (echo -e "size\tsamples\tvertices\tr25_mean\tr25_p99\tr4_mean\tr4_p99\tpt_mean\tpt_p99\tpt_max"; cat) |
+jq -r '.fig[] | [.db.grid[0], .builder, .db.samples, .db.vertices,
+      (.windows[] | .ratio.mean, .ratio.p99), .points.descent_ops.mean, .points.descent_ops.p99,
+      .points.descent_ops.max] | @tsv' "$OUT" |
+  (echo -e "size\tbuilder\tsamples\tvertices\tr25_mean\tr25_p99\tr4_mean\tr4_p99\tpt_mean\tpt_p99\tpt_max"; cat) |
   column -t >&2
 jq '.targets' "$OUT" >&2
 echo "wrote $OUT" >&2
