@@ -95,7 +95,8 @@ set output "${RES}/query_fig11.png"
 set title "Maheshwari Fig. 11: ops fetched by a point query, random points"
 set ylabel "ops"
 set logscale y
-set yrange [5:1000]
+set yrange [5:5000]
+set key top left
 plot "$g" u 1:10 w linespoints lw 2 pt 7 lc rgb "#2c7fb8" t "elevation descent: mean", \
      "" u 1:12 w lines dt 2 lc rgb "#2c7fb8" t "descent: p99", \
      "" u 1:13 w points pt 2 lc rgb "#2c7fb8" t "descent: max", \
