@@ -39,8 +39,11 @@ int locate_in_fragment(const OpView& op, const Vec2& p) {
     const Vec2 a = xy(op.position(t, 0)), b = xy(op.position(t, 1)), c = xy(op.position(t, 2));
     const double area = orient2d(a, b, c);
     if (!(area > 0.0)) continue;
-    // The smallest barycentric coordinate: >= 0 inside, slightly negative just outside.
-    const double score = std::min({orient2d(p, b, c), orient2d(a, p, c), orient2d(a, b, p)}) / area;
+    // The smallest barycentric coordinate: >= 0 inside, slightly negative just outside. Most
+    // triangles are far from p: the first coordinate well below 0 rules them out.
+    const double wa = orient2d(p, b, c);
+    if (wa < -1e-6 * area) continue;  // not even the nearest fallback (below) could use it
+    const double score = std::min({wa, orient2d(a, p, c), orient2d(a, b, p)}) / area;
     if (score > nearest_score) {
       nearest = static_cast<int>(i);
       nearest_score = score;
@@ -110,8 +113,9 @@ ElevationAnswer ElevationQuery::at(const Vec2& p, const Accuracy& accuracy) cons
   }
 }
 
-std::vector<ElevationAnswer> ElevationQuery::at_many(std::span<const Vec2> points,
-                                                     const Accuracy& accuracy) const {
+void ElevationQuery::at_many(
+    std::span<const Vec2> points, const Accuracy& accuracy,
+    const std::function<void(std::size_t, const ElevationAnswer&)>& take) const {
   for (const Vec2& p : points) check_inside(p);
   // Hilbert order on a 2^16 x 2^16 lattice over the domain.
   constexpr double kCells = 65535.0;
@@ -124,8 +128,13 @@ std::vector<ElevationAnswer> ElevationQuery::at_many(std::span<const Vec2> point
                 static_cast<std::uint32_t>(i)};
   }
   std::sort(order.begin(), order.end());
+  for (const auto& [key, i] : order) take(i, at(points[i], accuracy));
+}
+
+std::vector<ElevationAnswer> ElevationQuery::at_many(std::span<const Vec2> points,
+                                                     const Accuracy& accuracy) const {
   std::vector<ElevationAnswer> out(points.size());
-  for (const auto& [key, i] : order) out[i] = at(points[i], accuracy);
+  at_many(points, accuracy, [&](std::size_t i, const ElevationAnswer& a) { out[i] = a; });
   return out;
 }
 

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <vector>
 
@@ -43,6 +44,10 @@ class ElevationQuery {
   /// first point (in input order) outside the domain, before answering any.
   std::vector<ElevationAnswer> at_many(std::span<const Vec2> points,
                                        const Accuracy& accuracy) const;
+  /// The same, handing each answer with its index in `points` to `take` (in Hilbert order), so
+  /// a caller keeps only what it needs of each.
+  void at_many(std::span<const Vec2> points, const Accuracy& accuracy,
+               const std::function<void(std::size_t, const ElevationAnswer&)>& take) const;
   const Domain& domain() const { return domain_; }
   /// Throws at()'s error if p is outside the domain.
   void check_inside(const Vec2& p) const;
