@@ -16,6 +16,7 @@
 #include "smr/core/invariants.h"
 #include "smr/extract/extract.h"
 #include "smr/io/synthetic.h"
+#include "smr/rcf/spec.h"
 #include "tests/support/datasets.h"
 #include "tests/support/oracles.h"
 #include "tests/support/rcf_spread.h"
@@ -275,6 +276,32 @@ TEST_P(PerDataset, NoDataHolesAreExactAtTheFinestLevel) {
   const test::Dataset& d = data();
   if (!d.dem.has_nodata()) GTEST_SKIP() << "no holes";
   EXPECT_EQ(valid_samples_under_void(build().crmr, d.dem), 0u);
+}
+
+// A plateau (heights clipped at the median) is flat: its vertices go with zero error, so their
+// removals' ops have birth_res 1 like the finest mesh itself. A full refinement (level 1) must
+// still apply them all and give the finest mesh, triangle for triangle (issue 38.1).
+TEST(BlockTin, FullRefinementReachesTheFinestMeshThroughZeroErrorRemovals) {
+  Heightfield h = make_fbm(129, 129, 5, 500.0, 0, 0.5, 10.0);
+  std::vector<float> sorted = h.z;
+  std::nth_element(sorted.begin(), sorted.begin() + std::ptrdiff_t(sorted.size() / 2),
+                   sorted.end());
+  const float median = sorted[sorted.size() / 2];
+  for (float& z : h.z) z = std::min(z, median);
+  BlockTinOptions opt;  // lossless: every sample of the plateau edge stays
+  opt.block_cells = 16;
+  const Crmr m = build_block_tin(HeightfieldWindows(h), opt);
+  std::uint64_t zero = 0;
+  for (const Op& op : m.ops) zero += (op.id != kBaseOp && op.birth_res >= 1.0) ? 1 : 0;
+  EXPECT_GT(zero, 20u) << "the plateau should give removals of zero error";
+  RcfSpec all;
+  all.floor = 1.0;
+  const Extraction e = extract_minimal_surface(m, make_rcf(all, ModelKind::kTerrain, nullptr));
+  EXPECT_EQ(e.stats.x, m.ops.size());
+  std::vector<TriRef> full = e.triangles, finest = test::finest_mesh(m);
+  std::sort(full.begin(), full.end());
+  std::sort(finest.begin(), finest.end());
+  EXPECT_EQ(full, finest);
 }
 
 TEST(BlockTin, HolesThatCrossBlockBordersStayExact) {
