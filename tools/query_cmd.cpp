@@ -487,7 +487,8 @@ void QueryArgs::add_common(CLI::App& app) {
                  "(faster; the bound is in every answer)");
   app.add_option("-o,--output", out, "Write the answers here instead of stdout");
   app.add_option("--cache-mb", cache_mb, "Page cache budget in MiB")->check(CLI::PositiveNumber);
-  app.add_flag("--json", json, "Print a JSON report on stdout (with the answers when there is no -o)");
+  app.add_flag("--json", json,
+               "Print a JSON report on stdout (with the answers when there is no -o)");
   app.add_flag("-q,--quiet", quiet, "No summary on stderr");
 }
 
