@@ -9,16 +9,7 @@
 
 namespace smr::query {
 
-namespace {
-
-std::string where(const Vec2& p) {
-  std::ostringstream os;
-  os.precision(15);
-  os << '(' << p.x << ", " << p.y << ')';
-  return os.str();
-}
-
-}  // namespace
+namespace {}  // namespace
 
 double interpolate(const Triangle3& v, const Vec2& p) {
   const Vec2 a = xy(v[0]), b = xy(v[1]), c = xy(v[2]);
@@ -69,10 +60,7 @@ ElevationQuery::ElevationQuery(const OpSource& source)
     : source_(source), domain_(terrain_domain(source.info())) {}
 
 void ElevationQuery::check_inside(const Vec2& p) const {
-  if (!std::isfinite(p.x) || !std::isfinite(p.y) || !domain_.contains(p))
-    throw Error(ErrorKind::kInvalidInput, "point " + where(p) +
-                                              " is outside the database's domain " +
-                                              where(domain_.lo) + " .. " + where(domain_.hi));
+  domain_.require(p, "point");
 }
 
 OpRef ElevationQuery::fetch(std::size_t level, OpId id) const {
@@ -92,8 +80,8 @@ ElevationAnswer ElevationQuery::at(const Vec2& p, const Accuracy& accuracy) cons
     const int i = locate_in_fragment(*op, p);
     if (i < 0)
       throw Error(ErrorKind::kCorrupt, "op " + std::to_string(op->id.value) +
-                                           ": no triangle of its fragment contains " + where(p) +
-                                           ", though its predecessor's did");
+                                           ": no triangle of its fragment contains " +
+                                           point_text(p) + ", though its predecessor's did");
     const FragmentTriangle& t = op->fragment[static_cast<std::size_t>(i)];
     const double err = triangle_error(source_, t);
     // A void triangle stands for no data only where it is final: a coarse one may still be

@@ -67,13 +67,6 @@ std::array<Vec2, 4> rectangle(const Vec2& lo, const Vec2& hi) {
   return {lo, Vec2{hi.x, lo.y}, hi, Vec2{lo.x, hi.y}};
 }
 
-std::string point_text(const Vec2& p) {
-  std::ostringstream os;
-  os.precision(17);
-  os << p.x << ',' << p.y;
-  return os.str();
-}
-
 void check_accuracy(const Accuracy& accuracy) {
   if (accuracy.max_error && !(*accuracy.max_error >= 0.0))
     throw Error(ErrorKind::kInvalidInput, "max error: expected a number >= 0");
@@ -211,6 +204,20 @@ Extraction refine(const OpSource& source, std::shared_ptr<const Region> region, 
 
 double triangle_error(const OpSource& source, const FragmentTriangle& t) {
   return t.killer.valid() ? source.error_at(t.death_res) : source.info().err_final;
+}
+
+std::string point_text(const Vec2& p) {
+  std::ostringstream os;
+  os.precision(15);
+  os << '(' << p.x << ", " << p.y << ')';
+  return os.str();
+}
+
+void Domain::require(const Vec2& p, const std::string& what) const {
+  if (std::isfinite(p.x) && std::isfinite(p.y) && contains(p)) return;
+  throw Error(ErrorKind::kInvalidInput, what + " " + point_text(p) +
+                                            " is outside the database's domain " + point_text(lo) +
+                                            " .. " + point_text(hi));
 }
 
 Domain terrain_domain(const CrmrInfo& info) {

@@ -147,12 +147,18 @@ Extraction refine(const OpSource& source, std::shared_ptr<const Region> region, 
 /// final, error_at(death_res) otherwise.
 double triangle_error(const OpSource& source, const FragmentTriangle& t);
 
+/// "(x, y)" for messages (15 significant digits).
+std::string point_text(const Vec2& p);
+
 /// The domain of a terrain database: the source grid's extent in its own coordinates.
 struct Domain {
   Vec2 lo{0.0}, hi{0.0};
   bool contains(const Vec2& p) const {
     return p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y;
   }
+  /// Throws smr::Error (kInvalidInput) naming `what`, p and the domain unless p is finite and
+  /// inside.
+  void require(const Vec2& p, const std::string& what) const;
 };
 /// Throws smr::Error (kInvalidInput) naming the database kind when `info` is not a terrain.
 Domain terrain_domain(const CrmrInfo& info);

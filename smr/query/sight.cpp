@@ -102,20 +102,6 @@ std::vector<Piece> pieces_along(const OpSource& source, const Extraction& result
   return pieces;
 }
 
-std::string point_text(const Vec2& p) {
-  std::ostringstream os;
-  os.precision(15);
-  os << '(' << p.x << ", " << p.y << ')';
-  return os.str();
-}
-
-void require_inside(const Domain& d, const Vec2& p, const char* what) {
-  if (std::isfinite(p.x) && std::isfinite(p.y) && d.contains(p)) return;
-  throw Error(ErrorKind::kInvalidInput, std::string(what) + " " + point_text(p) +
-                                            " is outside the database's domain " +
-                                            point_text(d.lo) + " .. " + point_text(d.hi));
-}
-
 // Line of sight by descent through the DAG along pq. The segment's x-y path is cut into spans,
 // one per triangle, taken in order from p: a final triangle decides its span exactly (within
 // err_final); a coarse one whose band the segment enters, when its error is within the accuracy,
@@ -365,8 +351,8 @@ SightAnswer line_of_sight(const OpSource& source, const Vec3& p, const Vec3& q,
                           const Accuracy& accuracy) {
   const auto t0 = Clock::now();
   const Domain domain = terrain_domain(source.info());
-  require_inside(domain, xy(p), "point");
-  require_inside(domain, xy(q), "point");
+  domain.require(xy(p), "point");
+  domain.require(xy(q), "point");
   if (!std::isfinite(p.z) || !std::isfinite(q.z))
     throw Error(ErrorKind::kInvalidInput, "line of sight: heights must be finite numbers");
   SightAnswer a = SightDescent(source, p, q, accuracy).run();
@@ -382,7 +368,7 @@ ProfileResult profile(const OpSource& source, std::span<const Vec2> polyline,
     throw Error(ErrorKind::kInvalidInput, "profile: a polyline needs at least two points");
   std::vector<std::shared_ptr<const Region>> walls;
   for (std::size_t i = 0; i < polyline.size(); ++i) {
-    require_inside(domain, polyline[i], "polyline point");
+    domain.require(polyline[i], "polyline point");
     if (i > 0) walls.push_back(std::make_shared<PathRegion>(polyline[i - 1], polyline[i]));
   }
   const Extraction result = refine(source, std::make_shared<UnionRegion>(walls), accuracy);
