@@ -2,7 +2,6 @@
 #include "smr/query/elevation.h"
 
 #include <algorithm>
-#include <sstream>
 
 #include "base/error.h"
 #include "index/hilbert.h"
