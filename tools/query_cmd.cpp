@@ -343,7 +343,7 @@ nlohmann::json query_window(const IndexedSource& src, const QueryArgs& a) {
   for (const TriRef& r : e.triangles) {
     const OpRef op = src.op(r.op);
     const FragmentTriangle& t = op->fragment[r.index];
-    const Triangle3 v{op->position(t, 0), op->position(t, 1), op->position(t, 2)};
+    const Triangle3 v = corners(*op, t);
     if (t.is_void() || !region->triangle_meets(v, 0.0)) continue;
     meeting.push_back(r);
     worst = std::max(worst, query::triangle_error(src, t));

@@ -71,6 +71,10 @@ OpRef ElevationQuery::fetch(std::size_t level, OpId id) const {
 
 ElevationAnswer ElevationQuery::at(const Vec2& p, const Accuracy& accuracy) const {
   check_inside(p);
+  return descend(p, accuracy);
+}
+
+ElevationAnswer ElevationQuery::descend(const Vec2& p, const Accuracy& accuracy) const {
   ElevationAnswer ans;
   ans.p = p;
   OpRef op = fetch(0, kBaseOp);
@@ -85,15 +89,13 @@ ElevationAnswer ElevationQuery::at(const Vec2& p, const Accuracy& accuracy) cons
     const double err = triangle_error(source_, t);
     // A void triangle stands for no data only where it is final: a coarse one may still be
     // replaced by triangles with data (greedy_tin.cpp: a hole's boundary samples become vertices).
-    const bool fine =
-        !t.killer.valid() || (!t.is_void() && accuracy.max_error && err <= *accuracy.max_error);
+    const bool fine = !t.killer.valid() || (!t.is_void() && accuracy.allows(err));
     if (fine) {
       ans.triangle = TriRef{op->id, static_cast<std::uint32_t>(i)};
       ans.final = !t.killer.valid();
       ans.has_data = !t.is_void();
       ans.error_bound = err;
-      if (ans.has_data)
-        ans.z = interpolate({op->position(t, 0), op->position(t, 1), op->position(t, 2)}, p);
+      if (ans.has_data) ans.z = interpolate(corners(*op, t), p);
       return ans;
     }
     op = fetch(ans.ops_read, t.killer);
@@ -115,7 +117,7 @@ void ElevationQuery::at_many(
                 static_cast<std::uint32_t>(i)};
   }
   std::sort(order.begin(), order.end());
-  for (const auto& [key, i] : order) take(i, at(points[i], accuracy));
+  for (const auto& [key, i] : order) take(i, descend(points[i], accuracy));
 }
 
 std::vector<ElevationAnswer> ElevationQuery::at_many(std::span<const Vec2> points,

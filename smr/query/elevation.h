@@ -54,6 +54,7 @@ class ElevationQuery {
 
  private:
   OpRef fetch(std::size_t level, OpId id) const;
+  ElevationAnswer descend(const Vec2& p, const Accuracy& accuracy) const;  // p inside
 
   const OpSource& source_;
   Domain domain_;

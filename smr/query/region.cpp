@@ -141,20 +141,16 @@ std::string RegionCriterion::describe() const {
   return region_->describe() + " at " + accuracy_.describe();
 }
 
-bool RegionCriterion::fine_enough(double error) const {
-  return accuracy_.max_error && error <= *accuracy_.max_error;
-}
-
 bool RegionCriterion::triangle_satisfies(const Triangle3& v, double res,
                                          const CrmrInfo& info) const {
   const double e = error_at(info, res);
-  return fine_enough(e) || !region_->triangle_meets(v, e);
+  return accuracy_.allows(e) || !region_->triangle_meets(v, e);
 }
 
 bool RegionCriterion::region_satisfies(const Box3& box, double min_res,
                                        const CrmrInfo& info) const {
   const double e = error_at(info, min_res);  // the largest error of any triangle there
-  return fine_enough(e) || !region_->box_meets(box, e);
+  return accuracy_.allows(e) || !region_->box_meets(box, e);
 }
 
 Rcf region_rcf(std::shared_ptr<const Region> region, Accuracy accuracy) {
@@ -170,25 +166,21 @@ HeightRegionRcf::HeightRegionRcf(std::shared_ptr<const Region> region, Accuracy 
   check_accuracy(accuracy_);
 }
 
-bool HeightRegionRcf::fine_enough(double error) const {
-  return accuracy_.max_error && error <= *accuracy_.max_error;
-}
-
 bool HeightRegionRcf::is_finer(const OpView& op, const OpSource& source) const {
   bool all = true;
   for (const FragmentTriangle& t : op.fragment)
-    all = all && (!t.killer.valid() || fine_enough(source.error_at(t.death_res)));
+    all = all && (!t.killer.valid() || accuracy_.allows(source.error_at(t.death_res)));
   return all || !region_->box_meets(op.roi, 0.0);
 }
 
 bool HeightRegionRcf::is_completely_finer(const OpView& op, const OpSource& source) const {
   if (op.id == kBaseOp) return false;
-  return fine_enough(source.error_at(op.birth_res)) || !region_->box_meets(op.roi, 0.0);
+  return accuracy_.allows(source.error_at(op.birth_res)) || !region_->box_meets(op.roi, 0.0);
 }
 
 bool HeightRegionRcf::region_completely_finer(const Box3&, const Box3& roi, double min_birth_res,
                                               const CrmrInfo& info) const {
-  return fine_enough(error_at(info, min_birth_res)) || !region_->box_meets(roi, 0.0);
+  return accuracy_.allows(error_at(info, min_birth_res)) || !region_->box_meets(roi, 0.0);
 }
 
 Extraction refine(const OpSource& source, std::shared_ptr<const Region> region, Accuracy accuracy) {

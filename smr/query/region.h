@@ -42,6 +42,8 @@ struct Accuracy {
   std::optional<double> max_error;
   static Accuracy finest() { return {}; }
   static Accuracy within(double e) { return {e}; }
+  /// A triangle of this error is fine enough (never, at the finest accuracy: only final ones).
+  bool allows(double error) const { return max_error && error <= *max_error; }
   std::string describe() const;
 };
 
@@ -109,7 +111,6 @@ class RegionCriterion final : public SimilarityComponent {
   bool region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const override;
 
  private:
-  bool fine_enough(double error) const;
   std::shared_ptr<const Region> region_;
   Accuracy accuracy_;
 };
@@ -131,7 +132,6 @@ class HeightRegionRcf final : public RcfOracle {
                                const CrmrInfo& info) const override;
 
  private:
-  bool fine_enough(double error) const;
   std::shared_ptr<const Region> region_;
   Accuracy accuracy_;
 };

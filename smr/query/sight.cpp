@@ -92,7 +92,7 @@ std::vector<Piece> pieces_along(const OpSource& source, const Extraction& result
   for (const TriRef& r : result.triangles) {
     if (!op || op->id != r.op) op = source.op(r.op);
     const FragmentTriangle& t = op->fragment[r.index];
-    const Triangle3 v{op->position(t, 0), op->position(t, 1), op->position(t, 2)};
+    const Triangle3 v = corners(*op, t);
     const std::optional<Span> s = clip_to_footprint(a, b, v);
     if (!s) continue;
     pieces.push_back({s->t0, s->t1, v, triangle_error(source, t), t.is_void()});
@@ -155,7 +155,7 @@ void SightDescent::push_fragment(const OpRef& op, double t0, double t1) {
   const std::size_t first = stack_.size();
   for (std::uint32_t i = 0; i < op->fragment.size(); ++i) {
     const FragmentTriangle& t = op->fragment[i];
-    const Triangle3 v{op->position(t, 0), op->position(t, 1), op->position(t, 2)};
+    const Triangle3 v = corners(*op, t);
     const std::optional<Span> s = clip_to_footprint(xy(p_), xy(q_), v);
     if (!s || s->t1 < t0 || s->t0 > t1) continue;
     stack_.push_back({std::max(s->t0, t0), std::min(s->t1, t1), op, i});
@@ -172,7 +172,7 @@ SightDescent::Verdict SightDescent::judge(const Item& it, const Triangle3& v, do
 void SightDescent::settle(const Item& it) {
   ++tested_;
   const FragmentTriangle& t = it.op->fragment[it.tri];
-  const Triangle3 v{it.op->position(t, 0), it.op->position(t, 1), it.op->position(t, 2)};
+  const Triangle3 v = corners(*it.op, t);
   const double e = triangle_error(source_, t);
   if (!t.killer.valid()) {
     if (t.is_void()) {
@@ -187,7 +187,7 @@ void SightDescent::settle(const Item& it) {
   // When the accuracy allows this error and the segment enters the band without going under it,
   // the rest of the span is undecided; the stretch before the band is still to be proven clear.
   double t1 = it.t1;
-  if (!t.is_void() && accuracy_.max_error && e <= *accuracy_.max_error) {
+  if (!t.is_void() && accuracy_.allows(e)) {
     const Verdict j = judge(it, v, e);
     if (j.enter < kInf && j.below == kInf) {
       bands_.push_back({j.enter, e});

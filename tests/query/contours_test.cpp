@@ -104,7 +104,7 @@ std::vector<Cut> mesh_contours(const OpSource& src, std::span<const TriRef> tria
     const OpRef op = src.op(r.op);
     const FragmentTriangle& t = op->triangle(r.index);
     if (t.is_void()) continue;
-    const Triangle3 v{op->position(t, 0), op->position(t, 1), op->position(t, 2)};
+    const Triangle3 v = corners(*op, t);
     const Vec3 n = glm::cross(v[1] - v[0], v[2] - v[0]);
     const Vec2 gradient{-n.x / n.z, -n.y / n.z};
     for (const double h : levels) {

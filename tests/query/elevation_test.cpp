@@ -126,7 +126,7 @@ TEST_P(ElevationOnDem, BetweenSamplesItIsTheFinestTin) {
     for (const TriRef& r : finest) {
       const OpRef op = d.crmr.op(r.op);
       const FragmentTriangle& t = op->fragment[r.index];
-      const Triangle3 v{op->position(t, 0), op->position(t, 1), op->position(t, 2)};
+      const Triangle3 v = corners(*op, t);
       const Vec2 a2 = xy(v[0]), b2 = xy(v[1]), c2 = xy(v[2]);
       const double area = orient2d(a2, b2, c2);
       const double s =

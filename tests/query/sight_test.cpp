@@ -42,8 +42,7 @@ FinestTin finest_tin(const Crmr& m) {
   for (const TriRef& r : test::finest_mesh(m)) {
     const OpRef op = m.op(r.op);
     const FragmentTriangle& t = op->fragment[r.index];
-    (t.is_void() ? tin.no_data : tin.data)
-        .push_back({op->position(t, 0), op->position(t, 1), op->position(t, 2)});
+    (t.is_void() ? tin.no_data : tin.data).push_back(corners(*op, t));
   }
   return tin;
 }
