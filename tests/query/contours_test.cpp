@@ -20,11 +20,10 @@
 #include "base/error.h"
 #include "smr/builders/mesh/qem_pm.h"
 #include "smr/builders/terrain/greedy_tin.h"
-#include "smr/db/database.h"
-#include "smr/db/writer.h"
 #include "smr/io/gdal_raster.h"
 #include "smr/query/geojson.h"
 #include "smr/query/indexed_source.h"
+#include "tests/query/written_database.h"
 #include "tests/support/datasets.h"
 #include "tests/support/files.h"
 #include "tests/support/oracles.h"
@@ -544,11 +543,8 @@ TEST(ContoursGeoJson, TheCrsMemberIsGdals) {
 // and still join: vertices shared by id across pages decode to the same position.
 TEST(Contours, ADatabaseAnswersAsTheCrmr) {
   const test::Dataset& d = dataset("elev");
-  test::TempDir dir;
-  Crmr copy = d.crmr;
-  write_database(copy, dir.file("elev.smrdb"), {});
-  const auto db = Database::open(dir.file("elev.smrdb"), {std::size_t{1} << 20});
-  const IndexedSource src(*db);
+  const test::WrittenDatabase written(d.crmr);
+  const IndexedSource& src = written.source();
   ContourOptions o;
   o.interval = 25.0;
   o.base = 0.5;  // no sample (integer data) on a level: the quantum cannot move one across

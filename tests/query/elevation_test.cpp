@@ -8,12 +8,10 @@
 
 #include "base/error.h"
 #include "smr/builders/terrain/greedy_tin.h"
-#include "smr/db/database.h"
-#include "smr/db/writer.h"
 #include "smr/query/elevation.h"
 #include "smr/query/indexed_source.h"
+#include "tests/query/written_database.h"
 #include "tests/support/datasets.h"
-#include "tests/support/files.h"
 #include "tests/support/oracles.h"
 
 namespace smr::query {
@@ -184,12 +182,8 @@ TEST(Elevation, ACoarserAccuracyStopsEarlier) {
 // up to the database's z quantum).
 TEST(Elevation, ADatabaseAnswersAsTheCrmr) {
   const test::Dataset& d = dataset("elev");
-  test::TempDir dir;
-  const std::string path = dir.file("elev.smrdb");
-  Crmr copy = d.crmr;
-  write_database(copy, path, {});
-  const auto db = Database::open(path, {std::size_t{1} << 20});
-  const IndexedSource src(*db);
+  const test::WrittenDatabase written(d.crmr);
+  const IndexedSource& src = written.source();
   const ElevationQuery disk(src), memory(d.crmr);
   for (int row = 0; row < d.dem.height; row += 3) {
     for (int col = 0; col < d.dem.width; col += 2) {

@@ -10,12 +10,10 @@
 #include <set>
 
 #include "smr/core/invariants.h"
-#include "smr/db/database.h"
-#include "smr/db/writer.h"
 #include "smr/query/indexed_source.h"
 #include "smr/query/region.h"
+#include "tests/query/written_database.h"
 #include "tests/support/datasets.h"
-#include "tests/support/files.h"
 #include "tests/support/oracles.h"
 
 namespace smr::query {
@@ -140,12 +138,8 @@ INSTANTIATE_TEST_SUITE_P(Dems, WindowOnDem, ::testing::ValuesIn(test::dataset_na
 // database holds.
 TEST(Window, ADatabaseAnswersAsTheCrmr) {
   const test::Dataset& d = dataset("jacksboro");
-  test::TempDir dir;
-  const std::string path = dir.file("j.smrdb");
-  Crmr copy = d.crmr;
-  write_database(copy, path, {});
-  const auto db = Database::open(path, {std::size_t{4} << 20});
-  const IndexedSource src(*db);
+  const test::WrittenDatabase written(d.crmr, std::size_t{4} << 20);
+  const IndexedSource& src = written.source();
   for (const GridWindow& w : windows_of(d.dem, 5, 5)) {
     const auto region = window_region(d.crmr.info(), w);
     Extraction a = refine(src, region, Accuracy::finest());
@@ -153,7 +147,7 @@ TEST(Window, ADatabaseAnswersAsTheCrmr) {
     std::sort(a.triangles.begin(), a.triangles.end());
     std::sort(b.triangles.begin(), b.triangles.end());
     EXPECT_EQ(a.triangles, b.triangles);
-    EXPECT_LT(a.stats.x, db->op_count());
+    EXPECT_LT(a.stats.x, written.database().op_count());
   }
 }
 
