@@ -206,7 +206,6 @@ struct ElevationRun {
   bool json;
   Output& out;
   nlohmann::json answers = nlohmann::json::array();
-  std::vector<std::pair<std::size_t, nlohmann::json>> answers_by_index;
   std::vector<Vec2> pending;
   std::uint64_t count = 0, nodata = 0, ops = 0;
   double worst_error = 0.0;
@@ -222,25 +221,23 @@ struct ElevationRun {
   }
   void flush() {
     // Each answer keeps what the output needs (not the whole ElevationAnswer: a chunk of a
-    // million stays ~25 MB), then the lines go out in input order, 64 Ki at a time.
+    // million stays ~25 MB), then the lines go out in input order, about 4 MB at a time.
     struct Kept {
       double z, error;
       bool has_data;
     };
     std::vector<Kept> kept(pending.size());
+    std::vector<nlohmann::json> slots(json ? pending.size() : 0);
     q.at_many(pending, acc, [&](std::size_t i, const query::ElevationAnswer& a) {
       ++count;
       ops += a.ops_read;
       nodata += a.has_data ? 0 : 1;
       worst_error = std::max(worst_error, a.error_bound);
-      if (json) answers_by_index.emplace_back(i, answer_json(a));
+      if (json) slots[i] = answer_json(a);
       kept[i] = {a.z, a.error_bound, a.has_data};
     });
     if (json) {
-      std::sort(answers_by_index.begin(), answers_by_index.end(),
-                [](const auto& x, const auto& y) { return x.first < y.first; });
-      for (auto& [i, j] : answers_by_index) answers.push_back(std::move(j));
-      answers_by_index.clear();
+      for (nlohmann::json& j : slots) answers.push_back(std::move(j));
     } else {
       std::string text;
       for (std::size_t i = 0; i < pending.size(); ++i) {
