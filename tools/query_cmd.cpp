@@ -300,8 +300,7 @@ nlohmann::json query_elevation(const IndexedSource& src, const QueryArgs& a) {
   Output out(a.out);
   // The answers go to -o (or stdout); with --json and no -o, into the report.
   const bool inline_json = a.json && a.out.empty();
-  ElevationRun run{q,  accuracy_of(a), inline_json, out, nlohmann::json::array(), {}, {}, 0, 0, 0,
-                   0.0};
+  ElevationRun run{q, accuracy_of(a), inline_json, out, nlohmann::json::array(), {}, 0, 0, 0, 0.0};
   if (!inline_json) out.write("x,y,z,error\n");
   for (std::size_t i = 0; i < a.args.size(); ++i)
     run.add(parse_point(a.args[i], "point " + std::to_string(i + 1)),
