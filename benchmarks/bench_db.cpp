@@ -516,12 +516,9 @@ json mode_codecs(const CodecArgs& a) {
       page_bytes += pages[i].size();
       const smr::storage::ByteView payload =
           smr::storage::unseal(pages[i], "pages", std::to_string(i));
-      smr::storage::ByteReader r(payload, "pages/" + std::to_string(i));
-      r.u8();
-      r.u8();
-      r.varint();
-      record_bytes += r.blob().size();
-      const smr::storage::ByteView geo = r.blob();
+      const smr::PageSections parts = smr::page_sections(payload, "pages/" + std::to_string(i));
+      record_bytes += parts.records.size();
+      const smr::storage::ByteView geo = parts.geometry;
       geo_bytes += geo.size();
       payloads.push_back(payload);
       geos.push_back(geo);

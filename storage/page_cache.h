@@ -10,7 +10,9 @@
 #include <list>
 #include <memory>
 #include <mutex>
+#include <span>
 #include <unordered_map>
+#include <vector>
 
 namespace smr::storage {
 
@@ -73,6 +75,16 @@ class PageCache {
   bool contains(std::uint64_t key) const {
     std::lock_guard lock(mutex_);
     return index_.count(key) != 0;
+  }
+
+  // The keys that are not cached, in the given order (one lock for all; no statistics change).
+  std::vector<std::uint64_t> missing(std::span<const std::uint64_t> keys) const {
+    std::vector<std::uint64_t> out;
+    std::lock_guard lock(mutex_);
+    for (std::uint64_t k : keys) {
+      if (index_.count(k) == 0) out.push_back(k);
+    }
+    return out;
   }
 
   CacheStats stats() const {

@@ -163,6 +163,7 @@ void to_json(json& j, const FrameStats& s) {
 
 void to_json(json& j, const DatabaseStats& s) {
   j = {{"pages_read", s.pages_read},
+       {"pages_prefetched", s.pages_prefetched},
        {"page_bytes_read", s.page_bytes_read},
        {"rtree_nodes_read", s.rtree_nodes_read},
        {"rtree_bytes_read", s.rtree_bytes_read},

@@ -10,9 +10,11 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <string>
 #include <utility>
 #include <vector>
 
+#include "base/error.h"
 #include "smr/core/ids.h"  // mix64
 
 namespace smr {
@@ -86,6 +88,14 @@ class FlatMap {
     --size_;
     return true;
   }
+  /// Starts loading the slot where `id` would be (a lookup soon after then rarely waits on memory:
+  /// callers looking up many scattered ids issue this a few ids ahead).
+  void prefetch(const K& id) const {
+    if (keys_.empty()) return;
+    const std::size_t i = slot(id);
+    __builtin_prefetch(&keys_[i]);
+    __builtin_prefetch(&values_[i]);
+  }
   /// Room for n entries without growing (one rehash at most).
   void reserve(std::size_t n) {
     std::size_t capacity = std::max<std::size_t>(16, keys_.size());
@@ -131,5 +141,38 @@ class FlatMap {
 
 template <class V>
 using IdMap = FlatMap<std::uint64_t, V, IdKeys>;
+
+/// Small values for the ids below `n` (op ids of a source), V{} until set: a plain array while it
+/// takes at most kDenseBytes, else an IdMap, whose memory follows the ids set rather than n (a
+/// view of a huge database sets few). The array is what a whole-database traversal wants: no
+/// hashing, one byte per op.
+template <class V>
+class IdTable {
+ public:
+  static constexpr std::uint64_t kDenseBytes = std::uint64_t{8} << 20;
+  explicit IdTable(std::uint64_t n) : dense_(n * sizeof(V) <= kDenseBytes) {
+    if (dense_) array_.assign(std::size_t(n), V{});
+  }
+  /// The value of `id` (< n), to set.
+  V& operator[](std::uint64_t id) {
+    if (!dense_) return map_[id];
+    if (id >= array_.size())
+      throw_internal("IdTable: id " + std::to_string(id) + " beyond the table");
+    return array_[std::size_t(id)];
+  }
+  /// True when it is an array over every id: a scan over ids then costs n, not a sort.
+  bool dense() const { return dense_; }
+  std::uint64_t size() const { return array_.size(); }  // n when dense
+  V get(std::uint64_t id) const {
+    if (dense_) return id < array_.size() ? array_[std::size_t(id)] : V{};
+    const V* v = map_.find(id);
+    return v != nullptr ? *v : V{};
+  }
+
+ private:
+  bool dense_;
+  std::vector<V> array_;
+  IdMap<V> map_;
+};
 
 }  // namespace smr

@@ -1,6 +1,10 @@
 #include "smr/core/op_source.h"
 
 #include <algorithm>
+#include <string>
+#include <utility>
+
+#include "base/error.h"
 
 namespace smr {
 
@@ -14,6 +18,40 @@ double resolution_of(const CrmrInfo& info, double error) {
   const double span = info.err0 - info.err_final;
   if (span <= 0.0) return 1.0;
   return std::clamp(1.0 - (error - info.err_final) / span, 0.0, 1.0);
+}
+
+const OpView& batch_op(const OpBatch& batch, std::uint32_t index, OpId id) {
+  if (index >= batch.ops.size() || batch.ops[index].id != id) {
+    throw Error(ErrorKind::kCorrupt, "op " + std::to_string(id.value) +
+                                         " is not where its locator says (index " +
+                                         std::to_string(index) + " of a page of " +
+                                         std::to_string(batch.ops.size()) + " ops)");
+  }
+  return batch.ops[index];
+}
+
+const OpView& OpReader::read(const PlacedOp& p) {
+  if (p.at.index == OpPlace::kNoIndex) {
+    ref_ = source_->op(p.id);
+    return *ref_;
+  }
+  if (batch_.keep == nullptr || place_ != p.at.place) {
+    batch_ = source_->batch(p.at.place);
+    place_ = p.at.place;
+  }
+  return batch_op(batch_, p.at.index, p.id);
+}
+
+PlaceLookahead::PlaceLookahead(const OpSource& source, std::vector<std::uint64_t> places)
+    : source_(source), places_(std::move(places)) {
+  reached(0);
+}
+
+void PlaceLookahead::reached(std::size_t i) {
+  if (i + kAhead - kStep < hinted_ || hinted_ >= places_.size()) return;
+  const std::size_t from = std::max(i + 1, hinted_), to = std::min(places_.size(), i + 1 + kAhead);
+  if (from < to) source_.prefetch(std::span(places_).subspan(from, to - from));
+  hinted_ = to;
 }
 
 FragmentTriangle OpSource::triangle(TriRef t) const {

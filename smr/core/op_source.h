@@ -10,7 +10,9 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
+#include <vector>
 
 #include "smr/core/geometry.h"
 #include "smr/core/heightfield.h"
@@ -37,6 +39,67 @@ struct CrmrInfo {
 /// decoded page, while a handle on it exists, even if the page cache evicts the page.
 using OpRef = std::shared_ptr<const OpView>;
 
+/// Where an op is stored: its place (OpSource::locality) and its index among the ops of that place
+/// as OpSource::batch returns them; kNoIndex for sources that do not read ops in batches.
+struct OpPlace {
+  static constexpr std::uint32_t kNoIndex = ~std::uint32_t{0};
+  std::uint64_t place = 0;
+  std::uint32_t index = kNoIndex;
+};
+
+/// The ops stored at one place, read together (smr/db: one decoded page): `ops` stay valid while
+/// `keep` is held. Reading a place's ops this way costs one lookup, not one per op.
+struct OpBatch {
+  std::shared_ptr<const void> keep;
+  std::span<const OpView> ops;
+};
+
+/// Op `index` of `batch`, which must be op `id` (as place_of said); throws smr::Error (kCorrupt)
+/// otherwise.
+const OpView& batch_op(const OpBatch& batch, std::uint32_t index, OpId id);
+
+class OpSource;
+
+/// An op with where it is stored; sorting orders ops for reading (place, then index).
+struct PlacedOp {
+  OpPlace at;
+  OpId id;
+  friend bool operator<(const PlacedOp& a, const PlacedOp& b) {
+    if (a.at.place != b.at.place) return a.at.place < b.at.place;
+    if (a.at.index != b.at.index) return a.at.index < b.at.index;
+    return a.id < b.id;
+  }
+};
+
+/// Reads ops one after another through their places, holding the last place's batch: ops read in
+/// place order cost one lookup per place. A returned view stays valid until the reader reads an
+/// op of another place (or is reset); the previous one is still held while the next is fetched.
+class OpReader {
+ public:
+  explicit OpReader(const OpSource& source) : source_(&source) {}
+  const OpView& read(const PlacedOp& p);
+
+ private:
+  const OpSource* source_;
+  OpBatch batch_;
+  std::uint64_t place_ = 0;
+  OpRef ref_;  // an op of a source without batches
+};
+
+/// Keeps a source's prefetch (OpSource::prefetch) a few places ahead of a reader going through
+/// `places` in order: reached(i) says the reader is at places[i].
+class PlaceLookahead {
+ public:
+  static constexpr std::size_t kAhead = 16, kStep = 8;
+  PlaceLookahead(const OpSource& source, std::vector<std::uint64_t> places);
+  void reached(std::size_t i);
+
+ private:
+  const OpSource& source_;
+  std::vector<std::uint64_t> places_;
+  std::size_t hinted_ = 0;  // places_[0, hinted_) were hinted
+};
+
 /// Read access to a CRMR, in memory (Crmr) or paged from disk (smr/db's Database).
 class OpSource {
  public:
@@ -52,6 +115,13 @@ class OpSource {
   /// The memory an OpRef into place `locality` holds beyond the source's own (smr/db: the
   /// decoded page, which a handle keeps alive); 0 for in-memory sources.
   virtual std::uint64_t locality_bytes(std::uint64_t /*locality*/) const { return 0; }
+  /// The op's place and index (reads no op); index OpPlace::kNoIndex: read it with op().
+  virtual OpPlace place_of(OpId id) const { return {locality(id), OpPlace::kNoIndex}; }
+  /// Every op of a place that place_of gave an index in; throws smr::Error like op().
+  virtual OpBatch batch(std::uint64_t /*place*/) const { return {}; }
+  /// A hint: these places (in the order given) are read soon. smr/db decodes them on a thread of
+  /// its own meanwhile; replaces the previous hint. Never needed for correctness.
+  virtual void prefetch(std::span<const std::uint64_t> /*places*/) const {}
 
   /// Triangle `t`; throws smr::Error if it does not exist.
   FragmentTriangle triangle(TriRef t) const;

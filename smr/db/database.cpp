@@ -2,11 +2,15 @@
 // pages and R-tree nodes on demand through one page cache.
 #include "smr/db/database.h"
 
+#include <algorithm>
 #include <array>
+#include <condition_variable>
 #include <exception>
 #include <optional>
+#include <stop_token>
 #include <string>
 #include <string_view>
+#include <thread>
 
 #include <malloc.h>
 
@@ -135,8 +139,98 @@ Database::Memo& Database::memo(std::uint64_t kind) {
   return memos[kind - 1];
 }
 
+// Decodes hinted pages into the cache on a thread of its own, the latest hint first come first
+// served; a page already cached is skipped. Errors are left for the reader to meet.
+class Database::Prefetcher {
+ public:
+  explicit Prefetcher(const Database& db)
+      : db_(db), thread_([this](const std::stop_token& stop) { run(stop); }) {}
+  ~Prefetcher() {
+    thread_.request_stop();
+    wake_.notify_all();
+  }
+  void want(std::vector<std::uint64_t> pages) {
+    {
+      std::lock_guard lock(mutex_);
+      queue_ = std::move(pages);
+      next_ = queue_.size() > 1 ? 1 : 0;  // the first one is the reader's next: it decodes it
+    }
+    wake_.notify_one();
+  }
+  // A reader is about to read `page` through the cache: returns once the page is not being
+  // decoded here (the reader then finds it cached), and keeps this thread off it until done().
+  void reading(std::uint64_t page) {
+    std::unique_lock lock(mutex_);
+    done_.wait(lock, [&] { return !busy_ || current_ != page; });
+    readers_.push_back(page);
+  }
+  void done(std::uint64_t page) {
+    std::lock_guard lock(mutex_);
+    readers_.erase(std::find(readers_.begin(), readers_.end(), page));
+  }
+
+ private:
+  void run(const std::stop_token& stop) {
+    while (true) {
+      {
+        std::unique_lock lock(mutex_);
+        if (!wake_.wait(lock, stop, [&] { return next_ < queue_.size(); })) return;
+        current_ = queue_[next_++];
+        if (std::find(readers_.begin(), readers_.end(), current_) != readers_.end()) continue;
+        busy_ = true;
+      }
+      try {
+        db_.decode_ahead(current_);
+      } catch (...) {  // NOLINT(bugprone-empty-catch): the reader meets the same error
+      }
+      {
+        std::lock_guard lock(mutex_);
+        busy_ = false;
+      }
+      done_.notify_all();
+    }
+  }
+  const Database& db_;
+  std::mutex mutex_;
+  std::condition_variable_any wake_;
+  std::condition_variable done_;
+  std::vector<std::uint64_t> queue_;
+  std::size_t next_ = 0;
+  std::uint64_t current_ = 0;
+  bool busy_ = false;
+  std::vector<std::uint64_t> readers_;  // pages readers are reading themselves
+  std::jthread thread_;                 // last: started once the rest exists, stopped first
+};
+
+void Database::prefetch(std::span<const std::uint64_t> pages) const {
+  if (prefetcher_ == nullptr || pages.empty()) return;
+  // At most a quarter of the cache ahead, or the pages prefetched first would be evicted by the
+  // later ones before they are read. Pages are sized by those decoded so far (256 KiB before).
+  const std::uint64_t decoded = pages_read_.load(std::memory_order_relaxed);
+  const std::uint64_t page_bytes =
+      decoded == 0 ? std::uint64_t{256} << 10 : cache_->stats().bytes_decoded / decoded + 1;
+  const std::size_t most = std::min<std::uint64_t>(pages.size(), cache_->budget() / 4 / page_bytes);
+  std::vector<std::uint64_t> keys;
+  keys.reserve(most);
+  for (std::uint64_t p : pages.first(most)) {
+    if (p < page_count_) keys.push_back((std::uint64_t{1} << 60) | p);
+  }
+  std::vector<std::uint64_t> missing = cache_->missing(keys);
+  if (missing.empty()) return;
+  for (std::uint64_t& k : missing) k &= (std::uint64_t{1} << 60) - 1;
+  prefetcher_->want(std::move(missing));
+}
+
+void Database::decode_ahead(std::uint64_t page) const {
+  if (cache_->contains((std::uint64_t{1} << 60) | page)) return;
+  fetch(1, Table::kPages, page);
+  pages_prefetched_.fetch_add(1, std::memory_order_relaxed);
+}
+
 std::unique_ptr<Database> Database::open(const std::string& path, const Options& options) {
   std::unique_ptr<Database> db(new Database());
+  if (options.prefetch && std::thread::hardware_concurrency() > 1)
+    db->prefetcher_ = std::make_unique<Prefetcher>(*db);
   db->env_ = open_env(path);
   db->cache_ = std::make_unique<storage::PageCache<CacheItem>>(options.cache_bytes);
   db->instance_.store(next_instance.fetch_add(1));
@@ -169,6 +263,7 @@ std::unique_ptr<Database> Database::open(const std::string& path, const Options&
 }
 
 Database::~Database() {
+  prefetcher_.reset();  // before the memos are forgotten and the cache goes
   for (std::uint64_t kind : {1, 2})
     memo(kind).forget(instance_.load());  // this thread's (others'
                                           // lapse: never matched)
@@ -190,19 +285,38 @@ void Database::maybe_release() const {
   }
 }
 
+std::shared_ptr<const Database::CacheItem> Database::fetch(std::uint64_t kind, Table table,
+                                                           std::uint64_t id) const {
+  return cache_->get((kind << 60) | id,
+                     [&]() { return naming_file(path(), [&] { return load(table, id); }); });
+}
+
 std::shared_ptr<const Database::CacheItem> Database::cached(std::uint64_t kind, Table table,
                                                             std::uint64_t id) const {
+  if (kind != 1 && kind != 2) return fetch(kind, table, id);
+  memoized(kind, table, id);
+  return memo(kind).slot(id).item;
+}
+
+const Database::CacheItem& Database::memoized(std::uint64_t kind, Table table,
+                                              std::uint64_t id) const {
   const std::uint64_t key = (kind << 60) | id;
-  const auto get = [&] {
-    return cache_->get(key, [&]() { return naming_file(path(), [&] { return load(table, id); }); });
-  };
-  if (kind != 1 && kind != 2) return get();
   Memo::Slot& m = memo(kind).slot(id);
   const std::uint64_t instance = instance_.load(std::memory_order_relaxed);
-  if (m.instance == instance && m.key == key) return m.item;
-  auto item = get();
-  m = Memo::Slot{instance, key, item};
-  return item;
+  if (m.instance != instance || m.key != key) {
+    if (kind == 1 && prefetcher_ != nullptr) {
+      prefetcher_->reading(id);
+      struct Done {
+        Prefetcher& p;
+        std::uint64_t page;
+        ~Done() { p.done(page); }
+      } done{*prefetcher_, id};
+      m = Memo::Slot{instance, key, fetch(kind, table, id)};
+    } else {
+      m = Memo::Slot{instance, key, fetch(kind, table, id)};
+    }
+  }
+  return *m.item;
 }
 
 storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table,
@@ -255,8 +369,8 @@ Database::Locator Database::locate(OpId id) const {
   if (id.value >= op_count_)
     throw_input(path() + ": op " + std::to_string(id.value) + " does not exist (the database has " +
                 std::to_string(op_count_) + " ops)");
-  const auto item = cached(2, Table::kOpLocators, id.value / kOpsPerLocatorBlock);
-  const auto& locs = std::get<std::vector<Locator>>(*item);
+  const auto& locs = std::get<std::vector<Locator>>(
+      memoized(2, Table::kOpLocators, id.value / kOpsPerLocatorBlock));
   const std::uint64_t i = id.value % kOpsPerLocatorBlock;
   if (i >= locs.size() || locs[i].page >= page_count_)
     throw Error(ErrorKind::kCorrupt, path() + ": " + std::string(table_name(Table::kOpLocators)) +
@@ -272,6 +386,12 @@ std::shared_ptr<const DecodedPage> Database::page(std::uint64_t page) const {
 
 std::uint64_t Database::locality_bytes(std::uint64_t p) const {
   return page(p)->memory_bytes();
+}
+
+OpBatch Database::batch(std::uint64_t page_id) const {
+  std::shared_ptr<const DecodedPage> p = page(page_id);
+  const std::span<const OpView> ops = p->ops();
+  return {std::move(p), ops};
 }
 
 OpRef Database::op(OpId id) const {
@@ -292,6 +412,7 @@ DatabaseStats Database::stats() const {
   DatabaseStats s;
   s.cache = cache_->stats();
   s.pages_read = pages_read_.load();
+  s.pages_prefetched = pages_prefetched_.load();
   s.page_bytes_read = page_bytes_read_.load();
   s.rtree_nodes_read = nodes_read_.load();
   s.rtree_bytes_read = rtree_bytes_read_.load();

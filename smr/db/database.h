@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <utility>
 #include <variant>
@@ -24,8 +25,9 @@ namespace smr {
 
 struct DatabaseStats {
   storage::CacheStats cache;
-  std::uint64_t pages_read = 0;       // data pages fetched from LMDB
-  std::uint64_t page_bytes_read = 0;  // their bytes
+  std::uint64_t pages_read = 0;        // data pages fetched from LMDB
+  std::uint64_t pages_prefetched = 0;  // of which decoded ahead on the prefetch thread
+  std::uint64_t page_bytes_read = 0;   // their bytes
   std::uint64_t rtree_nodes_read = 0;
   std::uint64_t rtree_bytes_read = 0;    // bytes of R-tree nodes fetched
   std::uint64_t locator_bytes_read = 0;  // bytes of op-locator blocks fetched
@@ -40,6 +42,8 @@ class Database final : public OpSource {
  public:
   struct Options {
     std::size_t cache_bytes = std::size_t{64} << 20;
+    /// Decode hinted pages (prefetch) on a second thread, when the machine has more than one.
+    bool prefetch = true;
   };
   /// Opens a database read-only. A missing file, a file that is not a complete smrdb database (no
   /// meta record: an interrupted ingest), or an unknown format throws smr::Error naming the path.
@@ -51,6 +55,12 @@ class Database final : public OpSource {
   OpRef op(OpId id) const override;
   std::uint64_t locality(OpId id) const override { return locate(id).page; }
   std::uint64_t locality_bytes(std::uint64_t page) const override;
+  OpPlace place_of(OpId id) const override {
+    const Locator l = locate(id);
+    return {l.page, l.slot};
+  }
+  OpBatch batch(std::uint64_t page) const override;
+  void prefetch(std::span<const std::uint64_t> pages) const override;
   /// The entries of the R-tree that `visitor` accepts, grouped by leaf (= data page); reads the
   /// nodes the query enters (through the cache) and no page. Errors name the file.
   std::vector<index::Hit> rtree_query(index::Visitor& visitor) const;
@@ -80,12 +90,19 @@ class Database final : public OpSource {
   using CacheItem =
       std::variant<std::shared_ptr<const DecodedPage>, std::vector<Locator>, storage::Bytes>;
   std::shared_ptr<const CacheItem> cached(std::uint64_t kind, Table table, std::uint64_t id) const;
+  std::shared_ptr<const CacheItem> fetch(std::uint64_t kind, Table table, std::uint64_t id) const;
+  // The same item, held by this thread's memo until its next lookup of that kind (no reference
+  // count touched): for reads that finish before the next lookup.
+  const CacheItem& memoized(std::uint64_t kind, Table table, std::uint64_t id) const;
   struct Memo;
   static Memo& memo(std::uint64_t kind);
   // Reads and decodes one value (the cache's loader).
   storage::PageCache<CacheItem>::Loaded load(Table table, std::uint64_t id) const;
   Locator locate(OpId id) const;
   void maybe_release() const;
+
+  class Prefetcher;
+  void decode_ahead(std::uint64_t page) const;  // the prefetcher's work: into the cache
 
   std::unique_ptr<storage::Env> env_;
   std::unique_ptr<storage::PageCache<CacheItem>> cache_;
@@ -96,10 +113,12 @@ class Database final : public OpSource {
   std::string meta_json_;
   mutable std::atomic<std::uint64_t> pages_read_{0}, page_bytes_read_{0}, nodes_read_{0};
   mutable std::atomic<std::uint64_t> rtree_bytes_read_{0}, locator_bytes_read_{0};
+  mutable std::atomic<std::uint64_t> pages_prefetched_{0};
   mutable std::atomic<std::uint64_t> released_at_{0};
   // Names this database (and its cache's contents) in each thread's memo of the last page and
   // locator block it read (cached()): a new number after clear_cache().
   mutable std::atomic<std::uint64_t> instance_{0};
+  std::unique_ptr<Prefetcher> prefetcher_;  // last: stopped before anything it reads
 };
 
 }  // namespace smr

@@ -217,6 +217,20 @@ Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid, storage
   return out;
 }
 
+PageSections page_sections(ByteView page, const std::string& context) {
+  ByteReader r(page, context);
+  PageSections s;
+  s.format = r.u8();
+  if (s.format != kPageFormat) return s;  // the rest is another format's
+  s.codec = r.u8();
+  s.ops = r.varint();
+  for (std::uint64_t& n : s.totals) n = r.varint();
+  s.records = r.blob();
+  s.geometry = r.blob();
+  r.expect_end();
+  return s;
+}
+
 // Decodes a page into one block (page.h). Every count is checked against the page's totals and
 // every index against what it indexes before it is used: bytes that encode_page did not write
 // throw kCorrupt naming the page.
@@ -225,18 +239,19 @@ class PageDecoder {
   PageDecoder(ByteView page, const QuantGrid& grid, const CrmrInfo& info,
               const std::string& context)
       : grid_(grid), info_(info), context_(context) {
-    ByteReader pr(page, context);
-    if (const std::uint8_t f = pr.u8(); f != kPageFormat)
-      pr.fail("page format " + std::to_string(f) + " (this smrdb reads format " +
-              std::to_string(kPageFormat) + ")");
-    const std::uint8_t codec_byte = pr.u8();
-    if (codec_byte > static_cast<std::uint8_t>(storage::CodecId::kDraco)) pr.fail("unknown codec");
-    codec_ = static_cast<storage::CodecId>(codec_byte);
-    op_count_ = pr.varint();
-    for (std::uint64_t* n : totals_.fields()) *n = pr.varint();
-    packed_ = pr.blob();
-    geo_bytes_ = pr.blob();
-    pr.expect_end();
+    const PageSections s = page_sections(page, context);
+    if (s.format != kPageFormat)
+      ByteReader(page, context)
+          .fail("page format " + std::to_string(s.format) + " (this smrdb reads format " +
+                std::to_string(kPageFormat) + ")");
+    if (s.codec > static_cast<std::uint8_t>(storage::CodecId::kDraco))
+      ByteReader(page, context).fail("unknown codec");
+    codec_ = static_cast<storage::CodecId>(s.codec);
+    op_count_ = s.ops;
+    const auto fields = totals_.fields();
+    for (std::size_t i = 0; i < fields.size(); ++i) *fields[i] = s.totals[i];
+    packed_ = s.records;
+    geo_bytes_ = s.geometry;
   }
 
   std::shared_ptr<const DecodedPage> run() {

@@ -19,6 +19,7 @@
 // OpView over them, and fragment and PreF corners index the page's vertex table directly.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <memory>
 #include <span>
@@ -66,6 +67,16 @@ storage::Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid
 /// crashes.
 std::shared_ptr<const DecodedPage> decode_page(storage::ByteView page, const QuantGrid& grid,
                                                const CrmrInfo& info, const std::string& context);
+
+/// A page's parts as stored (the layout above), before anything is decompressed or checked
+/// beyond the framing: for tools that measure pages. Throws kCorrupt naming `context`.
+struct PageSections {
+  std::uint8_t format = 0, codec = 0;
+  std::uint64_t ops = 0;
+  std::array<std::uint64_t, 7> totals{};  // in the stored order
+  storage::ByteView records, geometry;    // zstd records, codec geometry
+};
+PageSections page_sections(storage::ByteView page, const std::string& context);
 
 /// One Hypermesh link of op `id` as pages store it (the stream writer's spool too): its triangle
 /// and edge, the coarser triangle's op as a difference from `id`, its index and edge.

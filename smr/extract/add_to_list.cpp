@@ -12,22 +12,26 @@ namespace smr {
 namespace {
 
 // Per op of the traversal: IsFiner / IsCompletely finer, each evaluated at most once per
-// extraction, and membership of X. One flat map (smr/core/id_map.h): on a whole-database output
-// X is every op.
+// extraction, and membership of X. One byte per op (IdTable: an array for all but huge sources);
+// on a whole-database output X is every op.
 class OpFlags {
  public:
-  OpFlags(const OpSource& s, const RcfOracle& r) : source_(s), rcf_(r) {}
+  OpFlags(const OpSource& s, const RcfOracle& r) : source_(s), rcf_(r), flags_(s.op_count()) {}
   bool finer(const OpView& op) { return get(op, 0); }
   bool completely_finer(const OpView& op) { return get(op, 1); }
-  bool in_x(OpId id) const {
-    const std::uint8_t* e = flags_.find(id.value);
-    return e != nullptr && (*e & kInX) != 0;
-  }
-  bool add_to_x(OpId id) {  // false if already in X
-    std::uint8_t& e = flags_[id.value];
-    if (e & kInX) return false;
-    e |= kInX;
-    return true;
+  bool in_x(OpId id) const { return (flags_.get(id.value) & kInX) != 0; }
+  void add_to_x(OpId id) { flags_[id.value] |= kInX; }
+  /// X in decreasing id order, `x` being its members in any order.
+  void sort_descending(std::vector<OpId>& x) const {
+    const std::uint64_t n = flags_.size();
+    if (!flags_.dense() || x.size() * 16 < n) {  // a sort, or a scan of every op when cheaper
+      std::sort(x.begin(), x.end(), std::greater<>());
+      return;
+    }
+    x.clear();
+    for (std::uint64_t id = n; id-- > 0;) {
+      if (flags_.get(id) & kInX) x.push_back(OpId{id});
+    }
   }
 
  private:
@@ -45,7 +49,7 @@ class OpFlags {
   }
   const OpSource& source_;
   const RcfOracle& rcf_;
-  IdMap<std::uint8_t> flags_;
+  IdTable<std::uint8_t> flags_;
 };
 
 std::vector<OpId> traverse(const OpSource& source, const RcfOracle& rcf, bool with_ancestors) {
@@ -54,13 +58,14 @@ std::vector<OpId> traverse(const OpSource& source, const RcfOracle& rcf, bool wi
   // the ops' boxes) is completely finer and is not fetched; only candidates are read and tested
   // exactly. Without it, the test reads every child of every non-finer op of X: finer ops, in
   // pages the output does not use (4x the needed pages on a 268 M-sample terrain).
-  IdMap<std::uint8_t> candidates;
-  const auto* indexed = dynamic_cast<const RcfIndexedSource*>(&source);
-  if (indexed != nullptr) {
-    for (OpId id : indexed->maybe_not_completely_finer(rcf)) candidates.insert(id.value);
+  const bool indexed = dynamic_cast<const RcfIndexedSource*>(&source) != nullptr;
+  IdTable<std::uint8_t> candidates(indexed ? source.op_count() : 0);
+  const auto* indexed_source = dynamic_cast<const RcfIndexedSource*>(&source);
+  if (indexed_source != nullptr) {
+    for (OpId id : indexed_source->maybe_not_completely_finer(rcf)) candidates[id.value] = 1;
   }
   const auto ruled_out = [&](OpId c) {  // completely finer by the index alone
-    return indexed != nullptr && !candidates.contains(c.value);
+    return indexed_source != nullptr && candidates.get(c.value) == 0;
   };
   // X is a closure, the same whatever order ops are visited in; they are visited page by page
   // (OpSource::locality), sweeping upwards through the pages and wrapping around, and a child is
@@ -69,7 +74,8 @@ std::vector<OpId> traverse(const OpSource& source, const RcfOracle& rcf, bool wi
   // fetched 18 000 pages of 3 515 for a whole-database output under a 64 MiB cache.
   struct Pending {
     OpId id;
-    bool test;  // reached as a child: joins X only if not completely finer
+    std::uint32_t index;  // in its place's batch (OpPlace)
+    bool test;            // reached as a child: joins X only if not completely finer
   };
   // Ops waiting, by locality: a bucket per place (found by hash), and the places with a non-empty
   // bucket in order (for the sweep), which change far less often than ops are pushed.
@@ -78,30 +84,36 @@ std::vector<OpId> traverse(const OpSource& source, const RcfOracle& rcf, bool wi
   std::set<std::uint64_t> waiting;  // localities whose bucket is not empty
   const auto push = [&](OpId id, bool test) {
     if (flags.in_x(id)) return;
-    const std::uint64_t place = source.locality(id);
-    std::uint32_t& b = bucket_of[place];
+    const OpPlace at = source.place_of(id);
+    std::uint32_t& b = bucket_of[at.place];
     if (b == 0) {
       buckets.emplace_back();
       b = static_cast<std::uint32_t>(buckets.size());
     }
-    if (buckets[b - 1].empty()) waiting.insert(place);
-    buckets[b - 1].push_back({id, test});
+    if (buckets[b - 1].empty()) waiting.insert(at.place);
+    buckets[b - 1].push_back({id, at.index, test});
   };
   std::vector<OpId> x;
+  OpReader reader(source);  // the place's ops, read once for its bucket
   push(kBaseOp, false);
   std::uint64_t cursor = 0;
+  constexpr std::size_t kAhead = PlaceLookahead::kAhead;
+  std::vector<std::uint64_t> ahead;
   while (!waiting.empty()) {
     auto next = waiting.lower_bound(cursor);
     if (next == waiting.end()) next = waiting.begin();
     const std::uint64_t here = *next;
     const std::uint32_t b = *bucket_of.find(here) - 1;
+    ahead.clear();  // the places the sweep visits next, for the source to read meanwhile
+    for (auto it = std::next(next); it != waiting.end() && ahead.size() < kAhead; ++it)
+      ahead.push_back(*it);
+    source.prefetch(ahead);
     // Ops pushed into this bucket while it is processed join it (buckets may grow: re-indexed).
     while (!buckets[b].empty()) {
       const Pending p = buckets[b].back();
       buckets[b].pop_back();
       if (flags.in_x(p.id)) continue;
-      const OpRef op_ref = source.op(p.id);
-      const OpView& op = *op_ref;
+      const OpView& op = reader.read({{here, p.index}, p.id});
       if (p.test && flags.completely_finer(op)) continue;
       flags.add_to_x(p.id);
       x.push_back(p.id);
@@ -117,7 +129,7 @@ std::vector<OpId> traverse(const OpSource& source, const RcfOracle& rcf, bool wi
     waiting.erase(here);
     cursor = here + 1;
   }
-  std::sort(x.begin(), x.end(), std::greater<>());
+  flags.sort_descending(x);
   return x;
 }
 

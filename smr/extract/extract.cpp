@@ -40,10 +40,45 @@ Extraction expand_minimal(const OpSource& source, std::span<const OpId> x,
   return e;
 }
 
+namespace {
+
+// Sorts ops into reading order (PlacedOp's <). Database places are page numbers, fewer than the
+// ops of a big X: then a counting pass by place, and a sort within each place.
+void sort_by_place(std::vector<PlacedOp>& ops) {
+  std::uint64_t top = 0;
+  for (const PlacedOp& p : ops) top = std::max(top, p.at.place);
+  if (ops.size() < 1024 || top >= ops.size()) {
+    std::sort(ops.begin(), ops.end());
+    return;
+  }
+  std::vector<std::size_t> start(std::size_t(top) + 2, 0);
+  for (const PlacedOp& p : ops) ++start[std::size_t(p.at.place) + 1];
+  for (std::size_t i = 1; i < start.size(); ++i) start[i] += start[i - 1];
+  std::vector<PlacedOp> sorted(ops.size());
+  std::vector<std::size_t> next(start.begin(), start.end() - 1);
+  for (const PlacedOp& p : ops) sorted[next[std::size_t(p.at.place)]++] = p;
+  for (std::size_t i = 0; i + 1 < start.size(); ++i)
+    std::sort(sorted.begin() + std::ptrdiff_t(start[i]),
+              sorted.begin() + std::ptrdiff_t(start[i + 1]));
+  ops.swap(sorted);
+}
+
+// The places of `items` (each with `at`, grouped by place), each once, in order.
+template <class Items>
+std::vector<std::uint64_t> distinct_places(const Items& items) {
+  std::vector<std::uint64_t> places;
+  for (const auto& item : items) {
+    if (places.empty() || places.back() != item.at.place) places.push_back(item.at.place);
+  }
+  return places;
+}
+
+}  // namespace
+
 Extraction extract_set_formula(const OpSource& source, std::span<const OpId> x) {
   const std::uint64_t n = source.op_count();
-  std::vector<std::uint64_t> in_x((n + 63) / 64, 0);              // a bit per op
-  std::vector<std::pair<std::uint64_t, std::uint64_t>> by_place;  // (locality, id)
+  std::vector<std::uint64_t> in_x((n + 63) / 64, 0);  // a bit per op
+  std::vector<PlacedOp> by_place;
   by_place.reserve(x.size());
   for (OpId id : x) {
     if (id.value >= n) throw_input("op " + std::to_string(id.value) + " does not exist");
@@ -51,26 +86,35 @@ Extraction extract_set_formula(const OpSource& source, std::span<const OpId> x) 
     const std::uint64_t bit = std::uint64_t{1} << (id.value % 64);
     if (word & bit) continue;
     word |= bit;
-    by_place.push_back({source.locality(id), id.value});
+    by_place.push_back({source.place_of(id), id});
   }
-  std::sort(by_place.begin(), by_place.end());
+  sort_by_place(by_place);
   const auto member = [&](OpId id) {
     return id.valid() && id.value < n && (in_x[id.value / 64] >> (id.value % 64) & 1) != 0;
   };
   Extraction e;
-  for (const auto& [place, id] : by_place) {
-    const OpRef op = source.op(OpId{id});
-    const auto count = static_cast<std::uint32_t>(op->fragment.size());
+  OpReader reader(source);
+  PlaceLookahead lookahead(source, distinct_places(by_place));
+  std::size_t place_index = 0;
+  for (std::size_t k = 0; k < by_place.size(); ++k) {
+    const PlacedOp& p = by_place[k];
+    if (k > 0 && p.at.place != by_place[k - 1].at.place) lookahead.reached(++place_index);
+    const OpView& op = reader.read(p);
+    const auto count = static_cast<std::uint32_t>(op.fragment.size());
     for (std::uint32_t i = 0; i < count; ++i) {
-      const FragmentTriangle& t = op->fragment[i];
+      const FragmentTriangle& t = op.fragment[i];
       if (member(t.killer)) continue;
-      e.triangles.push_back({op->id, i});
+      e.triangles.push_back({op.id, i});
       e.stats.void_triangles += t.is_void() ? 1 : 0;
     }
   }
-  e.x.reserve(by_place.size());
-  for (const auto& entry : by_place) e.x.push_back(OpId{entry.second});
-  std::sort(e.x.begin(), e.x.end(), std::greater<>());
+  if (std::is_sorted(x.begin(), x.end(), std::greater_equal<>())) {  // decreasing, no repeats
+    e.x.assign(x.begin(), x.end());
+  } else {
+    e.x.reserve(by_place.size());
+    for (const PlacedOp& p : by_place) e.x.push_back(p.id);
+    std::sort(e.x.begin(), e.x.end(), std::greater<>());
+  }
   e.stats.x = e.stats.x_plus = e.stats.ops_visited = e.x.size();
   e.stats.triangles = e.triangles.size();
   return e;
@@ -120,22 +164,26 @@ TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles, 
   // expansion.cpp). The vertices are numbered in the given order afterwards, so the mesh does not
   // depend on where its ops are stored.
   const std::size_t n = triangles.size();
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> order;  // (locality, triangle)
+  struct Placed {
+    OpPlace at;
+    std::uint32_t triangle;
+  };
+  std::vector<Placed> order;
   order.reserve(n);
   for (std::size_t i = 0; i < n; ++i) {
-    const std::uint64_t place = i > 0 && triangles[i].op == triangles[i - 1].op
-                                    ? order.back().first
-                                    : source.locality(triangles[i].op);
-    order.push_back({place, static_cast<std::uint32_t>(i)});
+    const OpPlace at = i > 0 && triangles[i].op == triangles[i - 1].op
+                           ? order.back().at
+                           : source.place_of(triangles[i].op);
+    order.push_back({at, static_cast<std::uint32_t>(i)});
   }
-  const auto by_place = [](const auto& a, const auto& b) { return a.first < b.first; };
+  const auto by_place = [](const Placed& a, const Placed& b) { return a.at.place < b.at.place; };
   if (!std::is_sorted(order.begin(), order.end(), by_place))
     std::stable_sort(order.begin(), order.end(), by_place);
   // First pass, page by page: every distinct vertex gets a slot (its id and position, in order of
   // first use here), and each corner its slot. Corners index their op's vertex pool (a page's
   // vertex table, or an in-memory op's own list), so a vertex id is looked up once per pool, not
-  // once per corner. The pool stays alive while op_ref holds its op, so a pool met again at the
-  // same address is the same pool.
+  // once per corner. The pool stays alive while the reader holds its op, so a pool met again at
+  // the same address is the same pool.
   constexpr std::uint32_t kDropped = ~std::uint32_t{0};
   std::vector<std::array<std::uint32_t, 3>> corners(n);  // slots; kDropped: a void triangle
   std::vector<float> values(n);
@@ -146,12 +194,47 @@ TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles, 
   const std::size_t vertices = n / 2 + 4 * static_cast<std::size_t>(std::sqrt(double(n))) + 16;
   slot_of.reserve(vertices);
   positions.reserve(vertices);
+  // A pool's corners first hold pool indices; when the run of triangles on one pool ends, the
+  // vertices it met are looked up together, a few ahead prefetched (the map is far larger than
+  // the caches: a lookup one after another waits on memory each time), and the corners become
+  // slots.
   const Vertex* pool = nullptr;
-  std::vector<std::uint32_t> pool_slot;  // pool index -> 1 + slot, 0 if not met yet
-  OpRef op_ref;
-  for (const auto& [place, i] : order) {
-    if (op_ref == nullptr || op_ref->id != triangles[i].op) op_ref = source.op(triangles[i].op);
-    const OpView& op = *op_ref;
+  std::vector<std::uint32_t> pool_slot;  // pool index -> 1 + slot; 0 not met; kDropped pending
+  std::vector<std::uint32_t> fresh;      // pool indices met first in the current run
+  std::size_t run_begin = 0;             // the current run is order[run_begin, j)
+  const auto end_run = [&](std::size_t run_end) {
+    constexpr std::size_t kAhead = 8;
+    for (std::size_t f = 0; f < fresh.size(); ++f) {
+      if (f + kAhead < fresh.size()) slot_of.prefetch(pool[fresh[f + kAhead]].id.value);
+      const Vertex& v = pool[fresh[f]];
+      std::uint32_t& slot = slot_of[v.id.value];
+      if (slot == 0) {
+        positions.push_back(v.p);  // the same position wherever a vertex appears
+        slot = static_cast<std::uint32_t>(positions.size());
+      }
+      pool_slot[fresh[f]] = slot;
+    }
+    fresh.clear();
+    for (std::size_t r = run_begin; r < run_end; ++r) {
+      auto& c = corners[order[r].triangle];
+      if (c[0] == kDropped) continue;
+      for (std::uint32_t& k : c) k = pool_slot[k] - 1;
+    }
+    run_begin = run_end;
+  };
+  OpReader reader(source);
+  const OpView* current = nullptr;
+  PlaceLookahead lookahead(source, distinct_places(order));
+  std::size_t place_index = 0;
+  for (std::size_t j = 0; j < n; ++j) {
+    const auto& [at, i] = order[j];
+    if (j > 0 && at.place != order[j - 1].at.place) lookahead.reached(++place_index);
+    if (current == nullptr || current->id != triangles[i].op) {
+      // Reading another place may let the pool go: its run ends first.
+      if (at.index == OpPlace::kNoIndex || (j > 0 && at.place != order[j - 1].at.place)) end_run(j);
+      current = &reader.read({at, triangles[i].op});
+    }
+    const OpView& op = *current;
     if (op.vertices.data() != pool) {
       pool = op.vertices.data();
       pool_slot.assign(op.vertices.size(), 0);
@@ -164,20 +247,16 @@ TriangleMesh to_mesh(const OpSource& source, std::span<const TriRef> triangles, 
     for (int k = 0; k < 3; ++k) {
       std::uint32_t& known = pool_slot[t.v[k]];
       if (known == 0) {
-        const Vertex& v = op.vertices[t.v[k]];
-        std::uint32_t& slot = slot_of[v.id.value];
-        if (slot == 0) {
-          positions.push_back(v.p);  // the same position wherever a vertex appears
-          slot = static_cast<std::uint32_t>(positions.size());
-        }
-        known = slot;
+        known = kDropped;
+        fresh.push_back(t.v[k]);
       }
-      corners[i][k] = known - 1;
+      corners[i][k] = t.v[k];
     }
     values[i] = static_cast<float>(t.death_res);
   }
-  op_ref.reset();
-  std::vector<std::pair<std::uint64_t, std::uint32_t>>().swap(order);
+  end_run(n);
+  reader = OpReader(source);
+  std::vector<Placed>().swap(order);
   slot_of = IdMap<std::uint32_t>();  // freed before the mesh grows
   // Second pass, in the given order: slots -> mesh indices by first use.
   TriangleMesh mesh;

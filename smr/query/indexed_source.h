@@ -29,6 +29,9 @@ class IndexedSource final : public OpSource, public RcfIndexedSource {
   std::uint64_t locality_bytes(std::uint64_t page) const override {
     return db_.locality_bytes(page);
   }
+  OpPlace place_of(OpId id) const override { return db_.place_of(id); }
+  OpBatch batch(std::uint64_t page) const override { return db_.batch(page); }
+  void prefetch(std::span<const std::uint64_t> pages) const override { db_.prefetch(pages); }
 
   /// Reduced extraction's X from the R-tree: every op not completely finer than `rcf`. Reads
   /// the R-tree nodes the query enters and the data pages of the entries it accepts.

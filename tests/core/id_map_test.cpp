@@ -47,5 +47,27 @@ TEST(IdMap, AgreesWithUnorderedMap) {
   }
 }
 
+TEST(IdTable, ArrayAndMapAgreeWithAReferenceMap) {
+  // Small n: an array; huge n: a hashed map. Both read 0 until set and keep what is set.
+  std::mt19937_64 rng(7);
+  for (const std::uint64_t n : {std::uint64_t{5000}, std::uint64_t{1} << 40}) {
+    IdTable<std::uint8_t> t(n);
+    EXPECT_EQ(t.dense(), n == 5000);
+    std::unordered_map<std::uint64_t, std::uint8_t> truth;
+    for (int step = 0; step < 20000; ++step) {
+      const std::uint64_t id = rng() % std::min<std::uint64_t>(n, 9000);
+      const auto v = static_cast<std::uint8_t>(rng());
+      t[id] |= v;
+      truth[id] |= v;
+      const std::uint64_t probe = rng() % std::min<std::uint64_t>(n, 9000);
+      const auto it = truth.find(probe);
+      ASSERT_EQ(t.get(probe), it == truth.end() ? 0 : it->second) << probe;
+    }
+    EXPECT_EQ(t.get(n + 1), 0);  // beyond the ids: unset, not a crash
+  }
+  IdTable<std::uint8_t> small(10);
+  EXPECT_THROW(small[10], Error);  // setting beyond the array is a bug, caught
+}
+
 }  // namespace
 }  // namespace smr

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <thread>
 #include <unordered_map>
 
 #include "base/error.h"
@@ -124,6 +125,55 @@ TEST_P(PerDataset, ExtractionFromDiskEqualsExtractionInMemory) {
   EXPECT_LE(st.cache.peak_held_bytes, budget);
   EXPECT_GT(st.cache.evictions, 0u);
   EXPECT_GT(st.pages_read, w.pages);  // pages were evicted and faulted in again
+}
+
+TEST(Database, PrefetchingChangesNothingAndDecodesEachPageOnce) {
+  // Prefetching (a second thread decoding the pages a traversal says come next) may only make
+  // reads earlier: the same X, triangles and mesh, each page decoded once when the cache holds
+  // them all, and no more page reads than without it when the cache is small.
+  const test::Dataset& d = test::dataset(test::dataset_names().front());
+  TempDir dir;
+  const std::string path = dir.file("model.smrdb");
+  Crmr m = d.crmr;  // write_database quantizes it
+  const WriteReport w = write_database(m, path, {});
+  RcfSpec whole;
+  whole.floor = 1.0;
+  const Rcf rcf = make_rcf(whole, ModelKind::kTerrain, &d.dem);
+  struct Run {
+    Extraction e;
+    TriangleMesh mesh;
+    DatabaseStats stats;
+  };
+  const auto run = [&](bool prefetch, std::size_t cache_bytes, bool fronts) {
+    const auto db = Database::open(path, {cache_bytes, prefetch});
+    const IndexedSource source(*db);
+    ExpansionOptions o;
+    o.fronts = fronts;
+    Run r{extract_minimal_surface(source, rcf, o), {}, {}};
+    r.mesh = to_mesh(source, r.e.triangles);
+    r.stats = db->stats();
+    return r;
+  };
+  const std::size_t all = std::size_t{1} << 30;
+  for (const bool fronts : {false, true}) {
+    SCOPED_TRACE(fronts ? "advancing front" : "set formula");
+    const Run off = run(false, all, fronts), on = run(true, all, fronts);
+    EXPECT_EQ(on.e.x, off.e.x);
+    EXPECT_EQ(on.e.triangles, off.e.triangles);
+    EXPECT_EQ(on.mesh.positions, off.mesh.positions);
+    EXPECT_EQ(on.mesh.triangles, off.mesh.triangles);
+    EXPECT_EQ(off.stats.pages_prefetched, 0u);
+    EXPECT_EQ(off.stats.pages_read, w.pages);
+    EXPECT_EQ(on.stats.pages_read, w.pages);  // nothing decoded twice
+    if (std::thread::hardware_concurrency() > 1) {
+      EXPECT_GT(on.stats.pages_prefetched, 0u);
+    }
+    // A cache of an eighth of the pages: the lookahead stays within it.
+    const std::size_t small = off.stats.cache.bytes_decoded / 8;
+    const Run small_off = run(false, small, fronts), small_on = run(true, small, fronts);
+    EXPECT_EQ(small_on.e.triangles, off.e.triangles);
+    EXPECT_LE(small_on.stats.pages_read, small_off.stats.pages_read + w.pages / 10);
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Dems, PerDataset, ::testing::ValuesIn(test::dataset_names()),
