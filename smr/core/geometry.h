@@ -119,7 +119,7 @@ double point_segment_distance2d(const Vec2& p, const Vec2& a, const Vec2& b);
 inline double point_rect_distance2d(const Vec2& p, const Vec2& lo, const Vec2& hi) {
   const double dx = std::max({lo.x - p.x, 0.0, p.x - hi.x});
   const double dy = std::max({lo.y - p.y, 0.0, p.y - hi.y});
-  return std::hypot(dx, dy);
+  return std::sqrt(dx * dx + dy * dy);  // coordinates: far from overflow, no need of hypot
 }
 
 /// Bounding sphere of points: centred at the centre of their bounding box (so it is contained

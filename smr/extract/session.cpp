@@ -156,7 +156,7 @@ class Session::Refiner {
     // completely finer and is not read (reading them all decodes pages the mesh never uses).
     if (const auto* indexed = dynamic_cast<const RcfIndexedSource*>(&s_.source_)) {
       indexed_ = true;
-      for (OpId id : indexed->maybe_not_completely_finer(rcf_)) candidates_.insert(id.value);
+      for (OpId id : indexed->maybe_not_completely_finer(rcf_)) marks_.set(id.value, kCandidate);
     }
   }
 
@@ -168,7 +168,7 @@ class Session::Refiner {
       const Candidate top = queue_.top();
       // The walk over ops already in X takes time too: the period bounds it (Brown 6.3).
       if (pops % 64 == 63 && stop(0)) return stopped(top.res);
-      if (reached_.contains(top.id) || rejected_.contains(top.id)) {
+      if (marks_.any(top.id, kReached | kRejected)) {
         queue_.pop();
         continue;
       }
@@ -179,12 +179,12 @@ class Session::Refiner {
       const OpRef op = s_.source_.op(OpId{top.id});
       ++stats_.ops_tested;
       if (rcf_.is_completely_finer(*op, s_.source_)) {
-        rejected_.insert(top.id);
+        marks_.set(top.id, kRejected);
         queue_.pop();
         continue;
       }
       std::vector<OpRef> group{op};  // the op and its ancestors not reached yet
-      seen_.insert(top.id);
+      marks_.set(top.id, kSeen);
       collect_ancestors(*op, group);
       std::int64_t delta = 0;
       for (const OpRef& a : group) {
@@ -207,7 +207,7 @@ class Session::Refiner {
   void remove_unreached() {
     std::vector<OpId> extra;
     s_.x_.for_each([&](std::uint64_t id, const XEntry&) {
-      if (!reached_.contains(id)) extra.push_back(OpId{id});
+      if (!marks_.any(id, kReached)) extra.push_back(OpId{id});
     });
     std::sort(extra.begin(), extra.end(), std::greater<>());
     for (OpId id : extra) s_.remove_op(*s_.source_.op(id), changes_);
@@ -216,19 +216,19 @@ class Session::Refiner {
 
  private:
   void reach(const OpView& op) {
-    reached_.insert(op.id.value);
+    marks_.set(op.id.value, kReached);
     ++stats_.ops_tested;
     if (rcf_.is_finer(op, s_.source_)) return;
     for (const FragmentTriangle& t : op.fragment) {
-      if (!t.killer.valid() || reached_.contains(t.killer.value)) continue;
-      if (indexed_ && !candidates_.contains(t.killer.value)) continue;  // completely finer
-      if (queued_.insert(t.killer.value))
+      if (!t.killer.valid() || marks_.any(t.killer.value, kReached)) continue;
+      if (indexed_ && !marks_.any(t.killer.value, kCandidate)) continue;  // completely finer
+      if (marks_.set(t.killer.value, kQueued))
         queue_.push({key(t.killer, t.death_res), t.killer.value, true});
     }
   }
   void collect_ancestors(const OpView& op, std::vector<OpRef>& group) {
     for (OpId p : op.parents) {
-      if (reached_.contains(p.value) || !seen_.insert(p.value)) continue;
+      if (marks_.any(p.value, kReached) || !marks_.set(p.value, kSeen)) continue;
       group.push_back(s_.source_.op(p));
       collect_ancestors(*group.back(), group);
     }
@@ -246,8 +246,7 @@ class Session::Refiner {
     while (!queue_.empty()) {
       const std::uint64_t id = queue_.top().id;
       queue_.pop();
-      if (!reached_.contains(id) && !rejected_.contains(id) && !s_.x_.contains(id))
-        waiting.insert(id);
+      if (!marks_.any(id, kReached | kRejected) && !s_.x_.contains(id)) waiting.insert(id);
     }
     stats_.pending_refinings = waiting.size();
     stats_.complete = false;
@@ -259,9 +258,25 @@ class Session::Refiner {
   Changes& changes_;
   FrameStats& stats_;
   std::priority_queue<Candidate, std::vector<Candidate>, LowestFirst> queue_;
-  IdMap<std::uint8_t> queued_, rejected_, seen_, reached_;
+  // Per op, what the traversal knows of it (one byte per op: IdTable).
+  static constexpr std::uint8_t kQueued = 1, kRejected = 2, kSeen = 4, kReached = 8,
+                                kCandidate = 16;
+  class Marks {
+   public:
+    explicit Marks(std::uint64_t n) : table_(n) {}
+    bool any(std::uint64_t id, std::uint8_t bits) const { return (table_.get(id) & bits) != 0; }
+    bool set(std::uint64_t id, std::uint8_t bit) {  // false if it was set already
+      std::uint8_t& m = table_[id];
+      const bool fresh = (m & bit) == 0;
+      m |= bit;
+      return fresh;
+    }
+
+   private:
+    IdTable<std::uint8_t> table_;
+  };
+  Marks marks_{s_.source_.op_count()};
   bool by_page_, indexed_ = false;
-  IdMap<std::uint8_t> candidates_;
   std::uint64_t round_ = 0, cursor_ = 0;
 };
 

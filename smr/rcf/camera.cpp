@@ -126,8 +126,8 @@ double max_sin_vertical(const Vec3& eye, const Box3& b) {
   if (dz <= 0.0) return 1.0;
   const double hx = std::max(std::abs(b.lo.x - eye.x), std::abs(b.hi.x - eye.x));
   const double hy = std::max(std::abs(b.lo.y - eye.y), std::abs(b.hi.y - eye.y));
-  const double h = std::hypot(hx, hy);
-  return h / std::hypot(h, dz);
+  const double h2 = hx * hx + hy * hy;  // coordinates: far from overflow, no need of hypot
+  return std::sqrt(h2 / (h2 + dz * dz));
 }
 
 }  // namespace smr

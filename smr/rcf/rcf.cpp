@@ -118,7 +118,7 @@ double ScreenSpaceCriterion::pixel_error_bound(double error, const Box3& region)
   const double dist = distance_to_box(cam_.eye, region);
   if (dist <= 0.0) return std::numeric_limits<double>::infinity();
   const double s = vertical_ ? max_sin_vertical(cam_.eye, region) : 1.0;
-  return error * s * cam_.focal_px() / dist;
+  return error * s * focal_px_ / dist;
 }
 
 double ScreenSpaceCriterion::tolerance_at(const Vec2& pixel) const {

@@ -153,7 +153,11 @@ class ScreenSpaceCriterion final : public SimilarityComponent {
  public:
   ScreenSpaceCriterion(Camera cam, double pixel_error, std::optional<ScreenAoi> aoi,
                        bool vertical_error)
-      : cam_(std::move(cam)), tau_(pixel_error), aoi_(aoi), vertical_(vertical_error) {}
+      : cam_(std::move(cam)),
+        focal_px_(cam_.focal_px()),
+        tau_(pixel_error),
+        aoi_(aoi),
+        vertical_(vertical_error) {}
   std::string describe() const override;
   bool triangle_satisfies(const Triangle3& v, double res, const CrmrInfo& info) const override;
   bool region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const override;
@@ -165,6 +169,7 @@ class ScreenSpaceCriterion final : public SimilarityComponent {
 
  private:
   Camera cam_;
+  double focal_px_;  // cam_.focal_px(), once (a tangent per test otherwise)
   double tau_;
   std::optional<ScreenAoi> aoi_;
   bool vertical_;
