@@ -184,14 +184,14 @@ void SelectiveRefinement::activate(std::uint32_t node) {
   std::push_heap(pending_.begin(), pending_.end(), std::greater<>());
 }
 
-bool SelectiveRefinement::selected(std::uint32_t v, const RcfOracle& rcf) const {
+bool SelectiveRefinement::selected_if(std::uint32_t v, const Select& select) const {
   if (node_of_[v] == kNone) return false;
   const std::uint32_t s = index_->nodes()[node_of_[v]].split;
   if (s == kNone) return false;
-  return !rcf.is_completely_finer(*read(index_->splits()[s].op), source_);
+  return select(node_of_[v], *read(index_->splits()[s].op));
 }
 
-void SelectiveRefinement::refine(const RcfOracle& rcf) {
+void SelectiveRefinement::refine_if(const Select& select) {
   const auto t0 = Clock::now();
   while (!pending_.empty()) {
     std::pop_heap(pending_.begin(), pending_.end(), std::greater<>());
@@ -200,11 +200,39 @@ void SelectiveRefinement::refine(const RcfOracle& rcf) {
     const SelectiveIndex::Split& sp = index_->splits()[s];
     if (node_of_[sp.vs] != sp.node) continue;  // split already (a degenerate case forced it)
     ++stats_.evaluated;
-    if (rcf.is_completely_finer(*read(sp.op), source_)) continue;
+    if (!select(sp.node, *read(sp.op))) continue;
     ++stats_.selected;
     split(sp.vs);
   }
   stats_.seconds += seconds_since(t0);
+}
+
+SelectiveRefinement::Select SelectiveRefinement::select_by(const NodeCriterion& c) const {
+  return [this, &c](std::uint32_t node, const OpView& op) {
+    const SelectiveIndex::Node& n = index_->nodes()[node];
+    const Sphere sphere{pos_[n.vertex], double(n.radius)};
+    if (c.frustum && sphere_outside(c.camera, sphere)) return false;
+    if (c.backface && backfacing(c.camera, sphere, n.cone)) return false;
+    const double d = std::max(glm::length(sphere.center - c.camera.eye) - sphere.radius, 1e-12);
+    return op.error * c.camera.focal_px() / d > c.pixel_error;
+  };
+}
+
+bool SelectiveRefinement::selected(std::uint32_t v, const RcfOracle& rcf) const {
+  return selected_if(
+      v, [&](std::uint32_t, const OpView& op) { return !rcf.is_completely_finer(op, source_); });
+}
+
+bool SelectiveRefinement::selected(std::uint32_t v, const NodeCriterion& criterion) const {
+  return selected_if(v, select_by(criterion));
+}
+
+void SelectiveRefinement::refine(const RcfOracle& rcf) {
+  refine_if([&](std::uint32_t, const OpView& op) { return !rcf.is_completely_finer(op, source_); });
+}
+
+void SelectiveRefinement::refine(const NodeCriterion& criterion) {
+  refine_if(select_by(criterion));
 }
 
 std::uint32_t SelectiveRefinement::find_cut(std::uint32_t v, std::uint32_t fundamental) const {
@@ -317,15 +345,34 @@ SelectiveStats SelectiveRefinement::stats() const {
   return s;
 }
 
-SelectiveExtraction extract_selective(const OpSource& source,
-                                      std::shared_ptr<const SelectiveIndex> index,
-                                      const RcfOracle& rcf) {
+namespace {
+
+template <class Criterion>
+SelectiveExtraction extract_with(const OpSource& source,
+                                 std::shared_ptr<const SelectiveIndex> index,
+                                 const Criterion& criterion) {
+  const auto t0 = Clock::now();
   SelectiveRefinement r(source, std::move(index));
-  r.refine(rcf);
+  r.refine(criterion);
   SelectiveExtraction out;
   out.mesh = r.to_mesh(&out.vertex_ids);
   out.stats = r.stats();
+  out.stats.seconds = seconds_since(t0);
   return out;
+}
+
+}  // namespace
+
+SelectiveExtraction extract_selective(const OpSource& source,
+                                      std::shared_ptr<const SelectiveIndex> index,
+                                      const RcfOracle& rcf) {
+  return extract_with(source, std::move(index), rcf);
+}
+
+SelectiveExtraction extract_selective(const OpSource& source,
+                                      std::shared_ptr<const SelectiveIndex> index,
+                                      const NodeCriterion& criterion) {
+  return extract_with(source, std::move(index), criterion);
 }
 
 }  // namespace smr

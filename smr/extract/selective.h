@@ -38,12 +38,14 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <vector>
 
 #include "smr/core/mesh.h"
 #include "smr/core/op_source.h"
+#include "smr/rcf/camera.h"
 #include "smr/rcf/rcf.h"
 
 namespace smr {
@@ -70,6 +72,7 @@ class SelectiveIndex {
     std::uint32_t id = 0;         // node-id: preorder number within its tree
     std::uint32_t size = 1;       // nodes in its subtree (its own included)
     float radius = 0.0f;          // r(n): bounds |p(vertex) - p(x)| over source vertices x below
+    NormalCone cone;              // holds the normal of every source triangle at those x
   };
   struct Stats {
     std::uint64_t splits = 0, roots = 0, spawned_components = 0;
@@ -168,6 +171,17 @@ class SplitMesh {
   std::uint64_t live_ = 0;
 };
 
+/// Hoppe 1997's per-vertex criterion (the one Kim & Lee's experiments and OpenMesh's VDPM use),
+/// over a node's dual piece: an active vertex is selected unless its sphere (its position, radius
+/// r(n)) is outside the view frustum, or (backface) the normal cone of its dual piece faces away
+/// from the eye over that sphere, or its split op's error projects to at most pixel_error at the
+/// sphere's nearest distance to the eye.
+struct NodeCriterion {
+  Camera camera;
+  bool frustum = true, backface = true;
+  double pixel_error = 1.0;
+};
+
 struct SelectiveStats {
   std::uint64_t evaluated = 0;         // active vertices whose next split was tested
   std::uint64_t selected = 0;          // of those, splits the criterion asked for
@@ -190,6 +204,7 @@ class SelectiveRefinement {
 
   /// Refines every selected active vertex, coarsest split first, until none is selected.
   void refine(const RcfOracle& rcf);
+  void refine(const NodeCriterion& criterion);
   /// vsplit_new (section 4.1): splits the active vertex v (it must have a split left), after
   /// the additional splits of a degenerate case. `forced` marks it as one of those.
   void split(std::uint32_t v, bool forced = false);
@@ -204,6 +219,7 @@ class SelectiveRefinement {
   /// Whether the criterion selects active vertex v: it has a split left whose op is not
   /// completely finer than `rcf`.
   bool selected(std::uint32_t v, const RcfOracle& rcf) const;
+  bool selected(std::uint32_t v, const NodeCriterion& criterion) const;
   const SplitMesh& mesh() const { return mesh_; }
   const SelectiveIndex& index() const { return *index_; }
   /// Vertex ids of the output and the indexed mesh (positions of the active vertices).
@@ -215,6 +231,11 @@ class SelectiveRefinement {
   const std::vector<std::uint8_t>& split_made() const { return made_; }  // 0, 1 selected, 2 forced
 
  private:
+  // The criterion asked of node `node` whose next split reads `op`.
+  using Select = std::function<bool(std::uint32_t node, const OpView& op)>;
+  void refine_if(const Select& select);
+  bool selected_if(std::uint32_t v, const Select& select) const;
+  Select select_by(const NodeCriterion& c) const;
   OpRef read(OpId id) const;
   void activate(std::uint32_t node);
   std::uint32_t find_cut(std::uint32_t v, std::uint32_t fundamental) const;
@@ -240,5 +261,8 @@ struct SelectiveExtraction {
 SelectiveExtraction extract_selective(const OpSource& source,
                                       std::shared_ptr<const SelectiveIndex> index,
                                       const RcfOracle& rcf);
+SelectiveExtraction extract_selective(const OpSource& source,
+                                      std::shared_ptr<const SelectiveIndex> index,
+                                      const NodeCriterion& criterion);
 
 }  // namespace smr

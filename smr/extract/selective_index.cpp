@@ -59,7 +59,10 @@ struct SelectiveIndexBuilder {
   }
 
   std::uint32_t new_node(std::uint32_t v, std::uint32_t parent) {
-    ix.nodes_.push_back({.vertex = v, .parent = parent});
+    SelectiveIndex::Node n;
+    n.vertex = v;
+    n.parent = parent;
+    ix.nodes_.push_back(n);
     return static_cast<std::uint32_t>(ix.nodes_.size() - 1);
   }
 
@@ -213,6 +216,24 @@ struct SelectiveIndexBuilder {
     }
   }
 
+  // Normal cones: a leaf's holds its source triangles' normals, a node's its children's.
+  void cones() {
+    std::vector<Vec3> normals;
+    for (std::uint32_t v = 0; v < node_of.size(); ++v) {
+      normals.clear();
+      for (std::uint32_t t : mesh.star(v)) {
+        const Triple& c = mesh.triangle(t);
+        normals.push_back(triangle_normal(pos[c[0]], pos[c[1]], pos[c[2]]));
+      }
+      ix.nodes_[node_of[v]].cone =
+          normals.empty() ? NormalCone{.half_angle = M_PI} : normal_cone(normals);
+    }
+    for (auto it = ix.splits_.rbegin(); it != ix.splits_.rend(); ++it) {
+      ix.nodes_[it->node].cone =
+          cone_union(ix.nodes_[it->child_t].cone, ix.nodes_[it->child_u].cone);
+    }
+  }
+
   // The source triangles: where the replay's triangles ended up; the cut vertices on them.
   void faces() {
     ix.faces_.reserve(ix.base_.size() + 2 * ix.splits_.size());
@@ -232,6 +253,7 @@ struct SelectiveIndexBuilder {
         throw_input("vertex " + std::to_string(v) + " is in no op of the database");
       }
     }
+    cones();
   }
 };
 

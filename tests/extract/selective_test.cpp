@@ -4,6 +4,7 @@
 // selected vertex unsplit, splits nothing the criterion did not ask for but the counted degenerate
 // cases, and is the same read from disk as in memory.
 #include <algorithm>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <numeric>
@@ -221,43 +222,62 @@ TEST_P(SelectiveMeshTest, FullRefinementIsTheSourceAndTheHierarchyIsConsistent) 
   }
 }
 
+// The properties every truly selective cut has: an oriented manifold with the source's topology,
+// the dual-piece mesh of its vertices, no active vertex still selected, and every split either
+// selected (split_selected(s), when given, confirms it) or forced by a counted degenerate case.
+SelectiveStats check_cut(const Built& b, const SelectiveRefinement& r,
+                         const std::function<bool(std::uint32_t v)>& still_selected,
+                         const std::function<bool(std::uint32_t s)>& split_selected) {
+  std::vector<std::uint32_t> ids;
+  const TriangleMesh m = r.to_mesh(&ids);
+  EXPECT_EQ(oriented_manifold_topology(m), oriented_manifold_topology(b.source));
+  EXPECT_EQ(id_triangles(m, ids), relabelled_source(b.source, r));
+  for (std::uint32_t v : ids) EXPECT_FALSE(still_selected(v)) << "vertex " << v;
+  const SelectiveStats st = r.stats();
+  std::uint64_t selected = 0, forced_made = 0;
+  for (std::uint32_t s = 0; s < r.split_made().size(); ++s) {
+    if (r.split_made()[s] == 1) {
+      ++selected;
+      if (split_selected) {
+        EXPECT_TRUE(split_selected(s)) << "split " << s;
+      }
+    }
+    if (r.split_made()[s] == 2) ++forced_made;
+  }
+  EXPECT_EQ(selected, st.selected);
+  EXPECT_EQ(forced_made, st.forced_splits);
+  EXPECT_EQ(st.splits, st.selected + st.forced_splits);
+  EXPECT_GE(st.forced_splits, st.degenerate_cases);
+  EXPECT_EQ(st.triangles, m.triangles.size());
+  return st;
+}
+
 TEST_P(SelectiveMeshTest, ViewDependentCutsAreManifoldDualPieceMeshesThatMeetTheCriterion) {
   const Built& b = built(GetParam());
-  const Topology source = oriented_manifold_topology(b.source);
-  std::uint64_t degenerate = 0, forced = 0, cuts = 0;
+  std::uint64_t degenerate = 0, forced = 0;
   for (const Vec3 dir : {Vec3{1, 0.3, 0.2}, Vec3{-0.4, 1, -0.5}, Vec3{0.2, -0.6, 1}}) {
     for (double px : {0.5, 4.0}) {
       for (bool cull : {true, false}) {
+        SCOPED_TRACE("px " + std::to_string(px) + (cull ? " cull" : " no cull"));
         RcfSpec spec = camera_spec(b.crmr.info(), dir, 1.5, px);
         spec.cull = cull;
         const Rcf rcf = make_rcf(spec, ModelKind::kMesh3d, nullptr);
         SelectiveRefinement r(b.crmr, b.index);
         r.refine(rcf);
-        std::vector<std::uint32_t> ids;
-        const TriangleMesh m = r.to_mesh(&ids);
-        SCOPED_TRACE("px " + std::to_string(px) + (cull ? " cull" : " no cull"));
-        EXPECT_EQ(oriented_manifold_topology(m), source);
-        EXPECT_EQ(id_triangles(m, ids), relabelled_source(b.source, r));
-        // Each selected vertex refined: no active vertex is still selected.
-        for (std::uint32_t v : ids) ASSERT_FALSE(r.selected(v, rcf)) << "vertex " << v;
-        // No split beyond the criterion's and the counted degenerate cases'.
-        const SelectiveStats st = r.stats();
-        std::uint64_t selected = 0, forced_made = 0;
-        for (std::uint32_t s = 0; s < r.split_made().size(); ++s) {
-          if (r.split_made()[s] == 1) {
-            ++selected;
-            EXPECT_FALSE(rcf.is_completely_finer(*b.crmr.op(b.index->splits()[s].op), b.crmr));
-          }
-          if (r.split_made()[s] == 2) ++forced_made;
-        }
-        EXPECT_EQ(selected, st.selected);
-        EXPECT_EQ(forced_made, st.forced_splits);
-        EXPECT_EQ(st.splits, st.selected + st.forced_splits);
-        EXPECT_GE(st.forced_splits, st.degenerate_cases);
-        EXPECT_EQ(st.triangles, m.triangles.size());
-        degenerate += st.degenerate_cases;
-        forced += st.forced_splits;
-        ++cuts;
+        const SelectiveStats st = check_cut(
+            b, r, [&](std::uint32_t v) { return r.selected(v, rcf); },
+            [&](std::uint32_t s) {
+              return !rcf.is_completely_finer(*b.crmr.op(b.index->splits()[s].op), b.crmr);
+            });
+        // Hoppe's per-vertex criterion over the dual pieces, culling as the RCF's.
+        const NodeCriterion node{*spec.camera, cull, cull, px};
+        SelectiveRefinement rn(b.crmr, b.index);
+        rn.refine(node);
+        const SelectiveStats sn =
+            check_cut(b, rn, [&](std::uint32_t v) { return rn.selected(v, node); }, {});
+        EXPECT_GT(sn.splits, 0u);
+        degenerate += st.degenerate_cases + sn.degenerate_cases;
+        forced += st.forced_splits + sn.forced_splits;
       }
     }
   }
