@@ -30,8 +30,8 @@
 // splits change the neighbourhoods, so those bounds do not carry over. What holds instead: every
 // output triangle is a source triangle whose corners moved to their active ancestors (the dual
 // piece partition, section 3.1), so it lies within max(r(a), r(b), r(c)) of that source triangle
-// and the source within the same of the output, where r(n) bounds the distance from node n's
-// vertex to every source vertex of its dual piece (SelectiveIndex::radius). The extraction
+// and the source within the same of the output, where r(n) is the largest distance from node n's
+// vertex to a source vertex of its dual piece (SelectiveIndex::Node::radius). The extraction
 // reports that bound; the rest (screen-space error, flipped triangles: a triangle whose normal
 // points against its source triangle's, the paper's open problem) is measured.
 #pragma once
@@ -71,7 +71,7 @@ class SelectiveIndex {
     std::uint32_t tree = 0;       // tree-id: its root's number
     std::uint32_t id = 0;         // node-id: preorder number within its tree
     std::uint32_t size = 1;       // nodes in its subtree (its own included)
-    float radius = 0.0f;          // r(n): bounds |p(vertex) - p(x)| over source vertices x below
+    float radius = 0.0f;          // r(n): max |p(vertex) - p(x)| over source vertices x below
     NormalCone cone;              // holds the normal of every source triangle at those x
   };
   struct Stats {

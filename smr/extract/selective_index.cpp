@@ -205,14 +205,17 @@ struct SelectiveIndexBuilder {
     }
   }
 
-  // r(n), bottom-up: r(split node) <= max(r(t), |p(v) - p(u)| + r(u)).
+  // r(n) = max |p(n's vertex) - p(x)| over the source vertices x of its dual piece, exactly: each
+  // x raises its ancestors' (O(vertices x depth)).
   void radii() {
-    for (auto it = ix.splits_.rbegin(); it != ix.splits_.rend(); ++it) {
-      const double d = glm::length(pos[it->vs] - pos[it->vu]);
-      const double r = std::max<double>(ix.nodes_[it->child_t].radius,
-                                        d + double(ix.nodes_[it->child_u].radius));
-      // Rounded up so the float still bounds the distance.
-      ix.nodes_[it->node].radius = std::nextafter(static_cast<float>(r), 1e30f);
+    for (std::uint32_t x = 0; x < node_of.size(); ++x) {
+      if (node_of[x] == kNone) continue;
+      for (std::uint32_t n = ix.nodes_[node_of[x]].parent; n != kNone; n = ix.nodes_[n].parent) {
+        // Rounded up so the float still bounds the distance.
+        const auto d = std::nextafter(
+            static_cast<float>(glm::length(pos[ix.nodes_[n].vertex] - pos[x])), 1e30f);
+        ix.nodes_[n].radius = std::max(ix.nodes_[n].radius, d);
+      }
     }
   }
 
