@@ -2,7 +2,7 @@
 # Kim & Lee's Table 2 (papers/002) side by side (issue 38 item 4): per mesh, OpenMesh's VDPM
 # hierarchy (OpenMesh-mkbalancedpm, OpenMesh-Analyzer), then bench_table2: #V, #F and #DC of VDPM,
 # our minimal surface and our truly selective refinement, at equal criteria and at equal measured
-# error. The 2.5-D row is a DEM triangulated as a mesh (bench_table2 --write-terrain: jacksboro,
+# error. The 2.5-D row is a DEM triangulated as a mesh (bench_table2 --write-terrain, a PLY: jacksboro,
 # every STEP-th sample, x and y in metres). Writes benchmarks/results/vdpm_table2.json and prints
 # the table (table2.sh).
 #
@@ -33,12 +33,12 @@ cmake --build "$BUILD_DIR" -j2 --target bench_table2 >/dev/null
 mkdir -p "$WORK_DIR" "$(dirname "$OUT")"
 
 inputs=()
-for m in $MESHES; do inputs+=("$DATA_DIR/meshes/$m|${m%.*}|"); done
 if [[ -n "$DEM" ]]; then
-  terrain="$WORK_DIR/terrain-${DEM%%.*}-step$STEP.off"
+  terrain="$WORK_DIR/terrain-${DEM%%.*}-step$STEP.ply"
   "$bench" --write-terrain "$terrain" --dem "$DATA_DIR/$DEM" --step "$STEP"
   inputs+=("$terrain|terrain-${DEM%%.*}|--terrain --fov 45")
 fi
+for m in $MESHES; do inputs+=("$DATA_DIR/meshes/$m|${m%.*}|"); done
 results=()
 loadavg_before="$(cut -d' ' -f1-3 /proc/loadavg)"
 for entry in "${inputs[@]}"; do
