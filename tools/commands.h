@@ -130,6 +130,13 @@ nlohmann::json run_ingest(const IngestArgs& a, const std::string& db_path, bool 
 nlohmann::json run_extract(const Database& db, const Heightfield* dem, const RcfSpec& spec,
                            const ExtractArgs& a, bool verify);
 
+/// --algorithm selective (extract_selective.cpp): Kim & Lee's truly selective refinement of
+/// `db` for `rcf` into a.out (and a.png); returns the report.
+nlohmann::json run_selective(const Database& db, const Rcf& rcf, const ExtractArgs& a);
+/// Writes `mesh` to a.out (and its picture to a.png) and adds "output" to the report.
+void write_output(const Database& db, const TriangleMesh& mesh, const ExtractArgs& a,
+                  nlohmann::json& report);
+
 int cmd_ingest(const IngestArgs& a, const std::string& db_path, const CommonFlags& f);
 int cmd_extract(const std::string& db_path, const RcfOptions& rcf, const ExtractArgs& a,
                 const CommonFlags& f);

@@ -104,7 +104,9 @@ RcfSpec RcfOptions::spec() const {
 }
 
 void ExtractArgs::add_to(CLI::App& app, bool with_budgets) {
-  app.add_option("--algorithm", algorithm, "minimal (Brown 5.1) or reduced (Brown 5.2)")
+  app.add_option("--algorithm", algorithm,
+                 "minimal (Brown 5.1), reduced (Brown 5.2) or selective (Kim & Lee 2001: truly "
+                 "selective vertex splits; meshes ingested with --coalesce 0)")
       ->capture_default_str();
   app.add_option("--order", order,
                  "fronts: triangles as the advancing front emits them, in fans (Brown 5.1.2); "
@@ -129,8 +131,8 @@ void ExtractArgs::add_to(CLI::App& app, bool with_budgets) {
 }
 
 void ExtractArgs::validate() const {
-  if (algorithm != "minimal" && algorithm != "reduced")
-    throw_input("--algorithm must be 'minimal' or 'reduced', got '" + algorithm + "'");
+  if (algorithm != "minimal" && algorithm != "reduced" && algorithm != "selective")
+    throw_input("--algorithm must be 'minimal', 'reduced' or 'selective', got '" + algorithm + "'");
   if (order != "fronts" && order != "pages")
     throw_input("--order must be 'fronts' or 'pages', got '" + order + "'");
   if (order == "pages" && algorithm != "minimal")
@@ -150,12 +152,26 @@ void ExtractArgs::validate() const {
     throw_input("--max-triangles and --max-ms need --algorithm minimal");
 }
 
+void write_output(const Database& db, const TriangleMesh& mesh, const ExtractArgs& a,
+                  nlohmann::json& report) {
+  write_mesh(a.out, mesh);
+  report["output"] = {
+      {"path", a.out}, {"vertices", mesh.positions.size()}, {"triangles", mesh.triangles.size()}};
+  if (!a.png.empty()) {
+    RenderOptions ro;
+    ro.geographic = db.info().georef.geographic;
+    render_png(a.png, mesh, ro);
+    report["output"]["png"] = a.png;
+  }
+}
+
 nlohmann::json run_extract(const Database& db, const Heightfield* dem, const RcfSpec& spec,
                            const ExtractArgs& a, bool verify) {
   nlohmann::json report;
   if (spec.critical_level && dem == nullptr)
     throw_input("--critical-lines needs the source DEM: pass --dem");
   const Rcf rcf = make_rcf(spec, db.info().kind, dem);
+  if (a.algorithm == "selective") return run_selective(db, rcf, a);
   ExpansionOptions expansion;
   expansion.max_held_bytes = a.held_mb << 20;
   expansion.fronts = a.order == "fronts";
@@ -195,15 +211,7 @@ nlohmann::json run_extract(const Database& db, const Heightfield* dem, const Rcf
   // before the writer's buffers come (the memory bound is cache + output + a margin).
   e = Extraction{};
   db.clear_cache();
-  write_mesh(a.out, mesh);
-  report["output"] = {
-      {"path", a.out}, {"vertices", mesh.positions.size()}, {"triangles", mesh.triangles.size()}};
-  if (!a.png.empty()) {
-    RenderOptions ro;
-    ro.geographic = db.info().georef.geographic;
-    render_png(a.png, mesh, ro);
-    report["output"]["png"] = a.png;
-  }
+  write_output(db, mesh, a, report);
   return report;
 }
 

@@ -136,6 +136,28 @@ void to_json(json& j, const ExtractStats& s) {
        {"expand_seconds", s.expand_seconds}};
 }
 
+void to_json(json& j, const SelectiveStats& s) {
+  j = {{"evaluated", s.evaluated},
+       {"selected", s.selected},
+       {"splits", s.splits},
+       {"degenerate_cases", s.degenerate_cases},
+       {"forced_splits", s.forced_splits},
+       {"ops_read", s.ops_read},
+       {"vertices", s.vertices},
+       {"triangles", s.triangles},
+       {"flipped_triangles", s.flipped_triangles},
+       {"displacement_bound", s.displacement_bound},
+       {"seconds", s.seconds}};
+}
+
+void to_json(json& j, const SelectiveIndex::Stats& s) {
+  j = {{"splits", s.splits},
+       {"roots", s.roots},
+       {"spawned_components", s.spawned_components},
+       {"max_depth", s.max_depth},
+       {"seconds", s.seconds}};
+}
+
 void to_json(json& j, const FrameStats& s) {
   const std::uint64_t morphs = s.coarsenings + s.refinings;
   j = {{"complete", s.complete},

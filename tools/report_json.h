@@ -10,6 +10,7 @@
 #include "smr/db/verify.h"
 #include "smr/db/writer.h"
 #include "smr/extract/extract.h"
+#include "smr/extract/selective.h"
 #include "smr/extract/session.h"
 #include "smr/ingest/ingest.h"
 
@@ -28,7 +29,9 @@ void to_json(nlohmann::json& j, const WriteReport& w);      // "database"
 void to_json(nlohmann::json& j, const ExtractStats& s);   // "extraction"
 void to_json(nlohmann::json& j, const DatabaseStats& s);  // "io"
 void to_json(nlohmann::json& j, const VerifyReport& r);
-void to_json(nlohmann::json& j, const FrameStats& s);  // a session update: flythrough, "budget"
+void to_json(nlohmann::json& j, const FrameStats& s);      // a session update: flythrough, "budget"
+void to_json(nlohmann::json& j, const SelectiveStats& s);  // "selective" (--algorithm selective)
+void to_json(nlohmann::json& j, const SelectiveIndex::Stats& s);  // its "index"
 
 namespace tools {
 

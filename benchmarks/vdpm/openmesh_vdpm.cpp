@@ -198,7 +198,8 @@ bool Vdpm::qrefine(VHierarchyNodeHandle nh) {
   if (cull_) {
     for (int i = 0; i < 4; ++i)  // outside_view_frustum
       if (planes_[i].signed_distance(p) < -node.radius()) return false;
-    if (product > 0.0f && product * product > distance2 * node.sin_square())  // oriented_away
+    if (backface_ && product > 0.0f &&
+        product * product > distance2 * node.sin_square())  // oriented_away
       return false;
   }
   // screen_space_error: refine when mu or the normal-direction term projects above tolerance.

@@ -68,6 +68,9 @@ class Vdpm {
   /// aspect, tolerance_square), then kappa^2 as the Synthesizer computes it. Returns the largest
   /// difference between OpenMesh's four frustum planes and smr::Camera's (normals and offsets).
   double set_view(const Camera& cam, double tau_px, bool cull);
+  /// With culling on, whether the back-face (normal cone) test is made too (default: yes); off,
+  /// only the view frustum culls (Kim & Lee's Table 2 "V.F." rows).
+  void set_backface(bool on) { backface_ = on; }
 
   /// The Synthesizer's adaptive_refinement, repeated until a pass makes no split and no collapse
   /// (each pass ends with the Synthesizer's garbage collection of edges and faces).
@@ -96,6 +99,7 @@ class Vdpm {
   OpenMesh::VDPM::Plane3d planes_[4];
   float kappa_square_ = 0.0f;
   bool cull_ = true;
+  bool backface_ = true;
   std::uint32_t n_base_vertices_ = 0, n_base_faces_ = 0, n_details_ = 0;
 };
 

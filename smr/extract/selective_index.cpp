@@ -1,0 +1,284 @@
+// SelectiveIndex::build: the vertex hierarchy of a single-split PM database and its fundamental
+// cut vertices, from one replay of every split in order (selective.h).
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include <glm/geometric.hpp>
+
+#include "base/error.h"
+#include "smr/core/clock.h"
+#include "smr/extract/selective.h"
+
+namespace smr {
+
+namespace {
+
+using Triple = std::array<std::uint32_t, 3>;
+constexpr std::uint32_t kNone = SelectiveIndex::kNone;
+
+// The rotation of t that starts at its smallest corner: equal triangles, equal triples.
+Triple normalized(const Triple& t) {
+  int k = 0;
+  if (t[1] < t[k]) k = 1;
+  if (t[2] < t[k]) k = 2;
+  return {t[k], t[(k + 1) % 3], t[(k + 2) % 3]};
+}
+
+std::vector<Triple> normalized_sorted(std::vector<Triple> ts) {
+  for (Triple& t : ts) t = normalized(t);
+  std::sort(ts.begin(), ts.end());
+  return ts;
+}
+
+std::string op_name(OpId id) {
+  return "op " + std::to_string(id.value);
+}
+
+}  // namespace
+
+struct SelectiveIndexBuilder {
+  const OpSource& source;
+  SelectiveIndex& ix;
+  SplitMesh mesh;
+  std::vector<std::uint32_t> node_of;  // per vertex: its active node in the replay
+  std::vector<Vec3> pos;
+  std::vector<std::uint32_t> base_tri;                  // replay triangle per base triangle
+  std::vector<std::array<std::uint32_t, 2>> split_tri;  // replay triangles (v,u,l), (u,v,r)
+  std::vector<std::uint32_t> roots;
+
+  SelectiveIndexBuilder(const OpSource& s, SelectiveIndex& index, std::uint32_t vertices)
+      : source(s), ix(index), mesh(vertices), node_of(vertices, kNone), pos(vertices) {}
+
+  std::uint32_t vertex(VertexId id, OpId op) const {
+    if (id.value >= node_of.size()) {
+      throw_input(op_name(op) + ": vertex id " + std::to_string(id.value) +
+                  " is not below the database's vertex count " + std::to_string(node_of.size()));
+    }
+    return static_cast<std::uint32_t>(id.value);
+  }
+
+  std::uint32_t new_node(std::uint32_t v, std::uint32_t parent) {
+    SelectiveIndex::Node n;
+    n.vertex = v;
+    n.parent = parent;
+    ix.nodes_.push_back(n);
+    return static_cast<std::uint32_t>(ix.nodes_.size() - 1);
+  }
+
+  void add_root(std::uint32_t v, const Vec3& p, OpId op) {
+    if (node_of[v] != kNone) throw_input(op_name(op) + ": vertex " + std::to_string(v) + " twice");
+    node_of[v] = new_node(v, kNone);
+    roots.push_back(node_of[v]);
+    pos[v] = p;
+    ix.base_vertices_.push_back(v);
+    ix.position_ops_.push_back(op);
+  }
+
+  void add_base_triangle(const Triple& t) {
+    ix.base_.push_back(t);
+    base_tri.push_back(mesh.add(t, 0));
+  }
+
+  // The ids of a triangle's corners.
+  template <class T>
+  Triple ids(const OpView& op, const T& t) const {
+    return {vertex(op.vertices[t.v[0]].id, op.id), vertex(op.vertices[t.v[1]].id, op.id),
+            vertex(op.vertices[t.v[2]].id, op.id)};
+  }
+
+  void read_base(const OpView& r0) {
+    for (std::size_t i = 0; i < r0.own_vertex_count(); ++i) {
+      add_root(vertex(r0.own_vertex(i).id, r0.id), r0.own_vertex(i).p, r0.id);
+    }
+    for (const FragmentTriangle& t : r0.fragment) add_base_triangle(ids(r0, t));
+  }
+
+  // The split vertex: the corner c of PreF whose fan over u's link, u's star relabelled u -> c
+  // without the triangles that degenerate, is PreF.
+  std::uint32_t split_vertex(const OpView& op, std::uint32_t u, const std::vector<Triple>& star,
+                             const std::vector<Triple>& pre) const {
+    if (pre.empty()) throw_input(op_name(op.id) + " replaces no triangle: not a vertex split");
+    const std::vector<Triple> want = normalized_sorted(pre);
+    Triple candidates = want.front();
+    std::sort(candidates.begin(), candidates.end());
+    std::vector<Triple> fan;
+    for (std::uint32_t c : candidates) {
+      if (c == u || node_of[c] == kNone) continue;
+      fan.clear();
+      for (Triple t : star) {
+        if (std::count(t.begin(), t.end(), c) != 0) continue;  // (u, c, x) degenerates
+        std::replace(t.begin(), t.end(), u, c);
+        fan.push_back(t);
+      }
+      if (normalized_sorted(fan) == want) return c;
+    }
+    throw_input(op_name(op.id) +
+                ": no corner of PreF is a vertex that F's new vertex collapses to (not a single "
+                "vertex split: ingest the mesh with --coalesce 0)");
+  }
+
+  void read_split(const OpView& op) {
+    if (op.new_vertex_count == 0) throw_input(op_name(op.id) + " introduces no vertex");
+    const std::uint32_t u = vertex(op.own_vertex(0).id, op.id);
+    std::vector<std::uint32_t> spawned;
+    for (std::uint32_t i = 1; i < op.new_vertex_count; ++i) {
+      spawned.push_back(vertex(op.own_vertex(i).id, op.id));
+    }
+    std::sort(spawned.begin(), spawned.end());
+    std::vector<Triple> star, spawn_tris, pre;
+    for (const FragmentTriangle& t : op.fragment) {
+      const Triple c = ids(op, t);
+      if (std::count(c.begin(), c.end(), u) != 0) {
+        star.push_back(c);
+      } else if (std::all_of(c.begin(), c.end(), [&](std::uint32_t x) {
+                   return std::binary_search(spawned.begin(), spawned.end(), x);
+                 })) {
+        spawn_tris.push_back(c);
+      } else {
+        throw_input(op_name(op.id) +
+                    " has a fragment triangle away from its new vertex: it holds more than one "
+                    "vertex split (ingest the mesh with --coalesce 0)");
+      }
+    }
+    for (const PreTriangle& t : op.pre_tris) pre.push_back(ids(op, t));
+    if (node_of[u] != kNone) throw_input(op_name(op.id) + ": its new vertex is already there");
+    // Spawned components join the base mesh (their vertices are roots).
+    for (std::uint32_t i = 1; i < op.new_vertex_count; ++i) {
+      add_root(vertex(op.own_vertex(i).id, op.id), op.own_vertex(i).p, op.id);
+    }
+    for (const Triple& t : spawn_tris) add_base_triangle(t);
+    if (!spawn_tris.empty()) ++ix.stats_.spawned_components;
+
+    const std::uint32_t v = split_vertex(op, u, star, pre);
+    std::uint32_t l = kNone, r = kNone;
+    for (const Triple& t : star) {
+      for (int k = 0; k < 3; ++k) {
+        if (t[k] == v && t[(k + 1) % 3] == u) l = t[(k + 2) % 3];
+        if (t[k] == u && t[(k + 1) % 3] == v) r = t[(k + 2) % 3];
+      }
+    }
+    const auto made = mesh.split(v, u, l, r, 0, 0);
+    // The replay must make exactly F: u's star is the op's fragment.
+    std::vector<Triple> now;
+    for (std::uint32_t t : mesh.star(u)) now.push_back(mesh.triangle(t));
+    if (normalized_sorted(now) != normalized_sorted(star)) {
+      throw_input(op_name(op.id) + ": splitting vertex " + std::to_string(v) +
+                  " does not give its fragment (not a single vertex split)");
+    }
+    SelectiveIndex::Split s{.op = op.id, .vs = v, .vu = u, .node = node_of[v]};
+    s.child_t = new_node(v, s.node);
+    s.child_u = new_node(u, s.node);
+    ix.nodes_[s.node].split = static_cast<std::uint32_t>(ix.splits_.size());
+    node_of[v] = s.child_t;
+    node_of[u] = s.child_u;
+    pos[u] = op.own_vertex(0).p;
+    ix.splits_.push_back(s);
+    split_tri.push_back(made);
+  }
+
+  // <tree-id, node-id>: preorder numbers within each tree, subtree sizes, depths.
+  void number() {
+    std::vector<std::uint32_t> order, depth(ix.nodes_.size(), 0), stack;
+    order.reserve(ix.nodes_.size());
+    for (std::uint32_t t = 0; t < roots.size(); ++t) {
+      std::uint32_t next = 0;
+      stack.push_back(roots[t]);
+      while (!stack.empty()) {
+        const std::uint32_t n = stack.back();
+        stack.pop_back();
+        SelectiveIndex::Node& node = ix.nodes_[n];
+        node.tree = t;
+        node.id = next++;
+        order.push_back(n);
+        if (node.parent != kNone) depth[n] = depth[node.parent] + 1;
+        ix.stats_.max_depth = std::max(ix.stats_.max_depth, depth[n]);
+        if (node.split != kNone) {
+          stack.push_back(ix.splits_[node.split].child_u);
+          stack.push_back(ix.splits_[node.split].child_t);
+        }
+      }
+    }
+    for (auto it = order.rbegin(); it != order.rend(); ++it) {
+      const std::uint32_t p = ix.nodes_[*it].parent;
+      if (p != kNone) ix.nodes_[p].size += ix.nodes_[*it].size;
+    }
+  }
+
+  // r(n) = max |p(n's vertex) - p(x)| over the source vertices x of its dual piece, exactly: each
+  // x raises its ancestors' (O(vertices x depth)).
+  void radii() {
+    for (std::uint32_t x = 0; x < node_of.size(); ++x) {
+      if (node_of[x] == kNone) continue;
+      for (std::uint32_t n = ix.nodes_[node_of[x]].parent; n != kNone; n = ix.nodes_[n].parent) {
+        // Rounded up so the float still bounds the distance.
+        const auto d = std::nextafter(
+            static_cast<float>(glm::length(pos[ix.nodes_[n].vertex] - pos[x])), 1e30f);
+        ix.nodes_[n].radius = std::max(ix.nodes_[n].radius, d);
+      }
+    }
+  }
+
+  // Normal cones: a leaf's holds its source triangles' normals, a node's its children's.
+  void cones() {
+    std::vector<Vec3> normals;
+    for (std::uint32_t v = 0; v < node_of.size(); ++v) {
+      normals.clear();
+      for (std::uint32_t t : mesh.star(v)) {
+        const Triple& c = mesh.triangle(t);
+        normals.push_back(triangle_normal(pos[c[0]], pos[c[1]], pos[c[2]]));
+      }
+      ix.nodes_[node_of[v]].cone =
+          normals.empty() ? NormalCone{.half_angle = M_PI} : normal_cone(normals);
+    }
+    for (auto it = ix.splits_.rbegin(); it != ix.splits_.rend(); ++it) {
+      ix.nodes_[it->node].cone =
+          cone_union(ix.nodes_[it->child_t].cone, ix.nodes_[it->child_u].cone);
+    }
+  }
+
+  // The source triangles: where the replay's triangles ended up; the cut vertices on them.
+  void faces() {
+    ix.faces_.reserve(ix.base_.size() + 2 * ix.splits_.size());
+    for (std::uint32_t t : base_tri) ix.faces_.push_back(mesh.triangle(t));
+    for (std::size_t s = 0; s < ix.splits_.size(); ++s) {
+      for (int side = 0; side < 2; ++side) {
+        const std::uint32_t t = split_tri[s][static_cast<std::size_t>(side)];
+        ix.faces_.push_back(t == kNone ? Triple{kNone, kNone, kNone} : mesh.triangle(t));
+      }
+      ix.splits_[s].cut_l = ix.faces_[ix.faces_.size() - 2][2];
+      ix.splits_[s].cut_r = ix.faces_.back()[2];
+    }
+    ix.leaf_ = node_of;
+    ix.pos_ = pos;
+    for (std::uint32_t v = 0; v < node_of.size(); ++v) {
+      if (node_of[v] == kNone) {
+        throw_input("vertex " + std::to_string(v) + " is in no op of the database");
+      }
+    }
+    cones();
+  }
+};
+
+std::shared_ptr<const SelectiveIndex> SelectiveIndex::build(const OpSource& source) {
+  const auto t0 = Clock::now();
+  if (source.info().kind != ModelKind::kMesh3d) {
+    throw_input("selective refinement needs a 3-D mesh database (a progressive mesh)");
+  }
+  if (source.info().vertex_count >= kNone || source.op_count() >= kNone) {
+    throw_input("selective refinement: the database has too many vertices or ops");
+  }
+  auto ix = std::make_shared<SelectiveIndex>();
+  SelectiveIndexBuilder b(source, *ix, static_cast<std::uint32_t>(source.info().vertex_count));
+  b.read_base(*source.op(kBaseOp));
+  for (std::uint64_t i = 1; i < source.op_count(); ++i) b.read_split(*source.op(OpId(i)));
+  b.number();
+  b.radii();
+  b.faces();
+  ix->stats_.splits = ix->splits_.size();
+  ix->stats_.roots = b.roots.size();
+  ix->stats_.seconds = seconds_since(t0);
+  return ix;
+}
+
+}  // namespace smr
