@@ -54,6 +54,27 @@ void PlaceLookahead::reached(std::size_t i) {
   hinted_ = to;
 }
 
+// Database places are page numbers, fewer than the ops of a big X: then a counting pass by place,
+// and a sort within each place.
+void sort_for_reading(std::vector<PlacedOp>& ops) {
+  std::uint64_t top = 0;
+  for (const PlacedOp& p : ops) top = std::max(top, p.at.place);
+  if (ops.size() < 1024 || top >= ops.size()) {
+    std::sort(ops.begin(), ops.end());
+    return;
+  }
+  std::vector<std::size_t> start(std::size_t(top) + 2, 0);
+  for (const PlacedOp& p : ops) ++start[std::size_t(p.at.place) + 1];
+  for (std::size_t i = 1; i < start.size(); ++i) start[i] += start[i - 1];
+  std::vector<PlacedOp> sorted(ops.size());
+  std::vector<std::size_t> next(start.begin(), start.end() - 1);
+  for (const PlacedOp& p : ops) sorted[next[std::size_t(p.at.place)]++] = p;
+  for (std::size_t i = 0; i + 1 < start.size(); ++i)
+    std::sort(sorted.begin() + std::ptrdiff_t(start[i]),
+              sorted.begin() + std::ptrdiff_t(start[i + 1]));
+  ops.swap(sorted);
+}
+
 FragmentTriangle OpSource::triangle(TriRef t) const {
   return op(t.op)->triangle(t.index);
 }

@@ -71,6 +71,9 @@ struct PlacedOp {
   }
 };
 
+/// Sorts ops into reading order (PlacedOp's <).
+void sort_for_reading(std::vector<PlacedOp>& ops);
+
 /// Reads ops one after another through their places, holding the last place's batch: ops read in
 /// place order cost one lookup per place. A returned view stays valid until the reader reads an
 /// op of another place (or is reset); the previous one is still held while the next is fetched.

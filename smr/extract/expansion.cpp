@@ -134,21 +134,16 @@ class HeldOps {
  public:
   HeldOps(const OpSource& source, std::span<const std::uint64_t> x, std::uint64_t max_bytes)
       : source_(source), max_bytes_(max_bytes) {
-    std::vector<std::pair<std::uint64_t, std::uint64_t>> by_place;  // (locality, id)
-    by_place.reserve(x.size());
-    for (std::uint64_t id : x) by_place.push_back({source.locality(OpId{id}), id});
-    std::sort(by_place.begin(), by_place.end());
+    members_.reserve(x.size());
+    for (std::uint64_t id : x) members_.push_back({source.place_of(OpId{id}), OpId{id}});
+    sort_for_reading(members_);
     group_of_.reserve(x.size());
-    for (std::size_t i = 0; i < by_place.size(); ++i) {
-      if (i == 0 || by_place[i].first != by_place[i - 1].first) {
-        starts_.push_back(i);
-        places_.push_back(by_place[i].first);
-      }
-      members_.push_back(by_place[i].second);
-      group_of_[by_place[i].second] = static_cast<std::uint32_t>(starts_.size() - 1);
+    for (std::size_t i = 0; i < members_.size(); ++i) {
+      if (i == 0 || members_[i].at.place != members_[i - 1].at.place) starts_.push_back(i);
+      group_of_[members_[i].id.value] = static_cast<std::uint32_t>(starts_.size() - 1);
     }
     starts_.push_back(members_.size());
-    groups_.assign(places_.size(), Group{});
+    groups_.assign(starts_.size() - 1, Group{});
   }
 
   // Op `id`, no longer held afterwards (each op of X is infilled once).
@@ -164,19 +159,27 @@ class HeldOps {
     if (group == nullptr || groups_[*group].loaded || bytes_ > max_bytes_) return source_.op(id);
     Group& g = groups_[*group];
     g.loaded = true;
+    const std::uint64_t place = members_[starts_[*group]].at.place;
+    OpBatch batch;  // the page's ops, one lookup for the group (sources with places)
     OpRef wanted;
     for (std::size_t i = starts_[*group]; i < starts_[*group + 1]; ++i) {
-      const OpId m{members_[i]};
-      OpRef op = source_.op(m);
-      if (m == id) {
+      const PlacedOp& m = members_[i];
+      OpRef op;
+      if (m.at.index == OpPlace::kNoIndex) {
+        op = source_.op(m.id);
+      } else {
+        if (batch.keep == nullptr) batch = source_.batch(place);
+        op = OpRef(batch.keep, &batch_op(batch, m.at.index, m.id));
+      }
+      if (m.id == id) {
         wanted = std::move(op);
         continue;
       }
-      held_[m.value] = {std::move(op), *group};
+      held_[m.id.value] = {std::move(op), *group};
       ++g.held;
     }
     if (g.held > 0) {
-      g.bytes = source_.locality_bytes(places_[*group]);
+      g.bytes = source_.locality_bytes(place);
       bytes_ += g.bytes;
     }
     peak_bytes_ = std::max(peak_bytes_, bytes_);
@@ -194,9 +197,8 @@ class HeldOps {
   };
   const OpSource& source_;
   const std::uint64_t max_bytes_;
-  std::vector<std::uint64_t> members_;  // X grouped by locality
-  std::vector<std::size_t> starts_;     // group g is members_[starts_[g], starts_[g + 1])
-  std::vector<std::uint64_t> places_;   // group g's locality
+  std::vector<PlacedOp> members_;    // X grouped by place
+  std::vector<std::size_t> starts_;  // group g is members_[starts_[g], starts_[g + 1])
   std::vector<Group> groups_;
   IdMap<std::uint32_t> group_of_;
   IdMap<std::pair<OpRef, std::uint32_t>> held_;  // op, its group

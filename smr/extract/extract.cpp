@@ -42,27 +42,6 @@ Extraction expand_minimal(const OpSource& source, std::span<const OpId> x,
 
 namespace {
 
-// Sorts ops into reading order (PlacedOp's <). Database places are page numbers, fewer than the
-// ops of a big X: then a counting pass by place, and a sort within each place.
-void sort_by_place(std::vector<PlacedOp>& ops) {
-  std::uint64_t top = 0;
-  for (const PlacedOp& p : ops) top = std::max(top, p.at.place);
-  if (ops.size() < 1024 || top >= ops.size()) {
-    std::sort(ops.begin(), ops.end());
-    return;
-  }
-  std::vector<std::size_t> start(std::size_t(top) + 2, 0);
-  for (const PlacedOp& p : ops) ++start[std::size_t(p.at.place) + 1];
-  for (std::size_t i = 1; i < start.size(); ++i) start[i] += start[i - 1];
-  std::vector<PlacedOp> sorted(ops.size());
-  std::vector<std::size_t> next(start.begin(), start.end() - 1);
-  for (const PlacedOp& p : ops) sorted[next[std::size_t(p.at.place)]++] = p;
-  for (std::size_t i = 0; i + 1 < start.size(); ++i)
-    std::sort(sorted.begin() + std::ptrdiff_t(start[i]),
-              sorted.begin() + std::ptrdiff_t(start[i + 1]));
-  ops.swap(sorted);
-}
-
 // The places of `items` (each with `at`, grouped by place), each once, in order.
 template <class Items>
 std::vector<std::uint64_t> distinct_places(const Items& items) {
@@ -88,7 +67,7 @@ Extraction extract_set_formula(const OpSource& source, std::span<const OpId> x) 
     word |= bit;
     by_place.push_back({source.place_of(id), id});
   }
-  sort_by_place(by_place);
+  sort_for_reading(by_place);
   const auto member = [&](OpId id) {
     return id.valid() && id.value < n && (in_x[id.value / 64] >> (id.value % 64) & 1) != 0;
   };
