@@ -9,6 +9,12 @@ $SUDO apt-get install -y -qq --no-install-recommends \
   build-essential cmake g++ git ca-certificates \
   libcgal-dev libgmp-dev libmpfr-dev libboost-dev \
   libgdal-dev gdal-bin libglm-dev libcli11-dev nlohmann-json3-dev libpng-dev zlib1g-dev \
-  liblmdb-dev lmdb-utils libdraco-dev libxxhash-dev libzstd-dev \
+  liblmdb-dev lmdb-utils libdraco-dev libmeshoptimizer-dev libxxhash-dev libzstd-dev \
   libgtest-dev libgmock-dev libbenchmark-dev clang-format >/dev/null
+# node and npm for the JavaScript tools the tests run (tests/js: the Khronos glTF-Validator);
+# a node that came with its own npm (NodeSource's) is kept.
+if ! command -v npm >/dev/null; then
+  $SUDO apt-get install -y -qq --no-install-recommends nodejs npm >/dev/null
+fi
+(cd "$(dirname "$0")/../tests/js" && npm ci --no-audit --no-fund --silent)
 echo "dependencies installed"

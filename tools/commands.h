@@ -13,6 +13,7 @@
 
 #include "smr/db/database.h"
 #include "smr/ingest/ingest.h"
+#include "smr/io/gltf_writer.h"
 #include "smr/rcf/spec.h"
 
 namespace CLI {
@@ -60,6 +61,7 @@ struct IngestArgs {
 struct ExtractArgs {
   std::string algorithm = "minimal", out, png, dem;
   std::string order = "fronts";  // ExpansionOptions::fronts: "fronts" or "pages"
+  std::string compress;          // glTF outputs: "draco" or "meshopt" (empty: none)
   std::uint64_t cache_mb = 64;
   std::uint64_t held_mb = 512;      // ExpansionOptions::max_held_bytes, in MiB
   std::uint64_t max_triangles = 0;  // SessionBudget (smr/extract/session.h); 0 = none
@@ -125,6 +127,11 @@ struct SynthArgs {
 
 /// Ingests a.input into db_path, drawing the progress bar unless quiet; returns the report.
 nlohmann::json run_ingest(const IngestArgs& a, const std::string& db_path, bool quiet, bool verify);
+/// The glTF writer's options for meshes of `db`: its grid, georeference and frame (the centre of
+/// its bounds), `compress` ("" or a name parse_gltf_compression knows), `extras` added to
+/// asset.extras.smrdb with the database's path and kind.
+GltfOptions gltf_options(const Database& db, const std::string& compress,
+                         const nlohmann::json& extras);
 /// Extracts the mesh `spec` asks of `db` into a.out (and a.png); returns the report. `dem`: the
 /// source DEM, for --critical-lines (nullptr: none).
 nlohmann::json run_extract(const Database& db, const Heightfield* dem, const RcfSpec& spec,

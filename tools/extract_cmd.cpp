@@ -13,6 +13,7 @@
 #include "smr/extract/extract.h"
 #include "smr/extract/session.h"
 #include "smr/io/dem_reader.h"
+#include "smr/io/gltf_writer.h"
 #include "smr/io/mesh_writer.h"
 #include "smr/io/render.h"
 #include "smr/query/indexed_source.h"
@@ -113,7 +114,10 @@ void ExtractArgs::add_to(CLI::App& app, bool with_budgets) {
                  "pages: the same triangles from the set formula, page by page (minimal only; "
                  "faster)")
       ->capture_default_str();
-  app.add_option("-o,--output", out, "Output mesh (.obj or .ply)")->required();
+  app.add_option("-o,--output", out, "Output mesh (.obj, .ply, or glTF .glb/.gltf)")->required();
+  app.add_option("--compress", compress,
+                 "glTF output only: draco (KHR_draco_mesh_compression) or meshopt "
+                 "(EXT_meshopt_compression)");
   app.add_option("--png", png, "Also write a top-down picture of the mesh (.png)");
   if (with_budgets) {
     app.add_option("--cache-mb", cache_mb, "Page cache budget in MiB")->capture_default_str();
@@ -140,8 +144,16 @@ void ExtractArgs::validate() const {
         "--order pages needs --algorithm minimal (reduced extraction grows X+ as its "
         "front advances)");
   const std::string ext = extension_of(out);
-  if (ext != ".obj" && ext != ".ply")
-    throw_input("-o " + out + ": the output must end in .obj or .ply");
+  if (ext != ".obj" && ext != ".ply" && ext != ".glb" && ext != ".gltf")
+    throw_input("-o " + out + ": the output must end in .obj, .ply, .glb or .gltf");
+  if (!compress.empty()) {
+    if (ext != ".glb" && ext != ".gltf")
+      throw_input("--compress " + compress + ": only glTF outputs (.glb, .gltf) are compressed, " +
+                  "not " + out);
+    const auto c = parse_gltf_compression(compress);
+    if (!c || *c == GltfCompression::kNone)
+      throw_input("--compress must be 'draco' or 'meshopt', got '" + compress + "'");
+  }
   if (!png.empty() && extension_of(png) != ".png")
     throw_input("--png " + png + ": must end in .png");
   if (cache_mb < 1 || cache_mb > (std::uint64_t{1} << 20))
@@ -152,11 +164,51 @@ void ExtractArgs::validate() const {
     throw_input("--max-triangles and --max-ms need --algorithm minimal");
 }
 
+GltfOptions gltf_options(const Database& db, const std::string& compress,
+                         const nlohmann::json& extras) {
+  const CrmrInfo& info = db.info();
+  GltfOptions o;
+  if (!compress.empty()) o.compression = *parse_gltf_compression(compress);
+  o.grid_origin = db.grid().origin;
+  o.grid_step = db.grid().step;
+  o.terrain = info.kind == ModelKind::kTerrain;
+  o.georef = info.georef;
+  // Every extraction of one database shares its frame: the centre of its bounds (at height 0 for
+  // a terrain, so that glTF y is the height).
+  o.reference = (info.bounds.lo + info.bounds.hi) * 0.5;
+  if (o.terrain) o.reference.z = 0.0;
+  nlohmann::json x = extras;
+  x["source"] = db.path();
+  x["kind"] = o.terrain ? "terrain" : "mesh";
+  o.extras_json = x.dump();
+  return o;
+}
+
+// The mesh goes out in the format its extension names: OBJ/PLY (mesh_writer.h) or glTF
+// (gltf_writer.h, on the database's grid, with its georeference and the report's RCF in
+// asset.extras.smrdb).
 void write_output(const Database& db, const TriangleMesh& mesh, const ExtractArgs& a,
                   nlohmann::json& report) {
-  write_mesh(a.out, mesh);
-  report["output"] = {
-      {"path", a.out}, {"vertices", mesh.positions.size()}, {"triangles", mesh.triangles.size()}};
+  const std::string ext = extension_of(a.out);
+  if (ext == ".glb" || ext == ".gltf") {
+    nlohmann::json extras = nlohmann::json::object();
+    if (report.contains("rcf")) extras["rcf"] = report["rcf"];
+    const GltfOptions options = gltf_options(db, a.compress, extras);
+    const GltfReport r = write_gltf(a.out, mesh, options);
+    const Vec3& e = r.max_position_error;
+    report["output"] = {{"path", a.out},
+                        {"vertices", r.vertices},
+                        {"triangles", r.triangles},
+                        {"bytes", r.bytes},
+                        {"compression", gltf_compression_name(options.compression)},
+                        {"position_shift", r.shift},
+                        {"max_position_error", {e.x, e.y, e.z}},
+                        {"normal_bits", r.normal_bits}};
+  } else {
+    write_mesh(a.out, mesh);
+    report["output"] = {
+        {"path", a.out}, {"vertices", mesh.positions.size()}, {"triangles", mesh.triangles.size()}};
+  }
   if (!a.png.empty()) {
     RenderOptions ro;
     ro.geographic = db.info().georef.geographic;
