@@ -116,6 +116,16 @@ struct QueryArgs {
   void add_common(CLI::App& app);
 };
 
+/// `tiles`: a static quantized-mesh pyramid (tiles_cmd.cpp, smr/tiles/pyramid.h).
+struct TilesArgs {
+  std::string out;
+  std::optional<int> max_zoom;  // absent: the scheme's default
+  std::uint64_t cache_mb = 64;
+  bool force = false;
+
+  void add_to(CLI::App& app);
+};
+
 struct SynthArgs {
   int width = 1025, height = 0;  // height 0: = width
   std::uint64_t seed = 1;
@@ -156,5 +166,6 @@ int cmd_synth(const SynthArgs& a, bool quiet);
 /// `kind`: the name of the query subcommand that was given.
 int cmd_query(const std::string& db_path, const std::string& kind, const QueryArgs& a);
 int cmd_flythrough(const std::string& db_path, const FlythroughArgs& a, const CommonFlags& f);
+int cmd_tiles(const std::string& db_path, const TilesArgs& a, const CommonFlags& f);
 
 }  // namespace smr::tools

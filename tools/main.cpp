@@ -32,6 +32,7 @@ int main(int argc, char** argv) {
   smr::tools::SynthArgs synth_args;
   smr::tools::FlythroughArgs fly_args;
   smr::tools::QueryArgs query_args;
+  smr::tools::TilesArgs tiles_args;
   std::string db_path;
 
   CLI::App* ingest = app.add_subcommand(
@@ -97,6 +98,13 @@ int main(int argc, char** argv) {
   query->add_option("db", db_path, "Database file")->required();
   query_args.add_to(*query);
 
+  CLI::App* tiles = app.add_subcommand(
+      "tiles", "Write a static quantized-mesh-1.0 terrain tile pyramid and its layer.json");
+  tiles->add_option("db", db_path, "Database file (a terrain)")->required();
+  tiles_args.add_to(*tiles);
+  tiles->add_flag("--json", flags.json, "Print statistics as JSON on stdout");
+  tiles->add_flag("-q,--quiet", flags.quiet, "No progress or summary on stderr");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -107,7 +115,7 @@ int main(int argc, char** argv) {
     if (app.get_subcommands().empty() && argc > 1 && argv[1][0] != '-') {
       std::fprintf(stderr,
                    "smrdb: error: unknown subcommand '%s' (ingest, extract, info, verify, build, "
-                   "synth, flythrough, query; --help lists them)\n",
+                   "synth, flythrough, query, tiles; --help lists them)\n",
                    argv[1]);
       return 1;
     }
@@ -124,6 +132,7 @@ int main(int argc, char** argv) {
     if (*synth) return cmd_synth(synth_args, flags.quiet);
     if (*fly) return cmd_flythrough(db_path, fly_args, flags);
     if (*query) return cmd_query(db_path, query->get_subcommands().at(0)->get_name(), query_args);
+    if (*tiles) return cmd_tiles(db_path, tiles_args, flags);
   } catch (const smr::Error& e) {
     std::fprintf(stderr, "smrdb: error: %s\n", e.what());
     return e.exit_code();

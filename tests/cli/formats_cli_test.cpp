@@ -1,8 +1,10 @@
 // The delivery formats from the command line (issue 37, item 1): `extract -o out.glb|out.gltf`
-// with and without --compress passes the Khronos glTF-Validator on a real DEM's database, and
-// bad arguments are exit code 1 with a message naming them and no output left behind.
+// with and without --compress passes the Khronos glTF-Validator on a real DEM's database, `tiles`
+// writes a quantized-mesh pyramid with its layer.json, and bad arguments are exit code 1 with a
+// message naming them and no output left behind.
 #include <gtest/gtest.h>
 
+#include <cstdint>
 #include <filesystem>
 #include <string>
 
@@ -88,6 +90,46 @@ TEST_F(FormatsCli, BadGltfArgumentsAreUserErrors) {
                     "--compress must be 'draco' or 'meshopt', got 'zip'", file("x.glb"));
   expect_user_error("extract " + db() + " --floor 0.5 -o " + file("x.gltfx"),
                     "must end in .obj, .ply, .glb or .gltf", file("x.gltfx"));
+}
+
+TEST_F(FormatsCli, TilesWritesAPyramid) {
+  const std::string out = file("tiles");
+  const CommandResult r = smrdb("tiles " + db() + " -o " + out + " --max-zoom 11 --json -q");
+  ASSERT_EQ(r.code, 0) << r.out;
+  const auto report = nlohmann::json::parse(r.out);
+  EXPECT_EQ(report["projection"], "EPSG:4326");
+  EXPECT_EQ(report["max_zoom"], 11);
+  const auto layer = nlohmann::json::parse(smr::test::read_file(out + "/layer.json"));
+  EXPECT_EQ(layer["maxzoom"], 11);
+  std::uint64_t files = 0;
+  for (const auto& e : fs::recursive_directory_iterator(out))
+    files += e.path().extension() == ".terrain";
+  EXPECT_EQ(files, report["tiles"].get<std::uint64_t>());
+  EXPECT_TRUE(fs::exists(out + "/0/0/0.terrain"));  // jacksboro is in the western hemisphere
+  // An existing output needs --force.
+  expect_user_error("tiles " + db() + " -o " + out + " --max-zoom 3", "exists (pass --force",
+                    out + "/3/../none");
+  EXPECT_TRUE(fs::exists(out + "/11"));
+  EXPECT_EQ(smrdb("tiles " + db() + " -o " + out + " --max-zoom 3 --force -q").code, 0);
+  EXPECT_FALSE(fs::exists(out + "/11"));
+}
+
+TEST_F(FormatsCli, BadTilesArgumentsAreUserErrors) {
+  const std::string out = file("bad-tiles");
+  expect_user_error("tiles " + db() + " -o " + out + " --max-zoom 25",
+                    "--max-zoom must be in [0, 24], got 25", out);
+  expect_user_error("tiles " + db() + " -o " + out + " --max-zoom -1",
+                    "--max-zoom must be in [0, 24], got -1", out);
+  expect_user_error("tiles " + db() + " -o " + out + " --max-zoom many", "--max-zoom", out);
+  expect_user_error("tiles " + file("missing.smrdb") + " -o " + out, "missing.smrdb", out);
+  // A 3-D mesh database has no tiles.
+  const std::string mesh_db = file("mesh.smrdb");
+  ASSERT_EQ(
+      smrdb("ingest " + smr::test::data_path("meshes/blobby_3cc.off") + " -q -o " + mesh_db).code,
+      0);
+  expect_user_error("tiles " + mesh_db + " -o " + out, "tiles need a terrain database", out);
+  for (const auto& e : fs::directory_iterator(dir_->path()))
+    EXPECT_EQ(e.path().string().find(".tmp-"), std::string::npos) << e.path();
 }
 
 }  // namespace
