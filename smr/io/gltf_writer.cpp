@@ -61,7 +61,7 @@ constexpr int kMaxRefine = 16;
 int fitting_shift(std::int64_t span) {
   int k = 0;
   while (((span + (k > 0 ? (std::int64_t{1} << (k - 1)) : 0)) >> k) > 65535) ++k;
-  while (k > -kMaxRefine && (span << (1 - k)) <= 65535) --k;
+  while (k <= 0 && k > -kMaxRefine && (span << (1 - k)) <= 65535) --k;
   return k;
 }
 
