@@ -11,9 +11,12 @@ namespace smr::tiles {
 
 namespace {
 
-// CesiumJS's level-0 geometric error estimate for a heightmap tiling of the WGS 84 ellipsoid:
-// maximum radius x 2 pi x 0.25 (its heightmap terrain quality) / (65 samples x 2 root tiles).
-constexpr double kCesiumLevel0Error = 6378137.0 * 2.0 * std::numbers::pi * 0.25 / (65.0 * 2.0);
+// CesiumJS's geometric error estimate for a tile of a heightmap tiling: its width x 0.25 (its
+// heightmap terrain quality) / 65 samples; at zoom 0 of the WGS 84 ellipsoid's EPSG:4326 tiling
+// (maximum radius x 2 pi / 2 root tiles wide), 77 067 m.
+constexpr double kCesiumErrorPerWidth = 0.25 / 65.0;
+constexpr double kCesiumLevel0Error =
+    6378137.0 * 2.0 * std::numbers::pi / 2.0 * kCesiumErrorPerWidth;
 
 }  // namespace
 
@@ -44,7 +47,7 @@ TilingScheme TilingScheme::for_terrain(const CrmrInfo& info) {
     s.origin_ = {s.domain_.west, s.domain_.south};
     s.root_size_ = std::max(s.domain_.east - s.domain_.west, s.domain_.north - s.domain_.south);
     s.root_tiles_x_ = 1;
-    s.level0_error_ = info.err0;
+    s.level0_error_ = s.root_size_ * kCesiumErrorPerWidth;
   }
   if (!(s.root_size_ > 0.0)) throw_input("tiles need a raster of at least 2 x 2 samples");
   return s;

@@ -11,10 +11,10 @@
 //
 // Other rasters (projected, or no CRS): a local tiling over the raster's extent: one root tile,
 // the square whose south-west corner is the raster's first sample and whose side is the larger of
-// its two extents, split in 2^z x 2^z tiles at zoom z (TMS layout, y from the south); e(z) =
-// err0 / 2^z, err0 the database's base mesh error. Cesium cannot load it unchanged (its
-// layer.json projections are EPSG:4326 and EPSG:3857); layer.json says "projection": "local"
-// and gives the square.
+// its two extents, split in 2^z x 2^z tiles at zoom z (TMS layout, y from the south); e(z) is the
+// same rule CesiumJS applies, a tile's width x 0.25 / 65 (in the raster's units, taken to be
+// those of its heights). Cesium cannot load it unchanged (its layer.json projections are
+// EPSG:4326 and EPSG:3857); layer.json says "projection": "local" and gives the square.
 #pragma once
 
 #include <cstdint>
