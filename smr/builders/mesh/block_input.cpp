@@ -105,7 +105,9 @@ void BlockInput::read_vertices() {
       box_.add(p);
       ++vertices_;
     }
-    positions_->append(batch.data(), batch.size());
+    // In pieces: the file's buffer flushes past 4 MiB, and a batch may be the whole mesh.
+    for (std::size_t at = 0; at < batch.size(); at += 4096)
+      positions_->append(batch.data() + at, std::min<std::size_t>(4096, batch.size() - at));
   });
   positions_->flush();
   if (vertices_ >= 0xffffffffu) throw_input("mesh '" + mesh_.name() + "': too many vertices");
