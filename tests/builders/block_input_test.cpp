@@ -19,6 +19,7 @@
 #include "smr/core/mesh.h"
 #include "smr/io/mesh_reader.h"
 #include "tests/support/datasets.h"
+#include "tests/support/sanitized.h"
 
 namespace smr::qem {
 namespace {
@@ -128,15 +129,20 @@ long input_peak_growth_kib(const TriangleMesh& mesh, std::uint64_t* triangles_re
 }
 
 TEST(BlockInput, HoldsWhatItsOptionsSayWhateverTheInputSize) {
-  const TriangleMesh mesh = midpoint_subdivided(midpoint_subdivided(armadillo()));
+  // Under the sanitizers (3-10x slower) the code path only, on a quarter of the triangles.
+  const TriangleMesh once = midpoint_subdivided(armadillo());
+  const TriangleMesh mesh = test::kSanitized ? once : midpoint_subdivided(once);
   std::uint64_t read = 0;
   const long growth = input_peak_growth_kib(mesh, &read);
   ASSERT_GE(growth, 0) << "the child failed, or /proc/self/clear_refs cannot reset the peak";
   EXPECT_EQ(read, mesh.triangles.size());
   // Two sorts and the cache of 256 KiB at a time, the vertex file's 4 MiB write buffer, one
-  // leaf's triangles: 6 MiB, with 2 MiB for what the allocator keeps. A table of 32 bytes a
-  // vertex would be 12.7 MiB more.
-  EXPECT_LE(growth, 8 * 1024) << "KiB";
+  // leaf's triangles: 6 MiB, with 2 MiB for what the allocator keeps (measured: 5.0 MiB). A table
+  // of 32 bytes a vertex would be 12.7 MiB more. Under AddressSanitizer freed memory waits in
+  // its quarantine and shadow memory is resident too: only the code path is checked there.
+  if (!test::kSanitized) {
+    EXPECT_LE(growth, 8 * 1024) << "KiB";
+  }
 }
 
 }  // namespace
