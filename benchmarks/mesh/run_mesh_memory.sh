@@ -60,7 +60,7 @@ ingest() {
   log "  $(cat "$t") (KiB, s wall, s user, s sys)"
   rm -f "$db"
   jq -c -n --slurpfile r "$WORK_DIR/sub$k.json" --arg t "$(cat "$t")" --argjson level "$k" \
-    --argjson bytes "$(stat -c %s "$ply")" '{level: $level, ply_bytes: $bytes, time: $t, report: $r[0]}'
+    --argjson bytes "$(stat -L -c %s "$ply")" '{level: $level, ply_bytes: $bytes, time: $t, report: $r[0]}'
 }
 
 runs="[]"
@@ -102,12 +102,16 @@ jq -n --argjson runs "$runs" --argjson peer "$peer" --arg memory "$MEMORY" --arg
       level: $peer_level, triangles: $peer.input.triangles,
       cgal_lt_10pct_seconds: $peer.results["cgal-lt"]["10pct"].seconds,
       cgal_lt_1pct_seconds: $peer.results["cgal-lt"]["1pct"].seconds,
+      cgal_lt_1pct_cpu_seconds: $peer.results["cgal-lt"]["1pct"].cpu_seconds,
       cgal_lt_1pct_triangles_per_second:
         ($peer.input.triangles / $peer.results["cgal-lt"]["1pct"].seconds)} end)
   } | .peer_ratio = (if .peer == null then null else
       ([.runs[] | select(.subdivision_levels == $peer_level)][0].wall_seconds
-       / .peer.cgal_lt_1pct_seconds) end)' >"$OUT"
+       / .peer.cgal_lt_1pct_seconds) end)
+  | .peer_cpu_ratio = (if .peer == null then null else
+      ([.runs[] | select(.subdivision_levels == $peer_level)][0].cpu_seconds
+       / .peer.cgal_lt_1pct_cpu_seconds) end)' >"$OUT"
 log "wrote $OUT"
 jq -c '.runs[] | {subdivision_levels, triangles, input_over_budget, peak_rss_mib, build_peak_rss_mib,
                   writer_finish_peak_rss_mib, within_bound, triangles_per_second}' "$OUT"
-jq -c '{bound_mib, peer, peer_ratio}' "$OUT"
+jq -c '{bound_mib, peer, peer_ratio, peer_cpu_ratio}' "$OUT"
