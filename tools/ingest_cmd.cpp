@@ -187,7 +187,7 @@ nlohmann::json run_ingest(const IngestArgs& a, const std::string& db_path, bool 
   // The block builders' writer finishes once the builder has freed its records: its own peak
   // resident set is measured apart (< 0: not measured).
   bool phase_rss = false;
-  double finish_rss = -1.0;
+  double finish_rss = -1.0, build_rss = -1.0;
   IngestProgress progress;
   progress.fraction = [&](double f) { bar.update(f); };
   progress.phase = [&](IngestPhase phase, const IngestReport& r) {
@@ -202,7 +202,10 @@ nlohmann::json run_ingest(const IngestArgs& a, const std::string& db_path, bool 
                      static_cast<unsigned long long>(st.triangles_made), a.max_error,
                      a.memory.c_str());
       }
-      if (streamed(r.path())) phase_rss = reset_peak_rss();
+      if (streamed(r.path())) {
+        build_rss = peak_rss_mb();  // reading and building, before the writer's finish()
+        phase_rss = reset_peak_rss();
+      }
     } else {
       if (phase_rss) finish_rss = phase_peak_rss_mb();
       bar.done();
@@ -211,6 +214,7 @@ nlohmann::json run_ingest(const IngestArgs& a, const std::string& db_path, bool 
   const IngestReport r = ingest(a.input, db_path, options, progress);
   nlohmann::json report = ingest_json(r, a.input, db_path, options);
   if (finish_rss >= 0.0) report["database"]["finish_peak_rss_mb"] = finish_rss;
+  if (build_rss >= 0.0) report["build_peak_rss_mb"] = build_rss;
   return report;
 }
 

@@ -4,7 +4,8 @@
 # a 1.3 GB binary PLY; the surface is unchanged, only the triangle count grows), ingested out of
 # core with `smrdb ingest --memory $MEMORY` (default 2G): the PLY is streamed, its triangles
 # sorted by octree cell on disk, blocks simplified with locked borders and merged up to the root,
-# ops assembled on disk. Reports peak RSS (/usr/bin/time) against the budget, triangles/s, temp
+# ops assembled on disk. Reports peak RSS (/usr/bin/time; also that of reading and building, and
+# that of writing the database, from the report) against the budget, triangles/s, temp
 # bytes, DAG height, ops and pages, then extraction on the database (bench_db's views at 1 px,
 # minimal surface -- reduced extraction is 2.5-D only -- pages read and time). Writes
 # benchmarks/results/block_mesh.json.
@@ -62,11 +63,12 @@ jq -n --slurpfile ingest "$WORK_DIR/ingest.json" --argjson views "$views" \
     mesh: {source: "armadillo.off (CGAL demo data)", subdivision_levels: $levels,
            vertices: $i.input.vertices, triangles: $i.input.triangles},
     memory: $memory,
-    peak_rss_mb: peak_rss_mb($t[0] | tonumber; $i), wall_seconds: ($t[1] | tonumber),
+    peak_rss_mb: peak_rss_mb($t[0] | tonumber; $i), build_peak_rss_mb: $i.build_peak_rss_mb,
+    writer_finish_peak_rss_mb: $i.database.finish_peak_rss_mb, wall_seconds: ($t[1] | tonumber),
     triangles_per_second: ($i.input.triangles / ($t[1] | tonumber)),
     ingest: $i,
     extraction: $views
   }' >"$OUT"
 log "wrote $OUT"
-jq '{peak_rss_mb, wall_seconds, triangles_per_second, dag: .ingest.blocks.dag_height,
+jq '{peak_rss_mb, build_peak_rss_mb, writer_finish_peak_rss_mb, wall_seconds, triangles_per_second, dag: .ingest.blocks.dag_height,
      ops: .ingest.crmr.ops, pages: .ingest.database.pages}' "$OUT"

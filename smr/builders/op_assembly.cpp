@@ -29,9 +29,10 @@ std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
   return (std::uint64_t(a) << 32) | b;
 }
 
-// A removal's record in the spool: this head, its vertices, its star, then what it made.
+// A removal's record in the spool: this head, its vertices, its star, what it made, then its
+// star's vertices' positions (by vertex id; none: finish()'s `position` gives them).
 struct SpoolHead {
-  std::uint32_t vertices = 0, star = 0, made = 0, pad = 0;
+  std::uint32_t vertices = 0, star = 0, made = 0, positions = 0;
 };
 
 // The order: falling err, the later removal first among equals.
@@ -253,6 +254,7 @@ struct Raw {  // what op i is made from
   std::vector<std::uint32_t> verts;
   std::vector<StarTriangle> star;
   std::vector<MadeTriangle> made;
+  std::vector<Vec3> positions;
   std::vector<Fixup> fixups;
   std::vector<Link> links;
 };
@@ -276,7 +278,8 @@ class RecordChunks {
     p += sizeof head;
     p = get(p, r.verts, head.vertices);
     p = get(p, r.star, head.star);
-    get(p, r.made, head.made);
+    p = get(p, r.made, head.made);
+    get(p, r.positions, head.positions);
   }
 
  private:
@@ -334,14 +337,23 @@ class OpMaker {
 
   // Fills the op's vertices (`first` introduced, then the rest of F's by id; R^0 introduces
   // them all) and fragment. `vs` is the caller's scratch: the op's vertex ids, the `first.size()`
-  // introduced ones, then the rest sorted.
+  // introduced ones, then the rest sorted. `positions`: the vertices' coordinates by id, or
+  // empty (from `position`).
   void fill(Op& op, std::span<const std::uint32_t> first, std::span<const StarTriangle> frag,
-            std::vector<std::uint32_t>& vs) const {
+            std::vector<std::uint32_t>& vs, std::span<const Vec3> positions = {}) const {
     const bool base_op = op.id == kBaseOp;
     vs.clear();
     for (const StarTriangle& t : frag) vs.insert(vs.end(), t.v.begin(), t.v.end());
     std::sort(vs.begin(), vs.end());
     vs.erase(std::unique(vs.begin(), vs.end()), vs.end());
+    if (!positions.empty() && positions.size() != vs.size())
+      throw_internal("op assembly: a record's positions do not match its star's vertices");
+    thread_local std::vector<std::uint32_t> sorted;
+    if (!positions.empty()) sorted = vs;
+    auto at = [&](std::uint32_t v) {
+      if (positions.empty()) return position_(v);
+      return positions[std::lower_bound(sorted.begin(), sorted.end(), v) - sorted.begin()];
+    };
     if (!base_op) {
       for (std::uint32_t v : first) {
         const auto it = std::lower_bound(vs.begin(), vs.end(), v);
@@ -353,7 +365,7 @@ class OpMaker {
     }
     op.new_vertex_count = static_cast<std::uint32_t>(base_op ? vs.size() : first.size());
     op.vertices.reserve(vs.size());
-    for (std::uint32_t v : vs) op.vertices.push_back({VertexId(v), position_(v)});
+    for (std::uint32_t v : vs) op.vertices.push_back({VertexId(v), at(v)});
     op.fragment.resize(frag.size());
     op.children.reserve(frag.size());
     for (std::size_t i = 0; i < frag.size(); ++i) {
@@ -374,7 +386,7 @@ class OpMaker {
   std::uint64_t make(std::uint32_t id, const Raw& r, Op& op, std::vector<std::uint32_t>& vs,
                      std::vector<std::pair<std::uint32_t, std::uint32_t>>& owner) const {
     op.id = OpId(id);
-    fill(op, r.verts, r.star, vs);
+    fill(op, r.verts, r.star, vs, r.positions);
     op.error = err_[r.k];
     op.birth_res = birth(r.k);
     owners(r, owner);
@@ -649,6 +661,13 @@ const AssemblyStats& OpAssembler::stats() const {
 std::uint32_t OpAssembler::add_removal(std::span<const std::uint32_t> vertices,
                                        std::span<const StarTriangle> star,
                                        std::span<const MadeTriangle> made, double error) {
+  return add_removal(vertices, star, made, error, {});
+}
+
+std::uint32_t OpAssembler::add_removal(std::span<const std::uint32_t> vertices,
+                                       std::span<const StarTriangle> star,
+                                       std::span<const MadeTriangle> made, double error,
+                                       std::span<const Vec3> star_positions) {
   State& s = *s_;
   if (s.finished) throw_internal("op assembly: add_removal() after finish()");
   if (s.err.size() >= kNone - 1) throw_internal("op assembly: more than 2^32 - 2 removals");
@@ -685,13 +704,14 @@ std::uint32_t OpAssembler::add_removal(std::span<const std::uint32_t> vertices,
   s.err.push_back(e);
   std::vector<std::uint8_t>& r = s.record;
   r.clear();
-  const SpoolHead head{static_cast<std::uint32_t>(vertices.size()),
-                       static_cast<std::uint32_t>(star.size()),
-                       static_cast<std::uint32_t>(made.size()), 0};
+  const SpoolHead head{
+      static_cast<std::uint32_t>(vertices.size()), static_cast<std::uint32_t>(star.size()),
+      static_cast<std::uint32_t>(made.size()), static_cast<std::uint32_t>(star_positions.size())};
   put(r, &head, 1);
   put(r, vertices.data(), vertices.size());
   put(r, star.data(), star.size());
   put(r, made.data(), made.size());
+  put(r, star_positions.data(), star_positions.size());
   s.order->add({e, k, static_cast<std::uint32_t>(r.size()), s.spool.count()});
   s.spool.append(r.data(), r.size());
   ++s.stats.removals;

@@ -90,13 +90,20 @@ class OpAssembler {
   std::uint32_t add_removal(std::span<const std::uint32_t> vertices,
                             std::span<const StarTriangle> star, std::span<const MadeTriangle> made,
                             double error);
+  /// The same, with the coordinates of every vertex of `star`, in increasing order of vertex id
+  /// (each once): they ride with the removal's record, and finish() makes its op with them
+  /// instead of calling `position` (a builder that keeps no table of positions).
+  std::uint32_t add_removal(std::span<const std::uint32_t> vertices,
+                            std::span<const StarTriangle> star, std::span<const MadeTriangle> made,
+                            double error, std::span<const Vec3> star_positions);
   std::uint64_t removals() const;
   /// err(k) as the order uses it: k's own bound raised to its children's.
   double error(std::uint32_t k) const;
 
   /// Hands R^0 (the triangles `base`, alive after the last removal, in this order) and then every
   /// op, in id order, to `sink`. info.err0 is raised to the largest err(k) and info.err_final
-  /// capped by it. `position` gives a vertex's coordinates. Call once.
+  /// capped by it. `position` gives a vertex's coordinates (R^0's, and those of the ops added
+  /// without positions). Call once.
   void finish(CrmrInfo info, std::span<const StarTriangle> base,
               const std::function<Vec3(std::uint32_t)>& position, OpSink& sink);
   const AssemblyStats& stats() const;

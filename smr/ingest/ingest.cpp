@@ -236,6 +236,7 @@ struct Run {
     auto opt = block_options<BlockPmOptions>();
     opt.allow_self_intersections = options.allow_self_intersections;
     opt.face_sort_bytes = shares.face_sort_bytes;
+    opt.leaf_triangles = shares.leaf_triangles;
     stream(t0, BlockPmReport{},
            [&](OpSink& sink, BlockPmStats& st) { build_block_pm(*mesh, sink, opt, &st); });
   }

@@ -22,6 +22,7 @@ MemoryShares divide(const MemoryBudget& budget, IngestPath path) {
   } else if (path == IngestPath::kBlockPm) {
     s.assembly_sort_bytes = pm.assembly_sort_bytes;
     s.face_sort_bytes = pm.face_sort_bytes;
+    s.leaf_triangles = pm.leaf_triangles;
   }
   const std::uint64_t m = budget.total_bytes;
   if (m == 0 || (path != IngestPath::kBlockTin && path != IngestPath::kBlockPm)) return s;
@@ -35,6 +36,8 @@ MemoryShares divide(const MemoryBudget& budget, IngestPath path) {
   } else {
     s.face_sort_bytes = m / 8;
     s.assembly_sort_bytes = m / 8;
+    s.leaf_triangles = std::uint64_t{4096};
+    while (s.leaf_triangles < 65536 && s.leaf_triangles * 2 * 8192 <= m) s.leaf_triangles *= 2;
   }
   return s;
 }

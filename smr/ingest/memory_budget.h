@@ -29,6 +29,7 @@ struct MemoryShares {
   std::uint64_t writer_sort_bytes = 0;     // WriteOptions::sort_bytes
   std::uint64_t assembly_sort_bytes = 0;   // BlockTinOptions / BlockPmOptions::assembly_sort_bytes
   std::uint64_t face_sort_bytes = 0;       // BlockPmOptions::face_sort_bytes
+  std::uint64_t leaf_triangles = 0;        // BlockPmOptions::leaf_triangles
   std::uint64_t exact_window_samples = 0;  // BlockTinOptions::exact_window_samples
   std::uint64_t raster_cache_bytes = 0;    // BlockTinOptions::raster_cache_bytes
   /// The block TIN builder's records (BlockTinStats::record_bytes) are expected to stay within
@@ -55,10 +56,15 @@ inline constexpr std::uint64_t kExactWindowBytesPerSample = 10;
 ///     assembly_sort_bytes  M/2, at least 16 MiB: the final assembly's sorts (op_assembly.h:
 ///                                two at a time, a quarter of it each; record chunks an eighth)
 ///     record_bytes         M/2   what the build records (~64 bytes a triangle made) may take
-///   kBlockPm (a PLY by octree blocks; the rest of M holds the vertices, 32 bytes each, the
-///   assembler's 16 bytes a collapse, the blocks being simplified and the writer's batch)
-///     face_sort_bytes      M/8   the triangles' sort by octree leaf cell
+///   kBlockPm (a PLY by octree blocks; the rest of M holds the blocks being simplified, the
+///   writer's batch and the assembler's 16 bytes a collapse; no table of vertices)
+///     face_sort_bytes      M/8   the input's regrouping by leaf cell (block_input.h): its
+///                                sorts and its cache of vertex pages, two of them at a time, a
+///                                half of it each
 ///     assembly_sort_bytes  M/8   the assembly's sorts, as above
+///     leaf_triangles       M/8192 rounded down to a power of 2, in [4096, 65536]: a block
+///                                being simplified takes ~300 bytes a triangle, and the threads'
+///                                leaves and a parent of 8 leaves' worth are alive at once
 ///
 /// Without a budget every share is its option's default (for kBlockTin the raster cache is left
 /// as the reader has it, 0, and there is no record check). The in-core paths take only the

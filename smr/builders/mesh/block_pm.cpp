@@ -93,28 +93,38 @@ BlockPmBuilder::BlockPmBuilder(const MeshStream& mesh, const BlockPmOptions& opt
 
 void BlockPmBuilder::run(OpSink& sink) {
   const auto t0 = Clock::now();
-  read_vertices();
+  // The three sorts of the input and the vertex cache share face_sort_bytes (two sorts and the
+  // cache are alive at once).
+  BlockInputOptions io;
+  io.tmp_dir = opt_.tmp_dir;
+  io.leaf_triangles = opt_.leaf_triangles;
+  io.sort_bytes = opt_.face_sort_bytes / 2;
+  io.vertex_cache_bytes = opt_.face_sort_bytes / 2;
+  auto input = std::make_unique<BlockInput>(mesh_, io);
+  box_ = input->box();
+  side_ = input->side();
+  levels_ = input->levels();
+  referenced_box_ = input->referenced_box();
+  referenced_ = input->referenced();
+  stats_.vertices = input->vertices();
+  stats_.triangles = input->triangles();
+  stats_.levels = levels_;
+  pending_.resize(levels_ + 1);
+  pending_code_.assign(levels_ + 1, 0);
   AssemblyOptions ao;
   ao.tmp_dir = opt_.tmp_dir;
   ao.sort_bytes = opt_.assembly_sort_bytes;
   ao.threads = opt_.threads;
   ao.progress = [this](double f) { report(0.9 + 0.1 * f); };
   assembler_ = std::make_unique<OpAssembler>(ao);
-  auto faces =
-      std::make_unique<storage::ExternalSorter<FaceRecord>>(opt_.tmp_dir, opt_.face_sort_bytes);
-  sort_faces(*faces);
   stats_.seconds_sort = seconds_since(t0);
   const auto t1 = Clock::now();
-  simplify_leaves(*faces);
-  std::unordered_set<std::uint32_t>().swap(leaf_cells_);
-  stats_.temp_bytes += faces->spilled_bytes();
-  faces.reset();
+  simplify_leaves(*input);
+  stats_.temp_bytes += input->temp_bytes();
+  input.reset();
   const auto t_tail = Clock::now();
   for (int l = 0; l < levels_; ++l) flush(l);
   stats_.seconds_tail = seconds_since(t_tail);
-  // The octree spans are done with (the root locks nothing): the assembly may use the room.
-  std::vector<std::uint32_t>().swap(vmin_);
-  std::vector<std::uint32_t>().swap(vmax_);
   if (pending_[levels_].size() != 1) throw_internal("block PM: the root block is missing");
   BlockState root = std::move(pending_[levels_].front());
   stats_.seconds_blocks = seconds_since(t1);
@@ -130,37 +140,37 @@ void BlockPmBuilder::report(double f) const {
 // Leaf blocks are read in Morton order, simplified on the workers and handed over in order
 // (parents are made as their last child is handed over, on this thread, while the workers go
 // on with the next leaves): the database does not depend on the number of threads.
-void BlockPmBuilder::simplify_leaves(storage::ExternalSorter<FaceRecord>& faces) {
+void BlockPmBuilder::simplify_leaves(BlockInput& input) {
   struct Leaf {
-    std::uint32_t cell = 0;
-    std::vector<std::array<std::uint32_t, 3>> faces;
+    LeafInput in;
     BlockState state;
     SimplifiedBlock done;
   };
-  FaceRecord f;
-  bool more = faces.next(f);
   const unsigned threads = thread_count(opt_.threads);
   ordered_pipeline(
-      leaf_cells_.size(), threads, threads + 1,
+      input.leaf_cells(), threads, threads + 1,
       [&](std::size_t) {
-        if (!more) throw_internal("block PM: fewer leaf blocks than cells counted");
         auto leaf = std::make_unique<Leaf>();
-        leaf->cell = f.cell;
-        for (; more && f.cell == leaf->cell; more = faces.next(f)) leaf->faces.push_back(f.v);
+        if (!input.next_leaf(leaf->in))
+          throw_internal("block PM: fewer leaf blocks than cells counted");
         return leaf;
       },
       [&](Leaf& leaf) {
-        reject_duplicate_faces(leaf.faces);
-        leaf.state = leaf_state(leaf.faces);
+        reject_duplicate_faces(leaf.in.faces);
+        leaf.state = leaf_state(leaf.in);
         leaf.done = compute(0, leaf.state);
       },
       [&](Leaf& leaf, std::size_t) {
         for (BlockTriangle& t : leaf.state.tris) t.id = next_tri_++;
         ++stats_.leaf_blocks;
-        push(0, leaf.cell, commit(std::move(leaf.state), std::move(leaf.done)));
-        report(0.9 * double(leaf_done_ += leaf.faces.size()) / double(stats_.triangles));
+        const std::size_t faces = leaf.in.faces.size();
+        const std::uint32_t cell = leaf.in.cell;
+        leaf.in = LeafInput();
+        push(0, cell, commit(std::move(leaf.state), std::move(leaf.done)));
+        report(0.9 * double(leaf_done_ += faces) / double(stats_.triangles));
       });
-  if (more) throw_internal("block PM: more leaf blocks than cells counted");
+  LeafInput rest;
+  if (input.next_leaf(rest)) throw_internal("block PM: more leaf blocks than cells counted");
 }
 
 // Two faces on the same three vertices (in either orientation: a "pillow" is a closed surface
@@ -180,87 +190,33 @@ void BlockPmBuilder::reject_duplicate_faces(
               "--memory) with --repair, which drops duplicates");
 }
 
-void BlockPmBuilder::read_vertices() {
-  pos_.reserve(mesh_.vertex_count());
-  mesh_.vertices([&](std::span<const Vec3> batch) {
-    for (const Vec3& p : batch) {
-      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
-        throw_input("mesh '" + mesh_.name() + "': vertex " + std::to_string(pos_.size()) +
-                    " has a coordinate that is not finite");
-      pos_.push_back(p);
-      box_.add(p);
-    }
-  });
-  if (pos_.size() >= kNone) throw_input("mesh '" + mesh_.name() + "': too many vertices");
-  stats_.vertices = pos_.size();
-}
-
-// Leaf cells: the bounding cube split 2^levels_ times per axis, about leaf_triangles each.
-void BlockPmBuilder::sort_faces(storage::ExternalSorter<FaceRecord>& faces) {
-  const std::uint64_t nt = mesh_.triangle_count();
-  if (nt == 0) throw_input("mesh '" + mesh_.name() + "' has no triangles");
-  levels_ = 0;
-  while (levels_ < 20 && (std::uint64_t{1} << (3 * levels_)) * opt_.leaf_triangles < nt) ++levels_;
-  const Vec3 ext = box_.hi - box_.lo;
-  side_ = std::max({ext.x, ext.y, ext.z, 1e-300});
-  const double cells = double(std::uint64_t{1} << levels_);
-  vmin_.assign(pos_.size(), ~std::uint32_t{0});
-  vmax_.assign(pos_.size(), 0);
-  std::uint64_t index = 0;
-  std::uint32_t last_code = 0;
-  mesh_.triangles([&](std::span<const std::array<std::uint32_t, 3>> batch) {
-    for (const auto& t : batch) {
-      for (std::uint32_t v : t) {
-        if (v >= pos_.size())
-          throw_input("mesh '" + mesh_.name() + "': triangle " + std::to_string(index) +
-                      " names vertex " + std::to_string(v) + ", past the last (" +
-                      std::to_string(pos_.size()) + " vertices)");
-      }
-      const Vec3 c = (pos_[t[0]] + pos_[t[1]] + pos_[t[2]]) / 3.0;
-      std::uint32_t code = 0;
-      for (int a = 0; a < 3; ++a) {
-        const double u = (c[a] - box_.lo[a]) / side_ * cells;
-        const auto k = static_cast<std::uint64_t>(std::clamp(u, 0.0, cells - 1.0));
-        code |= static_cast<std::uint32_t>(spread3(k) << a);
-      }
-      for (std::uint32_t v : t) {
-        vmin_[v] = std::min(vmin_[v], code);
-        vmax_[v] = std::max(vmax_[v], code);
-      }
-      faces.add({code, t});
-      if (index == 0 || code != last_code) leaf_cells_.insert(code);  // runs share a cell
-      last_code = code;
-      ++index;
-    }
-  });
-  stats_.triangles = index;
-  stats_.levels = levels_;
-  for (std::uint32_t v = 0; v < pos_.size(); ++v) {
-    if (vmax_[v] >= vmin_[v]) {
-      referenced_box_.add(pos_[v]);
-      ++referenced_;
-    }
-  }
-  pending_.resize(levels_ + 1);
-  pending_code_.assign(levels_ + 1, 0);
-}
-
-bool BlockPmBuilder::locked_at(std::uint32_t v, int level) const {
-  return level < levels_ && (vmin_[v] >> (3 * level)) != (vmax_[v] >> (3 * level));
+// A vertex is locked at `level` while its triangles span more than one block of the level.
+bool BlockPmBuilder::locked_at(const BlockVertex& v, int level) const {
+  return level < levels_ && (v.lo >> (3 * level)) != (v.hi >> (3 * level));
 }
 
 // A leaf's triangles (their ids are given when the leaf is handed over) and vertex quadrics.
-BlockState BlockPmBuilder::leaf_state(const std::vector<std::array<std::uint32_t, 3>>& leaf) const {
+BlockState BlockPmBuilder::leaf_state(const LeafInput& leaf) const {
   BlockState b;
-  std::unordered_map<std::uint32_t, Quadric> quads;
-  for (const auto& t : leaf) {
-    b.tris.push_back({t, 0.0, kNone, 0});
-    const Quadric q = face_quadric(pos_[t[0]], pos_[t[1]], pos_[t[2]]);
-    for (std::uint32_t v : t) quads[v] += q;
+  b.verts.resize(leaf.verts.size());
+  for (std::size_t i = 0; i < leaf.verts.size(); ++i) {
+    const LeafVertex& v = leaf.verts[i];
+    b.verts[i] = {v.id, v.lo, v.hi, v.pos, Quadric()};
   }
-  b.quads.assign(quads.begin(), quads.end());
-  std::sort(b.quads.begin(), b.quads.end(),
-            [](const auto& x, const auto& y) { return x.first < y.first; });
+  auto at = [&](std::uint32_t v) -> BlockVertex& {
+    const auto it =
+        std::lower_bound(b.verts.begin(), b.verts.end(), v,
+                         [](const BlockVertex& x, std::uint32_t id) { return x.id < id; });
+    if (it == b.verts.end() || it->id != v)
+      throw_internal("block PM: a leaf triangle's vertex is not among the leaf's vertices");
+    return *it;
+  };
+  for (const auto& t : leaf.faces) {
+    b.tris.push_back({t, 0.0, kNone, 0});
+    std::array<BlockVertex*, 3> c{&at(t[0]), &at(t[1]), &at(t[2])};
+    const Quadric q = face_quadric(c[0]->pos, c[1]->pos, c[2]->pos);
+    for (BlockVertex* v : c) v->quad += q;
+  }
   return b;
 }
 
@@ -277,19 +233,19 @@ void BlockPmBuilder::push(int level, std::uint64_t code, BlockState b) {
 void BlockPmBuilder::flush(int level) {
   if (pending_[level].empty()) return;
   BlockState merged;
-  std::vector<std::pair<std::uint32_t, Quadric>> quads;
+  std::vector<BlockVertex> verts;
   for (BlockState& b : pending_[level]) {
     merged.tris.insert(merged.tris.end(), b.tris.begin(), b.tris.end());
-    quads.insert(quads.end(), b.quads.begin(), b.quads.end());
+    verts.insert(verts.end(), b.verts.begin(), b.verts.end());
   }
   pending_[level].clear();
-  std::stable_sort(quads.begin(), quads.end(),
-                   [](const auto& x, const auto& y) { return x.first < y.first; });
-  for (const auto& [v, q] : quads) {
-    if (!merged.quads.empty() && merged.quads.back().first == v) {
-      merged.quads.back().second += q;
+  std::stable_sort(verts.begin(), verts.end(),
+                   [](const BlockVertex& x, const BlockVertex& y) { return x.id < y.id; });
+  for (const BlockVertex& v : verts) {
+    if (!merged.verts.empty() && merged.verts.back().id == v.id) {
+      merged.verts.back().quad += v.quad;
     } else {
-      merged.quads.push_back({v, q});
+      merged.verts.push_back(v);
     }
   }
   push(level + 1, pending_code_[level] >> 3, simplify(level + 1, std::move(merged)));
@@ -309,8 +265,8 @@ BlockState BlockPmBuilder::simplify(int level, BlockState in) {
 // A block simplified, not yet handed over: reads only what stays fixed while blocks are made
 // (positions, octree spans, options), so blocks of a level run on several threads.
 SimplifiedBlock BlockPmBuilder::compute(int level, const BlockState& in) const {
-  const std::size_t n = in.quads.size();
-  std::vector<std::uint32_t> gid(n);
+  const std::size_t n = in.verts.size();
+  std::vector<std::uint32_t> gid(n), src(n);
   std::vector<Vec3> pos(n);
   std::vector<Quadric> quad(n);
   std::vector<std::uint8_t> locked(n), constrain(n);
@@ -319,17 +275,18 @@ SimplifiedBlock BlockPmBuilder::compute(int level, const BlockState& in) const {
   // Local vertices in Morton order (as the in-core builder's): neighbours close in memory.
   std::vector<std::pair<std::uint64_t, std::uint32_t>> order(n);
   for (std::uint32_t i = 0; i < n; ++i) {
-    order[i] = {morton_code(pos_[in.quads[i].first], box_.lo, Vec3(side_)), i};
+    order[i] = {morton_code(in.verts[i].pos, box_.lo, Vec3(side_)), i};
   }
   std::sort(order.begin(), order.end());
   for (std::uint32_t i = 0; i < n; ++i) {
-    const auto& [v, q] = in.quads[order[i].second];
-    gid[i] = v;
-    pos[i] = pos_[v];
-    quad[i] = q;
+    const BlockVertex& v = in.verts[order[i].second];
+    gid[i] = v.id;
+    src[i] = order[i].second;
+    pos[i] = v.pos;
+    quad[i] = v.quad;
     locked[i] = locked_at(v, level) ? 1 : 0;
     constrain[i] = level == 0 || locked_at(v, level - 1) ? 1 : 0;
-    local.emplace(v, i);
+    local.emplace(v.id, i);
   }
   std::vector<Tri> tris;
   tris.reserve(in.tris.size());
@@ -345,6 +302,7 @@ SimplifiedBlock BlockPmBuilder::compute(int level, const BlockState& in) const {
              mesh_.name(), gid);
   out.rounds = simplify_block(level, *out.s);
   out.gid = std::move(gid);
+  out.src = std::move(src);
   return out;
 }
 
@@ -381,26 +339,63 @@ BlockState BlockPmBuilder::commit(BlockState in, SimplifiedBlock done) {
   stats_.max_block_triangles = std::max<std::uint64_t>(stats_.max_block_triangles, in.tris.size());
   stats_.rounds += done.rounds;
   const PmMesh& m = done.s->mesh;
-  const CollapseLog& log = done.s->log;
   const std::vector<std::uint32_t>& gid = done.gid;
   const std::size_t n = gid.size();
-  const std::uint32_t k0 = static_cast<std::uint32_t>(assembler_->removals());
   const std::size_t n_in = in.tris.size();
   std::vector<std::uint32_t> id_of(m.tris.size()), creator_of(m.tris.size());
   for (std::size_t t = 0; t < n_in; ++t) {
     id_of[t] = in.tris[t].id;
     creator_of[t] = in.tris[t].creator;
   }
+  add_removals(*done.s, gid, id_of, creator_of);
+  BlockState out;
+  std::vector<std::uint8_t> used(n, 0);
+  for (std::uint32_t t = 0; t < m.tris.size(); ++t) {
+    const Tri& x = m.tris[t];
+    if (x.destroyer != kNone) continue;
+    out.tris.push_back({{gid[x.v[0]], gid[x.v[1]], gid[x.v[2]]}, x.e, creator_of[t], id_of[t]});
+    for (std::uint32_t v : x.v) used[v] = 1;
+  }
+  std::vector<std::uint32_t> kept;  // local vertices handed over, by global id
+  for (std::uint32_t i = 0; i < n; ++i) {
+    if (used[i]) kept.push_back(i);
+  }
+  std::sort(kept.begin(), kept.end(),
+            [&](std::uint32_t a, std::uint32_t b) { return gid[a] < gid[b]; });
+  out.verts.reserve(kept.size());
+  for (std::uint32_t i : kept) {
+    out.verts.push_back(in.verts[done.src[i]]);
+    out.verts.back().quad = m.quad[i];
+  }
+  return out;
+}
+
+// The block's collapses to the assembler, each with its star's positions (by global id).
+// id_of / creator_of: per local triangle, its global id and the removal that made it.
+void BlockPmBuilder::add_removals(const Simplification& s, const std::vector<std::uint32_t>& gid,
+                                  std::vector<std::uint32_t>& id_of,
+                                  std::vector<std::uint32_t>& creator_of) {
+  const PmMesh& m = s.mesh;
+  const CollapseLog& log = s.log;
+  const std::uint32_t k0 = static_cast<std::uint32_t>(assembler_->removals());
   std::vector<OpAssembler::StarTriangle> star;
   std::vector<OpAssembler::MadeTriangle> made;
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> corners;  // global, local
+  std::vector<Vec3> positions;
   for (std::uint32_t c = 0; c < log.collapses.size(); ++c) {
     const Collapse& col = log.collapses[c];
     star.clear();
+    corners.clear();
     for (std::uint32_t i = col.old_begin; i < col.old_end; ++i) {
       const std::uint32_t t = log.old_tris[i];
       const Tri& x = m.tris[t];
       star.push_back({{gid[x.v[0]], gid[x.v[1]], gid[x.v[2]]}, id_of[t], creator_of[t], false});
+      for (std::uint32_t v : x.v) corners.push_back({gid[v], v});
     }
+    std::sort(corners.begin(), corners.end());
+    corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
+    positions.clear();
+    for (const auto& [g, v] : corners) positions.push_back(m.pos[v]);
     made.clear();
     for (std::uint32_t i = col.new_begin; i < col.new_end; ++i) {
       const std::uint32_t t = log.new_tris[i];
@@ -410,22 +405,10 @@ BlockState BlockPmBuilder::commit(BlockState in, SimplifiedBlock done) {
       made.push_back({{gid[x.v[0]], gid[x.v[1]], gid[x.v[2]]}, id_of[t], false});
     }
     const std::uint32_t removed = gid[col.removed];
-    assembler_->add_removal(std::span(&removed, 1), star, made, col.error);
+    assembler_->add_removal(std::span(&removed, 1), star, made, col.error, positions);
   }
   stats_.collapses += log.collapses.size();
-  stats_.rejected_intersection += done.s->stats.rejected_intersection;
-  BlockState out;
-  std::vector<std::uint8_t> used(n, 0);
-  for (std::uint32_t t = 0; t < m.tris.size(); ++t) {
-    const Tri& x = m.tris[t];
-    if (x.destroyer != kNone) continue;
-    out.tris.push_back({{gid[x.v[0]], gid[x.v[1]], gid[x.v[2]]}, x.e, creator_of[t], id_of[t]});
-    for (std::uint32_t v : x.v) used[v] = 1;
-  }
-  for (std::uint32_t i = 0; i < n; ++i) {
-    if (used[i]) out.quads.push_back({gid[i], m.quad[i]});
-  }
-  return out;
+  stats_.rejected_intersection += s.stats.rejected_intersection;
 }
 
 void BlockPmBuilder::finish(const BlockState& root, OpSink& sink) {
@@ -436,7 +419,6 @@ void BlockPmBuilder::finish(const BlockState& root, OpSink& sink) {
                  " tolerance-fraction=" + std::to_string(opt_.tolerance_fraction) +
                  " max-normal-turn=" + std::to_string(opt_.max_normal_turn_degrees) +
                  " boundary-weight=" + std::to_string(opt_.boundary_weight);
-  std::vector<std::uint8_t> used(pos_.size(), 0);
   std::vector<OpAssembler::StarTriangle> base;
   for (const BlockTriangle& t : root.tris) {
     base.push_back({t.v, t.id, t.creator, false});
@@ -448,14 +430,19 @@ void BlockPmBuilder::finish(const BlockState& root, OpSink& sink) {
   }
   info.bounds = referenced_box_;
   info.vertex_count = referenced_;
-  for (const BlockTriangle& t : root.tris) {
-    for (std::uint32_t v : t.v) used[v] = 1;
-  }
   stats_.base_triangles = base.size();
-  stats_.base_vertices = static_cast<std::uint64_t>(std::count(used.begin(), used.end(), 1));
+  stats_.base_vertices = root.verts.size();  // commit() hands over the used ones only
   info.err_final = 0.0;
-  assembler_->finish(
-      info, base, [this](std::uint32_t v) { return pos_[v]; }, sink);
+  // Every op's positions ride with its record; R^0's are the root's vertices.
+  const auto position = [&root](std::uint32_t v) {
+    const auto it =
+        std::lower_bound(root.verts.begin(), root.verts.end(), v,
+                         [](const BlockVertex& x, std::uint32_t id) { return x.id < id; });
+    if (it == root.verts.end() || it->id != v)
+      throw_internal("block PM: a vertex without a position: not in the root block");
+    return it->pos;
+  };
+  assembler_->finish(info, base, position, sink);
   stats_.dag_height = assembler_->stats().dag_height;
   stats_.seconds_join = assembler_->stats().seconds_join;
   stats_.seconds_emit = assembler_->stats().seconds_emit;
