@@ -248,7 +248,8 @@ int main(int argc, char** argv) {
   app.add_option("--tau", tau, "VDPM's tolerance for the equal-error rows (px)");
   app.add_option("--fov", fov, "Vertical field of view (degrees)");
   app.add_option("--distance", dist, "Eye distance in model radii (3-D meshes)");
-  app.add_option("--write-terrain", write_terrain, "Write the DEM --dem as a mesh (.ply or .obj) and exit");
+  app.add_option("--write-terrain", write_terrain,
+                 "Write the DEM --dem as a mesh (.ply or .obj) and exit");
   app.add_option("--dem", dem_path, "The DEM for --write-terrain");
   app.add_option("--step", step, "Keep every step-th DEM sample (--write-terrain)");
   CLI11_PARSE(app, argc, argv);
