@@ -168,6 +168,22 @@ class Database::Prefetcher {
     std::lock_guard lock(mutex_);
     readers_.erase(std::find(readers_.begin(), readers_.end(), page));
   }
+  // reading() .. done() around a reader's own read of a page; nothing without a prefetcher.
+  class Reading {
+   public:
+    Reading(Prefetcher* p, std::uint64_t page) : p_(p), page_(page) {
+      if (p_ != nullptr) p_->reading(page_);
+    }
+    Reading(const Reading&) = delete;
+    Reading& operator=(const Reading&) = delete;
+    ~Reading() {
+      if (p_ != nullptr) p_->done(page_);
+    }
+
+   private:
+    Prefetcher* p_;
+    std::uint64_t page_;
+  };
 
  private:
   void run(const std::stop_token& stop) {
@@ -304,17 +320,8 @@ const Database::CacheItem& Database::memoized(std::uint64_t kind, Table table,
   Memo::Slot& m = memo(kind).slot(id);
   const std::uint64_t instance = instance_.load(std::memory_order_relaxed);
   if (m.instance != instance || m.key != key) {
-    if (kind == 1 && prefetcher_ != nullptr) {
-      prefetcher_->reading(id);
-      struct Done {
-        Prefetcher& p;
-        std::uint64_t page;
-        ~Done() { p.done(page); }
-      } done{*prefetcher_, id};
-      m = Memo::Slot{instance, key, fetch(kind, table, id)};
-    } else {
-      m = Memo::Slot{instance, key, fetch(kind, table, id)};
-    }
+    const Prefetcher::Reading reading(kind == 1 ? prefetcher_.get() : nullptr, id);
+    m = Memo::Slot{instance, key, fetch(kind, table, id)};
   }
   return *m.item;
 }
