@@ -101,7 +101,7 @@ void put(std::vector<std::uint8_t>& out, const T* p, std::size_t n) {
 template <class T>
 const std::uint8_t* get(const std::uint8_t* in, std::vector<T>& out, std::size_t n) {
   out.resize(n);
-  std::memcpy(out.data(), in, n * sizeof(T));
+  if (n != 0) std::memcpy(out.data(), in, n * sizeof(T));
   return in + n * sizeof(T);
 }
 

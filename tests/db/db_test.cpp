@@ -172,7 +172,9 @@ TEST(Database, PrefetchingChangesNothingAndDecodesEachPageOnce) {
     const std::size_t small = off.stats.cache.bytes_decoded / 8;
     const Run small_off = run(false, small, fronts), small_on = run(true, small, fronts);
     EXPECT_EQ(small_on.e.triangles, off.e.triangles);
-    EXPECT_LE(small_on.stats.pages_read, small_off.stats.pages_read + w.pages / 10);
+    // Timing decides which prefetched page a reader evicts, so allow a tenth more reads than
+    // without prefetching (a lookahead past the cache would thrash: twice as many or more).
+    EXPECT_LE(small_on.stats.pages_read * 10, small_off.stats.pages_read * 11);
   }
 }
 
