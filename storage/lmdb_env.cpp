@@ -19,7 +19,6 @@
 #include <unistd.h>
 
 #include "base/error.h"
-#include "storage/mapped_file.h"
 
 namespace smr::storage {
 namespace {
@@ -905,6 +904,58 @@ const std::uint8_t* DatabaseWriter::mapping_of_written() const {
   return map;
 }
 
+namespace {
+
+constexpr std::size_t kTrimBytes = std::size_t{2} << 20;
+
+// Moves everything read from `in` to `out` until end of file, dropping `map`'s pages every
+// kTrimBytes moved. After a write error it keeps draining `in` (so the writer never blocks on a
+// full pipe) and returns the error; 0 on success.
+int pump_bytes(int in, int out, const std::uint8_t* map, std::size_t map_bytes) {
+  std::vector<std::uint8_t> buffer(std::size_t{1} << 20);
+  int error = 0;
+  std::size_t since_trim = 0;
+  for (;;) {
+    const ssize_t got = ::read(in, buffer.data(), buffer.size());
+    if (got < 0 && errno == EINTR) continue;
+    if (got < 0) return errno;
+    if (got == 0) break;
+    for (std::size_t done = 0; error == 0 && done < static_cast<std::size_t>(got);) {
+      const ssize_t put = ::write(out, buffer.data() + done, static_cast<std::size_t>(got) - done);
+      if (put < 0 && errno == EINTR) continue;
+      if (put < 0) error = errno;
+      if (put > 0) done += static_cast<std::size_t>(put);
+    }
+    since_trim += static_cast<std::size_t>(got);
+    if (map != nullptr && since_trim >= kTrimBytes) {
+      (void)::madvise(const_cast<std::uint8_t*>(map), map_bytes, MADV_DONTNEED);  // advisory
+      since_trim = 0;
+    }
+  }
+  return error;
+}
+
+// pump_bytes, then closes `in`: a writer still writing then fails (EPIPE) instead of blocking.
+int pump(int in, int out, const std::uint8_t* map, std::size_t map_bytes) {
+  const int rc = pump_bytes(in, out, map, map_bytes);
+  ::close(in);
+  return rc;
+}
+
+}  // namespace
+
+int DatabaseWriter::copy_through_pump(void* env, int fd, const std::uint8_t* map) const {
+  int ends[2];
+  if (::pipe2(ends, O_CLOEXEC) != 0) return errno;
+  int pumped = 0;
+  std::thread mover([&] { pumped = pump(ends[0], fd, map, map_bytes_); });
+  int rc = mdb_env_copyfd2(static_cast<MDB_env*>(env), ends[1], MDB_CP_COMPACT);
+  ::close(ends[1]);  // the pump sees the end of the copy
+  mover.join();
+  if (rc == MDB_SUCCESS) rc = pumped;
+  return rc;
+}
+
 void DatabaseWriter::finish() {
   if (finished_ || env_ == nullptr) throw_internal(path_ + ": finish() called twice");
   flush();
@@ -912,14 +963,12 @@ void DatabaseWriter::finish() {
   const int fd = ::open(compact_path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) throw_io(compact_path_ + ": cannot create: " + errno_text(errno));
   // The compacting copy reads every page through LMDB's map, and mapped pages count in the
-  // process's resident set: a 2.6 GB database would show as 2.6 GB of RSS. While it runs, a
-  // thread drops the map's pages every 20 ms (they are clean file pages, faulted back in from
-  // the page cache if read again), so the writer's memory stays what its buffers hold.
-  int rc = 0;
-  {
-    const PageTrimmer trimmer(mapping_of_written(), map_bytes_);
-    rc = mdb_env_copyfd2(env, fd, MDB_CP_COMPACT);
-  }
+  // process's resident set: a 2.6 GB database would show as 2.6 GB of RSS. So the copy writes
+  // into a pipe, and a pump moves the pipe's bytes to the file, dropping the map's pages (clean
+  // file pages, faulted back in from the page cache if read again) every kTrimBytes it moves:
+  // the copy cannot read further ahead than LMDB's two write buffers and the pipe, so the
+  // mapped pages resident stay under kTrimBytes plus those whatever the machine's load.
+  int rc = copy_through_pump(env, fd, mapping_of_written());
   if (rc == MDB_SUCCESS && ::fsync(fd) != 0) rc = errno;
   if (::close(fd) != 0 && rc == MDB_SUCCESS) rc = errno;
   check(rc, compact_path_ + ": writing the compacted database");

@@ -156,6 +156,9 @@ class DatabaseWriter {
   void add(Table table, ByteView key, ByteView value, bool append);
   // Where LMDB mapped the file written so far (after a commit), or nullptr if it cannot tell.
   const std::uint8_t* mapping_of_written() const;
+  /// LMDB's compacting copy of the written database to `fd`, through a pipe whose pump drops
+  /// `map`'s pages as it goes (lmdb_env.cpp); 0 or an errno/LMDB code.
+  int copy_through_pump(void* env, int fd, const std::uint8_t* map) const;
   void flush();
   void cleanup() noexcept;
 

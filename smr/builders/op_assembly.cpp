@@ -16,6 +16,7 @@
 #include "smr/core/parallel.h"
 #include "storage/external_sort.h"
 #include "storage/record_file.h"
+#include "storage/spill_array.h"
 
 namespace smr {
 
@@ -174,6 +175,10 @@ using StarTriangle = OpAssembler::StarTriangle;
 using MadeTriangle = OpAssembler::MadeTriangle;
 constexpr std::uint32_t kNever = kNone;  // killer of a finest triangle: never replaced
 
+// The per-removal tables (storage::SpillArray: in memory, or in scratch files under a budget).
+using ErrTable = storage::SpillArray<double>;        // err(k)
+using OpTable = storage::SpillArray<std::uint32_t>;  // op id by removal, DAG depth by op
+
 // ---- the joins (finish's first part) ----
 
 // R^0's triangles join like any star (destroyer kNone = R^0): their fixups into `fixups`, their
@@ -194,23 +199,22 @@ void join_base(std::span<const StarTriangle> base, std::size_t m, RecordFile<Raw
 
 // Op ids: ranks in the order (R^0 is 0), into op_of (per removal); `ops` gets each op's record's
 // place in the spool, in id order.
-void rank_ops(UniqueSorter<OrderKey>& order, std::vector<std::uint32_t>& op_of,
-              RecordFile<OrderEntry>& ops) {
+void rank_ops(UniqueSorter<OrderKey>& order, OpTable& op_of, RecordFile<OrderEntry>& ops) {
   OrderKey o;
   std::uint32_t i = 0;
   while (order.next(o)) {
-    op_of[o.k] = ++i;
+    op_of.set(o.k, ++i);
     ops.push({o.offset, o.k, o.bytes});
   }
   ops.flush();
 }
 
-std::uint32_t op_id(const std::vector<std::uint32_t>& op_of, std::uint32_t removal) {
+std::uint32_t op_id(const OpTable& op_of, std::uint32_t removal) {
   return removal == kNone ? 0 : op_of[removal];
 }
 
 // PreF's references: the raw fixups (by removal) by op ids, sorted by op.
-void join_fixups(const RecordFile<RawFixup>& raw, const std::vector<std::uint32_t>& op_of,
+void join_fixups(const RecordFile<RawFixup>& raw, const OpTable& op_of,
                  UniqueSorter<Fixup>& fixups) {
   raw.for_each([&](const RawFixup& f) {
     fixups.add({op_of[f.creator], f.tri, op_id(op_of, f.dest), f.local});
@@ -221,8 +225,7 @@ void join_fixups(const RecordFile<RawFixup>& raw, const std::vector<std::uint32_
 // The Hypermesh links, from the edges sorted by edge. Each edge's group: the question of op i is
 // answered by the triangle across alive just before i (owner < i < killer; one at most, as
 // triangles with one directed edge live one after another).
-void join_links(EdgeSorter& edges, const std::vector<std::uint32_t>& op_of,
-                UniqueSorter<Link>& links) {
+void join_links(EdgeSorter& edges, const OpTable& op_of, UniqueSorter<Link>& links) {
   std::vector<EdgeItem> group;
   EdgeItem e;
   bool more = edges.next(e);
@@ -330,8 +333,7 @@ void finish_op(Op& op) {
 // Makes the ops from their records. Runs on the workers: everything it reads is fixed by then.
 class OpMaker {
  public:
-  OpMaker(const CrmrInfo& info, const std::vector<double>& err,
-          const std::vector<std::uint32_t>& op_of,
+  OpMaker(const CrmrInfo& info, const ErrTable& err, const OpTable& op_of,
           const std::function<Vec3(std::uint32_t)>& position)
       : info_(info), err_(err), op_of_(op_of), position_(position) {}
 
@@ -449,16 +451,18 @@ class OpMaker {
   }
 
   const CrmrInfo& info_;
-  const std::vector<double>& err_;
-  const std::vector<std::uint32_t>& op_of_;
+  const ErrTable& err_;
+  const OpTable& op_of_;
   const std::function<Vec3(std::uint32_t)>& position_;
 };
 
 // Hands the ops to the sink in id order (the calling thread), keeping each op's DAG depth.
 class InOrder {
  public:
-  InOrder(OpSink& sink, std::uint64_t ops, std::uint64_t& dag_height)
-      : sink_(sink), depth_(ops, 0), dag_height_(dag_height) {}
+  InOrder(OpSink& sink, std::uint64_t ops, OpTable depth, std::uint64_t& dag_height)
+      : sink_(sink), depth_(std::move(depth)), dag_height_(dag_height) {
+    depth_.resize(ops);
+  }
   void add(Op&& op) {
     deepen(op.id.value, op.parents);
     sink_.add(std::move(op));
@@ -471,12 +475,13 @@ class InOrder {
 
  private:
   void deepen(std::uint64_t id, std::span<const OpId> parents) {
-    std::uint32_t& d = depth_[id];
+    std::uint32_t d = 0;
     for (OpId p : parents) d = std::max(d, depth_[p.value] + 1);
+    depth_.set(id, d);
     dag_height_ = std::max<std::uint64_t>(dag_height_, d);
   }
   OpSink& sink_;
-  std::vector<std::uint32_t> depth_;
+  OpTable depth_;
   std::uint64_t& dag_height_;
 };
 
@@ -626,7 +631,14 @@ struct OpAssembler::State {
         edges(std::make_unique<EdgeSorter>(dir, budget(4), std::less<EdgeItem>{},
                                            storage::Spill::kBackground)),
         order(std::make_unique<UniqueSorter<OrderKey>>(dir, budget(4), std::less<OrderKey>{},
-                                                       storage::Spill::kBackground)) {}
+                                                       storage::Spill::kBackground)),
+        err(table<double>()) {}
+
+  // A per-removal (or per-op) table, spilled to a scratch file under options.table_bytes.
+  template <class T>
+  storage::SpillArray<T> table() const {
+    return storage::SpillArray<T>(dir, options.table_bytes / 3);
+  }
 
   AssemblyOptions options;
   std::string dir;
@@ -634,7 +646,7 @@ struct OpAssembler::State {
   RecordFile<RawFixup> fixups;
   std::unique_ptr<EdgeSorter> edges;              // filled as removals come
   std::unique_ptr<UniqueSorter<OrderKey>> order;  // filled as removals come
-  std::vector<double> err;                        // per removal
+  ErrTable err;                                   // per removal (err(k))
   std::vector<std::uint8_t> record;
   AssemblyStats stats;
   bool finished = false;
@@ -652,7 +664,8 @@ std::uint64_t OpAssembler::removals() const {
   return s_->err.size();
 }
 double OpAssembler::error(std::uint32_t k) const {
-  return s_->err.at(k);
+  if (k >= s_->err.size()) throw_internal("op assembly: error() of a removal not added");
+  return s_->err[k];
 }
 const AssemblyStats& OpAssembler::stats() const {
   return s_->stats;
@@ -731,7 +744,8 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
   join_base(base, m, s.fixups, *s.edges);
   s.spool.flush();
   s.fixups.flush();
-  std::vector<std::uint32_t> op_of(m, 0);
+  OpTable op_of = s.table<std::uint32_t>();
+  op_of.resize(m);
   RecordFile<OrderEntry> ops(s.dir);
   rank_ops(*s.order, op_of, ops);
   s.stats.scratch_bytes += s.order->spilled_bytes();
@@ -755,7 +769,7 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
   report(s.options, 0.35);
 
   double err0 = info.err0;
-  for (double e : s.err) err0 = std::max(err0, e);
+  for (std::size_t k = 0; k < m; ++k) err0 = std::max(err0, s.err[k]);
   info.err0 = err0;
   info.err_final = std::min(info.err_final, err0);
   s.stats.seconds_join = seconds_since(t0);
@@ -763,7 +777,7 @@ void OpAssembler::finish(CrmrInfo info, std::span<const StarTriangle> base,
   sink.begin(info, m + 1);
 
   const OpMaker maker(info, s.err, op_of, position);
-  InOrder out(sink, m + 1, s.stats.dag_height);
+  InOrder out(sink, m + 1, s.table<std::uint32_t>(), s.stats.dag_height);
   emit_base(maker, sink, out, base, err0);
   const std::uint64_t chunk_bytes = std::max<std::uint64_t>(s.budget(8), 1 << 16);
   s.stats.links +=

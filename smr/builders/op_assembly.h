@@ -14,12 +14,13 @@
 //    with b->a alive just before i. Triangles with one directed edge live one after another, so
 //    the alive one is the last, by owner, whose owner is below i, provided its killer is above i:
 //    a merge of every triangle's edges with every op's boundary edges, both sorted by edge.
-// Memory holds 16 bytes per removal (its err, op id and DAG depth) and the budget, never the
-// triangles: a removal's record is spooled when it is added and read back when its op is made,
-// a chunk of records at a time (an 8th of the budget, read in runs of nearby records), and the
-// ops are made on `threads` workers a batch at a time, handed to the sink in id order (to a sink
-// that encodes, OpSink::encodes, encoded by the workers and handed over as bytes).
-// The ops are the ones an in-memory replay of the ops in id order gives.
+// Memory holds 16 bytes per removal (its err, op id and DAG depth: in scratch files under
+// AssemblyOptions::table_bytes) and the budget, never the triangles: a removal's record is spooled
+// when it is added and read back when its op is made, a chunk of records at a time (an 8th of the
+// budget, read in runs of nearby records), and the ops are made on `threads` workers a batch at a
+// time, handed to the sink in id order (to a sink that encodes, OpSink::encodes, encoded by the
+// workers and handed over as bytes). The ops are the ones an in-memory replay of the ops in id
+// order gives.
 #pragma once
 
 #include <array>
@@ -41,6 +42,10 @@ struct AssemblyOptions {
   /// filled at a time, each holding a quarter of it; the records read back while the ops are made
   /// come in chunks of an eighth of it.
   std::uint64_t sort_bytes = std::uint64_t{64} << 20;
+  /// Memory of the per-removal tables (err(k), op ids, DAG depths: 16 bytes a removal): 0 keeps
+  /// them in memory; otherwise they live in scratch files with at most this many bytes of them
+  /// resident (storage::SpillArray), so the assembler's memory does not grow with the input.
+  std::uint64_t table_bytes = 0;
   /// Threads making the ops in finish() (0 = one per core); the ops do not depend on it. The
   /// `position` given to finish() is then called from several threads at once.
   unsigned threads = 1;

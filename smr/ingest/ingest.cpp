@@ -142,6 +142,7 @@ struct Run {
     BlockOptions opt;
     opt.tmp_dir = options.tmp_dir;
     opt.assembly_sort_bytes = shares.assembly_sort_bytes;
+    opt.assembly_table_bytes = shares.assembly_table_bytes;
     opt.threads = options.threads;
     opt.progress = build_progress();
     return opt;

@@ -33,9 +33,11 @@ MemoryShares divide(const MemoryBudget& budget, IngestPath path) {
     s.exact_window_samples = std::min(s.exact_window_samples, m / 4 / kExactWindowBytesPerSample);
     s.assembly_sort_bytes = std::max<std::uint64_t>(m / 2, std::uint64_t{16} << 20);
     s.record_bytes = m / 2;
+    s.assembly_table_bytes = m / 16;
   } else {
     s.face_sort_bytes = m / 8;
     s.assembly_sort_bytes = m / 8;
+    s.assembly_table_bytes = m / 8;
     s.leaf_triangles = std::uint64_t{4096};
     while (s.leaf_triangles < 65536 && s.leaf_triangles * 2 * 8192 <= m) s.leaf_triangles *= 2;
   }

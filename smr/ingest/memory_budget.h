@@ -28,6 +28,7 @@ struct MemoryShares {
   std::uint64_t writer_batch_bytes = 0;    // WriteOptions::batch_bytes
   std::uint64_t writer_sort_bytes = 0;     // WriteOptions::sort_bytes
   std::uint64_t assembly_sort_bytes = 0;   // BlockTinOptions / BlockPmOptions::assembly_sort_bytes
+  std::uint64_t assembly_table_bytes = 0;  // ... ::assembly_table_bytes
   std::uint64_t face_sort_bytes = 0;       // BlockPmOptions::face_sort_bytes
   std::uint64_t leaf_triangles = 0;        // BlockPmOptions::leaf_triangles
   std::uint64_t exact_window_samples = 0;  // BlockTinOptions::exact_window_samples
@@ -56,12 +57,15 @@ inline constexpr std::uint64_t kExactWindowBytesPerSample = 10;
 ///     assembly_sort_bytes  M/2, at least 16 MiB: the final assembly's sorts (op_assembly.h:
 ///                                two at a time, a quarter of it each; record chunks an eighth)
 ///     record_bytes         M/2   what the build records (~64 bytes a triangle made) may take
-///   kBlockPm (a PLY by octree blocks; the rest of M holds the blocks being simplified, the
-///   writer's batch and the assembler's 16 bytes a collapse; no table of vertices)
+///     assembly_table_bytes M/16  the assembly's tables of 16 bytes a removal, resident (the rest
+///                                stays in scratch files: storage::SpillArray)
+///   kBlockPm (a PLY by octree blocks; the rest of M holds the blocks being simplified and the
+///   writer's batch; no table of vertices)
 ///     face_sort_bytes      M/8   the input's regrouping by leaf cell (block_input.h): its
 ///                                sorts and its cache of vertex pages, two of them at a time, a
 ///                                half of it each
 ///     assembly_sort_bytes  M/8   the assembly's sorts, as above
+///     assembly_table_bytes M/8   the assembly's tables, as above
 ///     leaf_triangles       M/8192 rounded down to a power of 2, in [4096, 65536]: a block
 ///                                being simplified takes ~300 bytes a triangle, and the threads'
 ///                                leaves and a parent of 8 leaves' worth are alive at once

@@ -760,7 +760,8 @@ TEST(OpAssembly, SpillsToScratchFilesChangeNoOpAndGoWithTheAssembler) {
   const test::TempDir tmp("op-assembly");
   AssemblyOptions large, tiny;
   large.tmp_dir = tiny.tmp_dir = tmp.path().string();
-  tiny.sort_bytes = 4 << 10;  // the sorts spill every few hundred records
+  tiny.sort_bytes = 4 << 10;    // the sorts spill every few hundred records
+  tiny.table_bytes = 48 << 10;  // the per-removal tables live in scratch files
   int open_large = 0, open_tiny = 0;
   const Assembled a = assemble(d, large, false, [&] { open_large = open_files_in(tmp.path()); });
   EXPECT_EQ(open_files_in(tmp.path()), 0) << "scratch files outlive the assembler";
@@ -793,6 +794,7 @@ TEST(OpAssembly, ThreadCountAndAnEncodingSinkChangeNoOp) {
     AssemblyOptions opt;
     opt.threads = v.threads;
     opt.sort_bytes = v.memory;
+    if (v.memory < (1 << 20)) opt.table_bytes = 48 << 10;  // workers read spilled tables
     const Assembled run = assemble(d, opt, v.encoding);
     const std::string what = std::to_string(v.threads) + " threads" +
                              (v.encoding ? ", encoding sink" : "") + ", budget " +

@@ -114,6 +114,7 @@ void BlockPmBuilder::run(OpSink& sink) {
   AssemblyOptions ao;
   ao.tmp_dir = opt_.tmp_dir;
   ao.sort_bytes = opt_.assembly_sort_bytes;
+  ao.table_bytes = opt_.assembly_table_bytes;
   ao.threads = opt_.threads;
   ao.progress = [this](double f) { report(0.9 + 0.1 * f); };
   assembler_ = std::make_unique<OpAssembler>(ao);

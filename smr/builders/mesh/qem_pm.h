@@ -132,6 +132,9 @@ struct BlockPmOptions {
   std::uint64_t face_sort_bytes = std::uint64_t{128} << 20;
   /// Memory of the assembly's external sorts (AssemblyOptions::sort_bytes).
   std::uint64_t assembly_sort_bytes = std::uint64_t{128} << 20;
+  /// Resident memory of the assembly's per-collapse tables (AssemblyOptions::table_bytes; 0 =
+  /// in memory).
+  std::uint64_t assembly_table_bytes = 0;
   /// Scratch files' directory (empty = the system's temporary directory).
   std::string tmp_dir;
   /// Threads simplifying leaf blocks (0 = one per core); the database does not depend on it.

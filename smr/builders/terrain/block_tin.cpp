@@ -126,6 +126,7 @@ class Feeder {
     AssemblyOptions ao;
     ao.tmp_dir = opt.tmp_dir;
     ao.sort_bytes = opt.assembly_sort_bytes;
+    ao.table_bytes = opt.assembly_table_bytes;
     ao.threads = opt.threads;
     ao.progress = [&opt](double f) { report(opt, 0.9 + 0.1 * f); };
     assembler_ = std::make_unique<OpAssembler>(ao);

@@ -72,6 +72,9 @@ struct BlockTinOptions {
   std::uint64_t raster_cache_bytes = 0;
   /// Memory of the final assembly's external sorts (AssemblyOptions::sort_bytes).
   std::uint64_t assembly_sort_bytes = std::uint64_t{256} << 20;
+  /// Resident memory of the assembly's per-removal tables (AssemblyOptions::table_bytes; 0 =
+  /// in memory).
+  std::uint64_t assembly_table_bytes = 0;
   /// Directory of the scratch file holding the samples for the later passes' re-reads (the
   /// Delaunay repair, level 0, the exact upper levels; empty = the system's temporary directory).
   /// Checked for room before any work.

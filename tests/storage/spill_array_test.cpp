@@ -1,0 +1,110 @@
+// SpillArray: the same values as a std::vector whatever the access pattern and the budget, and a
+// resident set that stays within the budget while the in-memory table grows with its length.
+#include "storage/spill_array.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace smr::storage {
+namespace {
+
+std::string tmp() {
+  return std::filesystem::temp_directory_path().string();
+}
+
+// The process's resident set, in bytes (VmRSS).
+std::uint64_t rss_bytes() {
+  std::ifstream in("/proc/self/status");
+  std::string key;
+  std::uint64_t kib = 0;
+  while (in >> key) {
+    if (key == "VmRSS:") {
+      in >> kib;
+      break;
+    }
+  }
+  return kib << 10;
+}
+
+TEST(SpillArray, HoldsTheValuesOfAVectorUnderAnyBudget) {
+  for (const std::uint64_t budget : {std::uint64_t{0}, std::uint64_t{64} << 10}) {
+    SpillArray<std::uint64_t> a(tmp(), budget);
+    std::vector<std::uint64_t> ref;
+    std::mt19937_64 rng(11);
+    for (std::uint64_t i = 0; i < 200'000; ++i) {  // grows through several remaps
+      const std::uint64_t v = rng();
+      a.push_back(v);
+      ref.push_back(v);
+      if (i % 3 == 0) {  // and changes earlier values, far back
+        const std::size_t j = rng() % ref.size();
+        ref[j] = rng();
+        a.set(j, ref[j]);
+      }
+    }
+    a.resize(400'000);
+    ref.resize(400'000);
+    ASSERT_EQ(a.size(), ref.size());
+    for (std::size_t k = 0; k < 50'000; ++k) {
+      const std::size_t j = rng() % ref.size();
+      ASSERT_EQ(a[j], ref[j]) << "value " << j << ", budget " << budget;
+    }
+    for (std::size_t j = 0; j < ref.size(); ++j) ASSERT_EQ(a[j], ref[j]) << "value " << j;
+    EXPECT_EQ(a.spilled(), budget > 0);
+    if (budget > 0) {
+      EXPECT_GT(a.trims(), 0u);
+    }
+  }
+}
+
+TEST(SpillArray, StaysWithinItsBudgetWhereAVectorGrows) {
+  constexpr std::size_t n = std::size_t{16} << 20;  // 128 MiB of values
+  constexpr std::uint64_t budget = std::uint64_t{4} << 20;
+  const auto growth = [&](std::uint64_t b) {
+    const std::uint64_t before = rss_bytes();
+    SpillArray<std::uint64_t> a(tmp(), b);
+    a.resize(n);
+    std::uint64_t peak = before;
+    for (std::size_t i = 0; i < n; ++i) {
+      a.set(i, i * 3);
+      if (i % 65536 == 0) peak = std::max(peak, rss_bytes());
+    }
+    std::uint64_t sum = 0;
+    for (std::size_t i = 0; i < n; i += 7) sum += a[i];
+    EXPECT_GT(sum, 0u);
+    return std::max(peak, rss_bytes()) - before;
+  };
+  const std::uint64_t spilled = growth(budget), in_memory = growth(0);
+  EXPECT_GT(in_memory, std::uint64_t{100} << 20) << "the measure cannot see the table";
+  EXPECT_LT(spilled, budget + (std::uint64_t{4} << 20));
+}
+
+TEST(SpillArray, ThreadsReadWhileTheyTrim) {
+  SpillArray<std::uint32_t> a(tmp(), 64 << 10);
+  constexpr std::uint32_t n = 2'000'000;
+  a.resize(n);
+  for (std::uint32_t i = 0; i < n; ++i) a.set(i, i ^ 0x5bd1e995u);
+  std::vector<std::uint64_t> wrong(4, 0);
+  std::vector<std::thread> threads;
+  for (std::size_t t = 0; t < wrong.size(); ++t) {
+    threads.emplace_back([&, t] {
+      std::mt19937 rng(static_cast<unsigned>(t));
+      for (int k = 0; k < 50'000; ++k) {
+        const auto i = static_cast<std::uint32_t>(rng() % n);
+        if (a[i] != (i ^ 0x5bd1e995u)) ++wrong[t];
+      }
+    });
+  }
+  for (auto& th : threads) th.join();
+  for (std::uint64_t w : wrong) EXPECT_EQ(w, 0u);
+  EXPECT_GT(a.trims(), 100u);
+}
+
+}  // namespace
+}  // namespace smr::storage
