@@ -307,7 +307,14 @@ Frame Session::update(const RcfOracle& rcf, const SessionBudget& budget) {
   const auto t0 = Clock::now();
   Frame frame;
   Changes changes;
-  coarsen(rcf, budget.max_period_ms, changes, frame.stats);
+  // Brown's coarsening first only where order matters: under a budget (it decides what a period
+  // or triangle cap leaves pending) and when asked for alone. Unbudgeted, the refining's traversal
+  // reaches exactly the new X and removes, finest first, the ops of X it does not reach, the
+  // coarsenings among them: X, the mesh and the frame (net changes) are the same, and the ops of C
+  // are not each read and tested a second time.
+  const bool budgeted =
+      budget.max_period_ms > 0.0 || budget.max_triangles != 0 || budget.coarsen_only;
+  if (budgeted) coarsen(rcf, budget.max_period_ms, changes, frame.stats);
   if (!budget.coarsen_only) refine(rcf, budget, ms_since(t0), changes, frame.stats);
   const auto t1 = Clock::now();
   changes.ops.for_each([&](std::uint64_t id, int d) {

@@ -13,6 +13,8 @@
 //   2. Refining: every op of X that is not finer than the new RCF offers its children that are
 //      not completely finer (AddToList, with their missing ancestors, Brown 5.1.1); they are added
 //      lowest birth_res first (the set Y). Afterwards X is the minimal-surface X of the new RCF.
+//   An update without a budget skips step 1: the refining reaches the same X on its own (the ops
+//   it does not reach are removed after it, finest first), and the frame is the same.
 // The update returns a Frame: what changed (ops and triangles, net) and the morph of the changed
 // region from the old mesh (t = 0) to the new one (t = 1), smr/extract/morph.h.
 //
@@ -68,7 +70,9 @@ struct FrameStats {
   /// before the refining began, stop_resolution 0: then what is pending is not known).
   std::uint64_t pending_coarsenings = 0;
   std::uint64_t pending_refinings = 0;
-  /// Ops Brown's coarsening kept that the new X lacks, removed after the refining (session.cpp).
+  /// Ops of X the refining did not reach, removed after it (session.cpp): those Brown's
+  /// coarsening kept that the new X lacks or, in an unbudgeted update (which skips the
+  /// coarsening: the same X), every op removed.
   std::uint64_t unreached_coarsenings = 0;
   bool complete = true;          // X is the minimal-surface X of the RCF (no budget stopped it)
   double stop_resolution = 1.0;  // see the header comment; 1 when complete
