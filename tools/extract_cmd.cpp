@@ -222,7 +222,7 @@ nlohmann::json run_extract(const Database& db, const Heightfield* dem, const Rcf
   nlohmann::json report;
   if (spec.critical_level && dem == nullptr)
     throw_input("--critical-lines needs the source DEM: pass --dem");
-  const Rcf rcf = make_rcf(spec, db.info().kind, dem);
+  const Rcf rcf = make_rcf(spec, db.info(), dem);
   if (a.algorithm == "selective") return run_selective(db, rcf, a);
   ExpansionOptions expansion;
   expansion.max_held_bytes = a.held_mb << 20;

@@ -230,7 +230,7 @@ Rcf frame_rcf(const Flight& f, const Key& k) {
   s.cull = !f.args.no_cull;
   s.pixel_error = f.args.pixel_error;
   validate(s);
-  return make_rcf(s, f.db.info().kind, nullptr);
+  return make_rcf(s, f.db.info(), nullptr);
 }
 
 // The fresh extraction of `rcf` (the set formula page by page: the fastest from scratch), timed,

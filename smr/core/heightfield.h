@@ -10,8 +10,11 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <numbers>
 #include <string>
 #include <vector>
 
@@ -26,6 +29,15 @@ struct Georef {
   bool geographic = false;    // true when x/y are degrees of longitude/latitude
   friend bool operator==(const Georef&, const Georef&) = default;
 };
+
+/// WGS 84 metres per degree of longitude (x) and of latitude (y) at `latitude_deg`.
+inline std::array<double, 2> metres_per_degree(double latitude_deg) {
+  constexpr double a = 6378137.0, f = 1.0 / 298.257223563, e2 = f * (2 - f);
+  const double phi = latitude_deg * std::numbers::pi / 180.0;
+  const double w = 1.0 - e2 * std::sin(phi) * std::sin(phi);
+  const double rad = std::numbers::pi / 180.0;
+  return {rad * a * std::cos(phi) / std::sqrt(w), rad * a * (1.0 - e2) / (w * std::sqrt(w))};
+}
 
 struct Heightfield {
   int width = 0;

@@ -429,14 +429,6 @@ std::string_view gltf_compression_name(GltfCompression c) {
   return "none";
 }
 
-std::array<double, 2> metres_per_degree(double latitude_deg) {
-  constexpr double a = 6378137.0, f = 1.0 / 298.257223563, e2 = f * (2 - f);
-  const double phi = latitude_deg * std::numbers::pi / 180.0;
-  const double w = 1.0 - e2 * std::sin(phi) * std::sin(phi);
-  const double rad = std::numbers::pi / 180.0;
-  return {rad * a * std::cos(phi) / std::sqrt(w), rad * a * (1.0 - e2) / (w * std::sqrt(w))};
-}
-
 GltfReport write_gltf(const std::string& path, const TriangleMesh& mesh, const GltfOptions& o) {
   const std::string ext = io_util::lower_extension(path);
   if (ext != ".glb" && ext != ".gltf")

@@ -76,7 +76,4 @@ struct GltfReport {
 GltfReport write_gltf(const std::string& path, const TriangleMesh& mesh,
                       const GltfOptions& options);
 
-/// WGS 84 metres per degree of longitude (x) and of latitude (y) at `latitude_deg`.
-std::array<double, 2> metres_per_degree(double latitude_deg);
-
 }  // namespace smr

@@ -1,5 +1,6 @@
 #include "smr/rcf/camera.h"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -128,6 +129,29 @@ double max_sin_vertical(const Vec3& eye, const Box3& b) {
   const double hy = std::max(std::abs(b.lo.y - eye.y), std::abs(b.hi.y - eye.y));
   const double h2 = hx * hx + hy * hy;  // coordinates: far from overflow, no need of hypot
   return std::sqrt(h2 / (h2 + dz * dz));
+}
+
+// ---- the metric frame ----
+MetricFrame MetricFrame::of(const Georef& georef, const Box3& bounds) {
+  MetricFrame f;
+  if (!georef.geographic || bounds.empty()) return f;
+  const Vec3 c = bounds.center();
+  const std::array<double, 2> m = metres_per_degree(c.y);
+  f.origin = {c.x, c.y};
+  f.kx = m[0];
+  f.ky = m[1];
+  return f;
+}
+
+Sphere MetricFrame::apply(const Sphere& s) const {
+  return {apply(s.center), s.radius * std::max({kx, ky, 1.0})};
+}
+
+Camera MetricFrame::apply(const Camera& c) const {
+  Camera m = c;
+  m.eye = apply(c.eye);
+  m.target = apply(c.target);
+  return m;
 }
 
 }  // namespace smr

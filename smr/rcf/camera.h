@@ -6,6 +6,7 @@
 #include <optional>
 
 #include "smr/core/geometry.h"
+#include "smr/core/heightfield.h"
 
 namespace smr {
 
@@ -39,6 +40,30 @@ struct Camera {
   /// Frustum planes: left, right, bottom, top, near, and far when far_distance > 0.
   std::array<Plane, 6> planes() const;
   int plane_count() const { return far_distance > 0.0 ? 6 : 5; }
+};
+
+/// Model coordinates to a frame where a camera's distances and angles mean something (metres on
+/// every axis). The identity for models in one unit; for a geographic raster (x, y degrees of
+/// longitude and latitude, z metres) the local equirectangular map about the model's centre
+/// (x0, y0): x' = (x - x0) mx, y' = (y - y0) my with mx, my the WGS 84 metres per degree at
+/// latitude y0 (metres_per_degree); over a degree of latitude its x scale is off by < 2 %. An axis
+/// scaling and shift: boxes map to boxes and triangles to triangles exactly, so every camera test
+/// judges the mapped geometry as it would metric data.
+struct MetricFrame {
+  Vec2 origin{0.0};
+  double kx = 1.0, ky = 1.0;  // metres per model unit along x and y (z is metres already)
+
+  static MetricFrame of(const Georef& georef, const Box3& bounds);
+  bool identity() const { return kx == 1.0 && ky == 1.0 && origin == Vec2(0.0); }
+  Vec3 apply(const Vec3& p) const { return {(p.x - origin.x) * kx, (p.y - origin.y) * ky, p.z}; }
+  Vec2 apply(const Vec2& p) const { return {(p.x - origin.x) * kx, (p.y - origin.y) * ky}; }
+  Box3 apply(const Box3& b) const { return {apply(b.lo), apply(b.hi)}; }
+  /// A sphere holding the image of `s` (the scaling is not uniform).
+  Sphere apply(const Sphere& s) const;
+  Triangle3 apply(const Triangle3& t) const { return {apply(t[0]), apply(t[1]), apply(t[2])}; }
+  /// The camera placed at the images of its eye and target (up, field of view, viewport and
+  /// clipping distances as given: they are metres and angles already).
+  Camera apply(const Camera& c) const;
 };
 
 /// A camera's frustum planes, computed once (Camera::planes() works them out on every call).

@@ -26,6 +26,26 @@ class ObjectSpaceTerm {
   virtual double max_over_rect(const Vec2& lo, const Vec2& hi) const = 0;
 };
 
+/// A term judged in a MetricFrame: points, triangles and rectangles are mapped into the frame
+/// (an axis scaling: triangles stay triangles and rectangles rectangles) and asked of `inner`.
+class FramedTerm final : public ObjectSpaceTerm {
+ public:
+  FramedTerm(std::shared_ptr<const ObjectSpaceTerm> inner, MetricFrame frame)
+      : inner_(std::move(inner)), frame_(frame) {}
+  std::string describe() const override { return inner_->describe() + " (metric frame)"; }
+  double value(const Vec2& p) const override { return inner_->value(frame_.apply(p)); }
+  double max_over_triangle(const Vec2& a, const Vec2& b, const Vec2& c) const override {
+    return inner_->max_over_triangle(frame_.apply(a), frame_.apply(b), frame_.apply(c));
+  }
+  double max_over_rect(const Vec2& lo, const Vec2& hi) const override {
+    return inner_->max_over_rect(frame_.apply(lo), frame_.apply(hi));
+  }
+
+ private:
+  std::shared_ptr<const ObjectSpaceTerm> inner_;
+  MetricFrame frame_;
+};
+
 class ConstantTerm final : public ObjectSpaceTerm {
  public:
   explicit ConstantTerm(double level) : level_(level) {}

@@ -26,13 +26,15 @@ Box3 triangle_box(const Triangle3& v) {
 
 // ---- culling ----
 bool FrustumCulling::culls(const OpView& op) const {
-  return sphere_outside(frustum_, op.sphere) || box_outside(frustum_, op.box);
+  return sphere_outside(frustum_, frame_.apply(op.sphere)) ||
+         box_outside(frustum_, frame_.apply(op.box));
 }
 
-bool FrustumCulling::culls_triangle(const Triangle3& v) const {
+bool FrustumCulling::culls_triangle(const Triangle3& model) const {
   // Every corner strictly outside one plane. A sphere or box outside that plane holds no point
   // inside it, so culls(op) implies this for each triangle of the op.
   const auto& planes = frustum_.planes;
+  const Triangle3 v = frame_.apply(model);
   for (int i = 0; i < frustum_.count; ++i) {
     if (planes[i].signed_distance(v[0]) < 0 && planes[i].signed_distance(v[1]) < 0 &&
         planes[i].signed_distance(v[2]) < 0)
@@ -146,13 +148,14 @@ double ScreenSpaceCriterion::tolerance(const Box3& region) const {
 
 bool ScreenSpaceCriterion::triangle_satisfies(const Triangle3& v, double res,
                                               const CrmrInfo& info) const {
-  const Box3 b = triangle_box(v);
+  const Box3 b = triangle_box(frame_.apply(v));
   return pixel_error_bound(error_at(info, res), b) <= tolerance(b);
 }
 
 bool ScreenSpaceCriterion::region_satisfies(const Box3& box, double min_res,
                                             const CrmrInfo& info) const {
-  return pixel_error_bound(error_at(info, min_res), box) <= tolerance(box);
+  const Box3 b = frame_.apply(box);
+  return pixel_error_bound(error_at(info, min_res), b) <= tolerance(b);
 }
 
 // ---- composition ----

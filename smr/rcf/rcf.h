@@ -65,14 +65,19 @@ class SimilarityComponent {
 
 class FrustumCulling final : public CullingComponent {
  public:
-  explicit FrustumCulling(Camera cam) : cam_(std::move(cam)), frustum_(cam_) {}
+  /// `cam` in model coordinates; the tests run in `frame` (MetricFrame).
+  explicit FrustumCulling(const Camera& cam, MetricFrame frame = {})
+      : frame_(frame), cam_(frame.apply(cam)), frustum_(cam_) {}
   std::string describe() const override { return "frustum-culling"; }
   bool culls(const OpView& op) const override;
-  bool culls_region(const Box3& box) const override { return box_outside(frustum_, box); }
+  bool culls_region(const Box3& box) const override {
+    return box_outside(frustum_, frame_.apply(box));
+  }
   bool culls_triangle(const Triangle3& v) const override;
 
  private:
-  Camera cam_;
+  MetricFrame frame_;
+  Camera cam_;  // in the frame
   Frustum frustum_;
 };
 
@@ -151,9 +156,12 @@ struct ScreenAoi {
 /// smallest tolerance of any screen position B may project to.
 class ScreenSpaceCriterion final : public SimilarityComponent {
  public:
-  ScreenSpaceCriterion(Camera cam, double pixel_error, std::optional<ScreenAoi> aoi,
-                       bool vertical_error)
-      : cam_(std::move(cam)),
+  /// `cam` in model coordinates; distances and angles are judged in `frame` (MetricFrame), and
+  /// pixel_error_bound and tolerance take regions in that frame.
+  ScreenSpaceCriterion(const Camera& cam, double pixel_error, std::optional<ScreenAoi> aoi,
+                       bool vertical_error, MetricFrame frame = {})
+      : frame_(frame),
+        cam_(frame.apply(cam)),
         focal_px_(cam_.focal_px()),
         tau_(pixel_error),
         aoi_(aoi),
@@ -168,7 +176,8 @@ class ScreenSpaceCriterion final : public SimilarityComponent {
   const Camera& camera() const { return cam_; }
 
  private:
-  Camera cam_;
+  MetricFrame frame_;
+  Camera cam_;       // in the frame
   double focal_px_;  // cam_.focal_px(), once (a tangent per test otherwise)
   double tau_;
   std::optional<ScreenAoi> aoi_;

@@ -20,6 +20,8 @@ void check_aoi(const AoiSpec& a, const std::string& option) {
   }
   check_level(a.level, option);
 }
+Rcf build_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem,
+              const MetricFrame& frame);
 }  // namespace
 
 bool RcfSpec::has_similarity() const {
@@ -73,6 +75,18 @@ void validate(const RcfSpec& s) {
 }
 
 Rcf make_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem) {
+  return build_rcf(spec, kind, dem, MetricFrame{});
+}
+
+Rcf make_rcf(const RcfSpec& spec, const CrmrInfo& info, const Heightfield* dem) {
+  const MetricFrame frame =
+      info.kind == ModelKind::kTerrain ? MetricFrame::of(info.georef, info.bounds) : MetricFrame{};
+  return build_rcf(spec, info.kind, dem, frame);
+}
+
+namespace {
+Rcf build_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem,
+              const MetricFrame& frame) {
   validate(spec);
   if (kind == ModelKind::kMesh3d) {
     const char* flat = !spec.aois.empty()    ? "--aoi"
@@ -89,9 +103,16 @@ Rcf make_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem) {
   }
   Rcf rcf;
   if (spec.camera && spec.cull) {
-    rcf.add(std::make_shared<FrustumCulling>(*spec.camera));
-    rcf.add(std::make_shared<BackfaceCulling>(*spec.camera));
+    rcf.add(std::make_shared<FrustumCulling>(*spec.camera, frame));
+    if (frame.identity()) rcf.add(std::make_shared<BackfaceCulling>(*spec.camera));
   }
+  // The camera's footprint terms, made in the metric frame and asked there.
+  const auto camera_term = [&](WedgeTerm term) -> std::shared_ptr<const ObjectSpaceTerm> {
+    auto t = std::make_shared<WedgeTerm>(std::move(term));
+    if (frame.identity()) return t;
+    return std::make_shared<FramedTerm>(std::move(t), frame);
+  };
+  const Camera metric_camera = spec.camera ? frame.apply(*spec.camera) : Camera{};
   ObjectSpaceFunction g;
   if (spec.floor) g.add(std::make_shared<ConstantTerm>(*spec.floor));
   for (const AoiSpec& a : spec.aois)
@@ -99,12 +120,11 @@ Rcf make_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem) {
   for (const AoiSpec& a : spec.discs)
     g.add(std::make_shared<DiscTerm>(Vec2{a.x, a.y}, a.radius, a.level));
   if (spec.frustum_level) {
-    g.add(std::make_shared<WedgeTerm>(
-        WedgeTerm::frustum_footprint(*spec.camera, *spec.frustum_level)));
+    g.add(camera_term(WedgeTerm::frustum_footprint(metric_camera, *spec.frustum_level)));
   }
   if (spec.centre_cone) {
-    g.add(std::make_shared<WedgeTerm>(
-        WedgeTerm::centre_cone(*spec.camera, spec.centre_cone->first, spec.centre_cone->second)));
+    g.add(camera_term(
+        WedgeTerm::centre_cone(metric_camera, spec.centre_cone->first, spec.centre_cone->second)));
   }
   if (spec.critical_level) {
     if (dem == nullptr) throw_input("--critical-lines needs the source DEM");
@@ -122,9 +142,10 @@ Rcf make_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem) {
   if (!g.empty()) rcf.add(std::make_shared<ObjectSpaceCriterion>(std::move(g)));
   if (spec.pixel_error) {
     rcf.add(std::make_shared<ScreenSpaceCriterion>(*spec.camera, *spec.pixel_error, spec.screen_aoi,
-                                                   kind == ModelKind::kTerrain));
+                                                   kind == ModelKind::kTerrain, frame));
   }
   return rcf;
 }
+}  // namespace
 
 }  // namespace smr

@@ -46,6 +46,13 @@ void validate(const RcfSpec& spec);
 /// screen-space error direction (vertical for terrain). For a 3-D mesh the 2.5-D terms over xy
 /// (areas of interest, discs, frustum footprint, centre cone, critical lines) are kInvalidInput:
 /// volumes of significance are their 3-D form.
+/// The camera is in model coordinates and judged as metric data (identity MetricFrame).
 Rcf make_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem);
+/// The same for the model `info` describes: a geographic raster's camera criteria (frustum,
+/// screen space, frustum footprint, centre cone) are judged in its metric frame
+/// (MetricFrame::of), where a camera in degrees of longitude and latitude and metres of height
+/// means what it says; back-face culling is then left out (normal cones in degrees and metres
+/// bound nothing; not culling is always allowed).
+Rcf make_rcf(const RcfSpec& spec, const CrmrInfo& info, const Heightfield* dem);
 
 }  // namespace smr

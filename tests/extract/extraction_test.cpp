@@ -5,7 +5,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <numbers>
 #include <unordered_set>
 
 #include "smr/core/invariants.h"
@@ -251,6 +253,59 @@ TEST(Extraction, ToMeshSharesVerticesAndDropsVoid) {
   EXPECT_EQ(std::int64_t(all.positions.size()) - std::int64_t(edges.size()) +
                 std::int64_t(all.triangles.size()),
             1);
+}
+
+TEST(MetricFrame, AGeographicTerrainIsJudgedInMetresAsItsProjectedTwin) {
+  // jacksboro is a geographic raster: x, y in degrees, z in metres. A camera placed in those
+  // units must judge distances and angles in metres: the same as a camera at the mapped place
+  // over the model mapped into the metric frame (a projected twin), op for op.
+  const test::Dataset& d = test::dataset("jacksboro");
+  ASSERT_TRUE(d.crmr.header.georef.geographic);
+  const MetricFrame f = MetricFrame::of(d.crmr.header.georef, d.crmr.header.bounds);
+  const Box3& b = d.crmr.header.bounds;
+  const double lat = b.center().y;
+  EXPECT_NEAR(f.ky, 111'132.95 - 559.8 * std::cos(2 * lat * std::numbers::pi / 180), 1.0);
+  EXPECT_NEAR(f.kx / f.ky, std::cos(lat * std::numbers::pi / 180), 0.01);
+  Crmr twin = d.crmr;
+  for (Op& op : twin.ops) {
+    for (Vertex& v : op.vertices) v.p = f.apply(v.p);
+    compute_op_bounds(op);
+    op.roi = f.apply(op.roi);
+  }
+  twin.header.bounds = f.apply(b);
+  twin.header.georef.geographic = false;
+  Camera cam;  // south-west of the model, 600 m above its highest point
+  cam.eye = {b.lo.x - 0.1 * (b.hi.x - b.lo.x), b.lo.y - 0.1 * (b.hi.y - b.lo.y), b.hi.z + 600};
+  cam.target = {b.center().x, b.center().y, b.lo.z};
+  cam.fov_y_deg = 45;
+  cam.viewport_w = 1280;
+  cam.viewport_h = 800;
+  RcfSpec geo;
+  geo.camera = cam;
+  geo.pixel_error = 1.5;
+  geo.cull = false;  // culling tests the op's sphere, which the frame only bounds
+  RcfSpec metric = geo;
+  metric.camera = f.apply(cam);
+  const Extraction in_degrees =
+      extract_minimal_surface(d.crmr, make_rcf(geo, d.crmr.header, nullptr));
+  const Extraction in_metres =
+      extract_minimal_surface(twin, make_rcf(metric, twin.header, nullptr));
+  EXPECT_EQ(in_degrees.x, in_metres.x);
+  EXPECT_EQ(in_degrees.triangles, in_metres.triangles);
+  // Judged in raw units the camera looks straight down at a flat model: hardly anything refines.
+  const Extraction raw =
+      extract_minimal_surface(d.crmr, make_rcf(geo, ModelKind::kTerrain, nullptr));
+  EXPECT_GT(in_degrees.triangles.size(), 20 * raw.triangles.size());
+  // With culling, the frustum keeps what the camera sees: fewer triangles, the RCF still met.
+  geo.cull = true;
+  const Rcf culled = make_rcf(geo, d.crmr.header, nullptr);
+  const Extraction seen = extract_minimal_surface(d.crmr, culled);
+  EXPECT_LT(seen.triangles.size(), in_degrees.triangles.size());
+  EXPECT_GT(seen.triangles.size() * 4, in_degrees.triangles.size());
+  const test::OracleResult opwise = test::check_rcf_opwise(d.crmr, seen.triangles, culled);
+  EXPECT_TRUE(opwise.ok()) << opwise.first_failure;
+  const test::OracleResult xdef = test::check_x_definition(d.crmr, seen.x, culled, true);
+  EXPECT_TRUE(xdef.ok()) << xdef.first_failure;
 }
 
 }  // namespace
