@@ -36,8 +36,10 @@ using nlohmann::json;
 
 constexpr int kTimeoutMs = 1500;
 
-// One server for the suite: jacksboro (geographic) written to a scratch database.
-class Serve : public ::testing::Test {
+// One server for the suite: jacksboro (geographic) and fbm257 (grid units) written to scratch
+// databases. The suite has one parameter so that CTest runs it in one process
+// (tests/discover_grouped.cmake): one server, one build of each dataset.
+class Serve : public ::testing::TestWithParam<std::string> {
  protected:
   static void SetUpTestSuite() {
     dir_ = new test::TempDir("smrdb-serve");
@@ -149,7 +151,7 @@ std::vector<View> views(const Box3& b) {
           {at(-0.5, -0.5, 3.0), at(0.5, 0.5, 0.3), 4.0}};
 }
 
-TEST_F(Serve, DatabasesAndInfo) {
+TEST_P(Serve, DatabasesAndInfo) {
   const json list = get_json("/v1/databases");
   EXPECT_EQ(list,
             json::parse(R"([{"name":"j","kind":"terrain"},{"name":"fbm257","kind":"terrain"}])"));
@@ -164,7 +166,7 @@ TEST_F(Serve, DatabasesAndInfo) {
   EXPECT_EQ(info["dag_depth"], info["meta"]["counts"]["dag_depth"]);
 }
 
-TEST_F(Serve, ExtractGlbIsTheCliGlb) {
+TEST_P(Serve, ExtractGlbIsTheCliGlb) {
   const View v = views(fbm_->info().bounds)[1];
   struct Case {
     std::string query, flags;
@@ -195,7 +197,7 @@ TEST_F(Serve, ExtractGlbIsTheCliGlb) {
   EXPECT_NE(big["error"].get<std::string>().find("max_triangles"), std::string::npos);
 }
 
-TEST_F(Serve, TilesAreTheStaticPyramidsBytes) {
+TEST_P(Serve, TilesAreTheStaticPyramidsBytes) {
   const std::string out = dir_->file("pyramid");
   const tiles::PyramidReport report = tiles::write_pyramid(*db_, out, {});
   const tiles::TilingScheme scheme = tiles::TilingScheme::for_terrain(db_->info());
@@ -250,7 +252,7 @@ TEST_F(Serve, TilesAreTheStaticPyramidsBytes) {
   get_json("/v1/j/tiles/0/99/0.terrain", 404);
 }
 
-TEST_F(Serve, QueriesAnswerAsTheLibrary) {
+TEST_P(Serve, QueriesAnswerAsTheLibrary) {
   const query::ElevationQuery eq(*source_);
   for (const Vec2 p : {Vec2{-84.3, 36.6}, Vec2{-84.2, 36.5}, Vec2{-84.12345, 36.7}}) {
     std::ostringstream q;
@@ -337,7 +339,7 @@ double morph_area(const test::DecodedFrame& f, bool end, bool flat) {
   return sum;
 }
 
-TEST_F(Serve, SessionFramesRebuildTheMesh) {
+TEST_P(Serve, SessionFramesRebuildTheMesh) {
   httplib::Client c("127.0.0.1", server_->port());
   c.set_read_timeout(20, 0);
   const auto created = c.Post("/v1/fbm257/session");
@@ -408,7 +410,7 @@ TEST_F(Serve, SessionFramesRebuildTheMesh) {
   get_json("/v1/fbm257/session/" + id + "/update?" + path[0].query(), 404);
 }
 
-TEST_F(Serve, SessionTableIsBounded) {
+TEST_P(Serve, SessionTableIsBounded) {
   httplib::Client c("127.0.0.1", server_->port());
   std::vector<std::string> ids;
   for (int i = 0; i < 3; ++i) {
@@ -425,7 +427,7 @@ TEST_F(Serve, SessionTableIsBounded) {
   EXPECT_EQ(c.Delete(("/v1/j/session/" + ids[0]).c_str())->status, 404);
 }
 
-TEST_F(Serve, BadParametersAre400NamingTheParameter) {
+TEST_P(Serve, BadParametersAre400NamingTheParameter) {
   const std::string cam = "eye=-84.3,36.4,3000&target=-84.25,36.6,500";
   const std::pair<std::string, std::string> cases[] = {
       {"/v1/j/extract?eye=nan,36.4,3000&target=-84.25,36.6,500", "eye"},
@@ -462,7 +464,7 @@ TEST_F(Serve, BadParametersAre400NamingTheParameter) {
   get_json("/v1/j/extract?eye=1,1,1&target=1,1,1", 400);
 }
 
-TEST_F(Serve, UnknownNamesAndPathTricksAre404) {
+TEST_P(Serve, UnknownNamesAndPathTricksAre404) {
   for (const std::string path :
        {"/v1/nosuchdb/info", "/v1/j/nosuchroute", "/v1/j/query/nosuch?x=1", "/v2/j/info",
         "/v1/j/session/0123/update?eye=1,1,1&target=2,2,2", "/v1/../../etc/passwd",
@@ -483,7 +485,7 @@ TEST_F(Serve, UnknownNamesAndPathTricksAre404) {
   EXPECT_EQ(root->get_header_value("Location"), "/index.html");
 }
 
-TEST_F(Serve, MalformedHttpDoesNotCrashTheServer) {
+TEST_P(Serve, MalformedHttpDoesNotCrashTheServer) {
   const std::string requests[] = {
       "GARBAGE\r\n\r\n",
       "GET\r\n\r\n",
@@ -512,7 +514,7 @@ TEST_F(Serve, MalformedHttpDoesNotCrashTheServer) {
   EXPECT_EQ(get_json("/v1/databases").size(), 2u);
 }
 
-TEST_F(Serve, SlowClientIsCutOff) {
+TEST_P(Serve, SlowClientIsCutOff) {
   // A request's headers must arrive within --timeout-ms of its first byte: a byte every 200 ms
   // (slowloris) is disconnected before the request is complete.
   test::RawSocket s(server_->port());
@@ -532,7 +534,7 @@ TEST_F(Serve, SlowClientIsCutOff) {
   EXPECT_GT(seconds, kTimeoutMs / 1000.0 - 0.5);
 }
 
-TEST_F(Serve, ParallelConnectionsAreBounded) {
+TEST_P(Serve, ParallelConnectionsAreBounded) {
   // 4 threads and 8 waiting: 200 idle connections get 503 at once beyond that, and the server
   // answers again once they are gone.
   std::vector<std::unique_ptr<test::RawSocket>> idle;
@@ -563,6 +565,9 @@ TEST_F(Serve, ParallelConnectionsAreBounded) {
   ASSERT_TRUE(after);
   EXPECT_EQ(after->status, 200);
 }
+
+INSTANTIATE_TEST_SUITE_P(Loopback, Serve, ::testing::Values(std::string("loopback")),
+                         [](const auto& p) { return p.param; });
 
 }  // namespace
 }  // namespace smr
