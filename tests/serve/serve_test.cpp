@@ -56,11 +56,11 @@ class Serve : public ::testing::TestWithParam<std::string> {
     std::filesystem::create_directories(dir_->file("viewer/assets"));
     test::write_file(dir_->file("viewer/index.html"), "<html>viewer</html>");
     test::write_file(dir_->file("viewer/assets/app.js"), "console.log(1);");
-    server_ =
-        new test::ServerProcess({"j=" + db_path_, fbm_path_, "--threads", "4", "--queue", "8",
-                                 "--timeout-ms", std::to_string(kTimeoutMs), "--max-sessions", "3",
-                                 "--max-triangles", "50000", "--viewer", dir_->file("viewer")},
-                                dir_->file("server.log"));
+    server_ = new test::ServerProcess(
+        {"j=" + db_path_, fbm_path_, "--threads", "4", "--queue", "8", "--timeout-ms",
+         std::to_string(kTimeoutMs), "--max-sessions", "3", "--max-triangles", "50000",
+         "--session-idle-s", "2", "--viewer", dir_->file("viewer")},
+        dir_->file("server.log"));
   }
   static void TearDownTestSuite() {
     const int status = server_->stop();
@@ -363,6 +363,13 @@ TEST_P(Serve, SessionFramesRebuildTheMesh) {
     ASSERT_EQ(res->status, 200) << res->body;
     const test::DecodedFrame f = test::decode_frame(res->body);
     EXPECT_EQ(f.header["frame"], k + 1);
+    for (const char* field :
+         {"coarsenings", "refinings", "pending_coarsenings", "pending_refinings", "complete", "x",
+          "triangles", "triangles_in", "triangles_out", "ops_tested", "morph_triangles", "seconds",
+          "pages_read"})
+      EXPECT_TRUE(f.header["stats"].contains(field)) << field;
+    EXPECT_EQ(f.header["stats"]["triangles_in"], f.in.size());
+    EXPECT_EQ(f.header["stats"]["triangles_out"], f.out.size());
     double out_flat = 0, out_area = 0, in_flat = 0, in_area = 0;
     for (const auto& key : f.out) {
       const auto it = client.held.find(key);
@@ -425,6 +432,19 @@ TEST_P(Serve, SessionTableIsBounded) {
   EXPECT_TRUE(json::parse(full->body).contains("error"));
   for (const auto& id : ids) EXPECT_EQ(c.Delete(("/v1/j/session/" + id).c_str())->status, 200);
   EXPECT_EQ(c.Delete(("/v1/j/session/" + ids[0]).c_str())->status, 404);
+}
+
+TEST_P(Serve, IdleSessionsExpire) {
+  httplib::Client c("127.0.0.1", server_->port());
+  const auto r = c.Post("/v1/fbm257/session");
+  ASSERT_TRUE(r);
+  ASSERT_EQ(r->status, 200);
+  const std::string id = test::decode_frame(r->body).header["session"];
+  const std::string update =
+      "/v1/fbm257/session/" + id + "/update?" + views(fbm_->info().bounds)[3].query();
+  EXPECT_EQ(get(update)->status, 200);  // touched: idle from now
+  std::this_thread::sleep_for(std::chrono::milliseconds(2300));
+  get_json(update, 404);
 }
 
 TEST_P(Serve, BadParametersAre400NamingTheParameter) {

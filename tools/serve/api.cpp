@@ -96,6 +96,15 @@ RcfSpec camera_spec(const Params& p, bool allow_floor) {
   return s;
 }
 
+// The frame header's "stats": FrameStats as the CLI reports it (report_json.h), plus the
+// contract's "seconds" and the update's "pages_read".
+json frame_stats(const FrameStats& stats, std::uint64_t pages_read) {
+  json j = stats;
+  j["seconds"] = stats.seconds;
+  j["pages_read"] = pages_read;
+  return j;
+}
+
 }  // namespace
 
 Response error_response(int status, const std::string& message) {
@@ -277,8 +286,8 @@ Response Api::session_create(Db& db) {
   FrameStats stats;
   stats.x = 1;
   stats.triangles = stats.triangles_in = in.size();
-  json header = {{"session", id}, {"frame", entry->frame++}, {"stats", stats}};
-  header["stats"]["pages_read"] = 0;
+  const json header = {
+      {"session", id}, {"frame", entry->frame++}, {"stats", frame_stats(stats, 0)}};
   Response r;
   r.content_type = "application/octet-stream";
   r.body = encode_frame(*db.db, db.origin, header, {}, in, nullptr);
@@ -299,8 +308,9 @@ Response Api::session_update(Db& db, const std::string& id, const Request& reque
   const Rcf rcf = make_rcf(spec, db.db->info().kind, nullptr);
   const std::uint64_t pages_before = db.db->stats().pages_read;
   const Frame f = entry->session->update(rcf, {.max_period_ms = max_ms, .max_triangles = cap});
-  json header = {{"session", id}, {"frame", entry->frame++}, {"stats", f.stats}};
-  header["stats"]["pages_read"] = db.db->stats().pages_read - pages_before;
+  const json header = {{"session", id},
+                       {"frame", entry->frame++},
+                       {"stats", frame_stats(f.stats, db.db->stats().pages_read - pages_before)}};
   Response r;
   r.content_type = "application/octet-stream";
   r.body = encode_frame(*db.db, db.origin, header, f.triangles_out, f.triangles_in, &f.morph);
