@@ -27,6 +27,7 @@
 #include "tests/serve/serve_client.h"
 #include "tests/support/datasets.h"
 #include "tests/support/files.h"
+#include "tests/support/meshes.h"
 #include "tests/support/process.h"
 
 namespace smr {
@@ -53,13 +54,18 @@ class Serve : public ::testing::TestWithParam<std::string> {
     write_database(fbm, fbm_path_, {});
     fbm_ = Database::open(fbm_path_, {std::size_t{64} << 20}).release();
     fbm_source_ = new IndexedSource(*fbm_);
+    mesh_path_ = dir_->file("bunny.smrdb");
+    Crmr bunny = test::built_mesh("bunny00.off").crmr;
+    write_database(bunny, mesh_path_, {});
+    mesh_ = Database::open(mesh_path_, {std::size_t{64} << 20}).release();
+    mesh_source_ = new IndexedSource(*mesh_);
     std::filesystem::create_directories(dir_->file("viewer/assets"));
     test::write_file(dir_->file("viewer/index.html"), "<html>viewer</html>");
     test::write_file(dir_->file("viewer/assets/app.js"), "console.log(1);");
     server_ = new test::ServerProcess(
-        {"j=" + db_path_, fbm_path_, "--threads", "4", "--queue", "8", "--timeout-ms",
-         std::to_string(kTimeoutMs), "--max-sessions", "3", "--max-triangles", "50000",
-         "--session-idle-s", "2", "--viewer", dir_->file("viewer")},
+        {"j=" + db_path_, fbm_path_, "bunny=" + mesh_path_, "--threads", "4", "--queue", "8",
+         "--timeout-ms", std::to_string(kTimeoutMs), "--max-sessions", "3", "--max-triangles",
+         "50000", "--session-idle-s", "2", "--viewer", dir_->file("viewer")},
         dir_->file("server.log"));
   }
   static void TearDownTestSuite() {
@@ -71,6 +77,8 @@ class Serve : public ::testing::TestWithParam<std::string> {
     delete db_;
     delete fbm_source_;
     delete fbm_;
+    delete mesh_source_;
+    delete mesh_;
     delete dir_;
   }
   static httplib::Result get(const std::string& path, const httplib::Headers& headers = {}) {
@@ -94,6 +102,9 @@ class Serve : public ::testing::TestWithParam<std::string> {
   static std::string fbm_path_;  // served as "fbm257" (a bare path: named by its stem)
   static Database* fbm_;
   static IndexedSource* fbm_source_;
+  static std::string mesh_path_;  // "bunny": a 3-D mesh
+  static Database* mesh_;
+  static IndexedSource* mesh_source_;
   static test::ServerProcess* server_;
 };
 
@@ -104,6 +115,9 @@ IndexedSource* Serve::source_ = nullptr;
 std::string Serve::fbm_path_;
 Database* Serve::fbm_ = nullptr;
 IndexedSource* Serve::fbm_source_ = nullptr;
+std::string Serve::mesh_path_;
+Database* Serve::mesh_ = nullptr;
+IndexedSource* Serve::mesh_source_ = nullptr;
 test::ServerProcess* Serve::server_ = nullptr;
 
 // A camera over a database in grid units (fbm257): eye and target as fractions of its bounds.
@@ -153,8 +167,10 @@ std::vector<View> views(const Box3& b) {
 
 TEST_P(Serve, DatabasesAndInfo) {
   const json list = get_json("/v1/databases");
-  EXPECT_EQ(list,
-            json::parse(R"([{"name":"j","kind":"terrain"},{"name":"fbm257","kind":"terrain"}])"));
+  EXPECT_EQ(
+      list,
+      json::parse(
+          R"([{"name":"j","kind":"terrain"},{"name":"fbm257","kind":"terrain"},{"name":"bunny","kind":"mesh"}])"));
   const json info = get_json("/v1/j/info");
   const Box3& b = db_->info().bounds;
   EXPECT_EQ(info["kind"], "terrain");
@@ -339,10 +355,14 @@ double morph_area(const test::DecodedFrame& f, bool end, bool flat) {
   return sum;
 }
 
-TEST_P(Serve, SessionFramesRebuildTheMesh) {
-  httplib::Client c("127.0.0.1", server_->port());
+// A session on database `name` along `path`, its frames applied by a Client: after each update the
+// client's triangles are the fresh extraction's, and the morph covers what changed. `terrain`: the
+// x-y areas are checked too (a terrain's morph keeps x-y; a 3-D morph moves vertices).
+void fly_session(int port, const std::string& name, const Database& db, const IndexedSource& src,
+                 const std::vector<View>& path, bool terrain) {
+  httplib::Client c("127.0.0.1", port);
   c.set_read_timeout(20, 0);
-  const auto created = c.Post("/v1/fbm257/session");
+  const auto created = c.Post(("/v1/" + name + "/session").c_str());
   ASSERT_TRUE(created);
   ASSERT_EQ(created->status, 200) << created->body;
   const test::DecodedFrame f0 = test::decode_frame(created->body);
@@ -353,12 +373,11 @@ TEST_P(Serve, SessionFramesRebuildTheMesh) {
   Client client;
   for (const auto& t : f0.in) client.held[t.key] = t;
   EXPECT_EQ(client.held.size(), f0.in.size());
-  const Vec3 origin = (fbm_->info().bounds.lo + fbm_->info().bounds.hi) * 0.5;
-  const std::vector<View> path = views(fbm_->info().bounds);
+  const Vec3 origin = (db.info().bounds.lo + db.info().bounds.hi) * 0.5;
   for (std::size_t k = 0; k < path.size(); ++k) {
     const View& v = path[k];
     const auto res =
-        c.Get(("/v1/fbm257/session/" + id + "/update?" + v.query() + "&max_ms=1400").c_str());
+        c.Get(("/v1/" + name + "/session/" + id + "/update?" + v.query() + "&max_ms=1400").c_str());
     ASSERT_TRUE(res);
     ASSERT_EQ(res->status, 200) << res->body;
     const test::DecodedFrame f = test::decode_frame(res->body);
@@ -384,8 +403,10 @@ TEST_P(Serve, SessionFramesRebuildTheMesh) {
       if ((t.flags & 1) == 0) in_area += area(t, false);
     }
     // The morph covers the region out covered (t = 0) and becomes the in triangles (t = 1).
-    EXPECT_NEAR(morph_area(f, false, true), out_flat, 1e-6 * out_flat + 1e-12);
-    EXPECT_NEAR(morph_area(f, true, true), in_flat, 1e-6 * in_flat + 1e-12);
+    if (terrain) {
+      EXPECT_NEAR(morph_area(f, false, true), out_flat, 1e-6 * out_flat + 1e-12);
+      EXPECT_NEAR(morph_area(f, true, true), in_flat, 1e-6 * in_flat + 1e-12);
+    }
     EXPECT_NEAR(morph_area(f, false, false), out_area, 1e-4 * out_area + 1e-9);
     EXPECT_NEAR(morph_area(f, true, false), in_area, 1e-4 * in_area + 1e-9);
     if (!f.out.empty()) {
@@ -393,7 +414,7 @@ TEST_P(Serve, SessionFramesRebuildTheMesh) {
     }
     // The client's mesh is the fresh extraction's, key for key and corner for corner.
     ASSERT_TRUE(f.header["stats"]["complete"].get<bool>());
-    const Extraction e = extract_minimal_surface(*fbm_source_, v.rcf(fbm_->info()), {});
+    const Extraction e = extract_minimal_surface(src, v.rcf(db.info()), {});
     EXPECT_GT(e.triangles.size(), 100u);
     ASSERT_EQ(client.held.size(), e.triangles.size()) << "frame " << k + 1;
     for (const TriRef& t : e.triangles) {
@@ -401,7 +422,7 @@ TEST_P(Serve, SessionFramesRebuildTheMesh) {
                                              std::uint32_t(t.op.value >> 32), t.index};
       const auto it = client.held.find(key);
       ASSERT_NE(it, client.held.end());
-      const OpRef op = fbm_->op(t.op);
+      const OpRef op = db.op(t.op);
       const FragmentTriangle& ft = op->fragment[t.index];
       for (int corner = 0; corner < 3; ++corner) {
         const Vec3 p = op->position(ft, corner) - origin;
@@ -411,10 +432,43 @@ TEST_P(Serve, SessionFramesRebuildTheMesh) {
       EXPECT_EQ(it->second.flags & 1, ft.is_void() ? 1 : 0);
     }
   }
-  const auto del = c.Delete(("/v1/fbm257/session/" + id).c_str());
+  const auto del = c.Delete(("/v1/" + name + "/session/" + id).c_str());
   ASSERT_TRUE(del);
   EXPECT_EQ(del->status, 200);
-  get_json("/v1/fbm257/session/" + id + "/update?" + path[0].query(), 404);
+  const auto gone =
+      c.Get(("/v1/" + name + "/session/" + id + "/update?" + path[0].query()).c_str());
+  ASSERT_TRUE(gone);
+  EXPECT_EQ(gone->status, 404);
+}
+
+TEST_P(Serve, SessionFramesRebuildTheMesh) {
+  fly_session(server_->port(), "fbm257", *fbm_, *fbm_source_, views(fbm_->info().bounds), true);
+}
+
+TEST_P(Serve, MeshDatabase) {
+  const json info = get_json("/v1/bunny/info");
+  EXPECT_EQ(info["kind"], "mesh");
+  EXPECT_FALSE(info.contains("tiles"));
+  get_json("/v1/bunny/layer.json", 404);
+  get_json("/v1/bunny/tiles/0/0/0.terrain", 404);
+  get_json("/v1/bunny/query/elevation?x=0&y=0", 400);
+  const std::string out = dir_->file("bunny.glb");
+  const auto r = test::run_command(std::string(SMRDB_BIN) + " extract " + mesh_path_ + " -o " +
+                                   out + " -q --floor 0.6");
+  ASSERT_EQ(r.code, 0) << r.out;
+  const auto glb = get("/v1/bunny/extract?floor=0.6");
+  ASSERT_TRUE(glb);
+  ASSERT_EQ(glb->status, 200) << glb->body.substr(0, 200);
+  EXPECT_EQ(glb->body, test::read_file(out));
+  // A 3-D session: cameras around the model at 3 and 1.5 radii.
+  const Box3& b = mesh_->info().bounds;
+  const Vec3 c = (b.lo + b.hi) * 0.5;
+  const double r3 = 1.5 * std::max({b.hi.x - b.lo.x, b.hi.y - b.lo.y, b.hi.z - b.lo.z});
+  const std::vector<View> path = {{c + Vec3{r3, -r3, 0.5 * r3}, c, 2.0},
+                                  {c + Vec3{0.5 * r3, -0.5 * r3, 0.3 * r3}, c, 1.0},
+                                  {c + Vec3{-0.5 * r3, -0.5 * r3, 0.3 * r3}, c, 1.0},
+                                  {c + Vec3{-2 * r3, 2 * r3, r3}, c, 4.0}};
+  fly_session(server_->port(), "bunny", *mesh_, *mesh_source_, path, false);
 }
 
 TEST_P(Serve, SessionTableIsBounded) {
@@ -531,7 +585,7 @@ TEST_P(Serve, MalformedHttpDoesNotCrashTheServer) {
   const auto overlong = get("/v1/j/extract?floor=" + std::string(9000, '1'));
   ASSERT_TRUE(overlong);
   EXPECT_GE(overlong->status, 400);
-  EXPECT_EQ(get_json("/v1/databases").size(), 2u);
+  EXPECT_EQ(get_json("/v1/databases").size(), 3u);
 }
 
 TEST_P(Serve, SlowClientIsCutOff) {
