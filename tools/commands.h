@@ -133,6 +133,7 @@ struct ServeArgs {
   std::string bind = "127.0.0.1";
   unsigned threads = 8;
   std::size_t queue = 64;
+  std::size_t max_connections = 1024;
   std::uint64_t cache_mb = 256;
   std::size_t max_sessions = 64;
   int session_idle_s = 60;

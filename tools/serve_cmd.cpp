@@ -1,5 +1,7 @@
 // smrdb serve: databases over HTTP (tools/serve/, docs/serve.md).
+#include <sys/resource.h>
 #include <chrono>
+
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
@@ -60,6 +62,9 @@ void ServeArgs::add_to(CLI::App& app) {
   app.add_option("--threads", threads, "Request threads")->capture_default_str();
   app.add_option("--queue", queue, "Connections waiting for a thread before 503")
       ->capture_default_str();
+  app.add_option("--max-connections", max_connections,
+                 "New connections waiting for their first byte before 503")
+      ->capture_default_str();
   app.add_option("--cache-mb", cache_mb, "Page cache of each database, MiB")->capture_default_str();
   app.add_option("--max-sessions", max_sessions, "Open progressive sessions (then 503)")
       ->capture_default_str();
@@ -82,6 +87,8 @@ int cmd_serve(const ServeArgs& a) {
   if (a.port < 0 || a.port > 65535) throw_input("--port must be in [0, 65535]");
   if (a.threads < 1 || a.threads > 1024) throw_input("--threads must be in [1, 1024]");
   if (a.queue > 100000) throw_input("--queue must be in [0, 100000]");
+  if (a.max_connections < 1 || a.max_connections > 60000)
+    throw_input("--max-connections must be in [1, 60000]");
   if (a.cache_mb < 1 || a.cache_mb > (std::uint64_t{1} << 20))
     throw_input("--cache-mb must be in [1, 1048576]");
   if (a.max_sessions < 1 || a.max_sessions > 100000)
@@ -109,6 +116,11 @@ int cmd_serve(const ServeArgs& a) {
   sigaddset(&signals, SIGTERM);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
   std::signal(SIGPIPE, SIG_IGN);
+  rlimit files{};  // as many open connections as the system allows this process
+  if (::getrlimit(RLIMIT_NOFILE, &files) == 0 && files.rlim_cur < files.rlim_max) {
+    files.rlim_cur = files.rlim_max;
+    ::setrlimit(RLIMIT_NOFILE, &files);
+  }
 
   serve::ApiOptions ao;
   ao.max_triangles = a.max_triangles;
@@ -122,6 +134,7 @@ int cmd_serve(const ServeArgs& a) {
   ho.port = a.port;
   ho.threads = a.threads;
   ho.queue = a.queue;
+  ho.max_connections = a.max_connections;
   ho.timeout_ms = a.timeout_ms;
   ho.viewer_dir = a.viewer == "none" ? "" : a.viewer.empty() ? default_viewer() : a.viewer;
   ho.log = a.log;

@@ -200,6 +200,7 @@ class HttpServer::Impl {
   void worker();
   void connection(int fd);
   void reject(int fd);
+  void dispatch(int fd);  // to the workers' queue, or 503 when it is full
 
   Api& api_;
   HttpOptions o_;
@@ -311,8 +312,9 @@ void HttpServer::Impl::connection(int fd) {
   DeadlineStream s(fd);
   t_stream = &s;
   for (int n = 0; n < kKeepAliveRequests && !stopping_; ++n) {
-    // The first request's first byte within the timeout, a later one's within the idle time.
-    if (!s.buffered() && !wait_for(fd, POLLIN, n == 0 ? o_.timeout_ms : kKeepAliveIdleMs)) break;
+    // The first request's first byte is there (the acceptor waited for it); a later one's must
+    // come within the keep-alive idle time.
+    if (n > 0 && !s.buffered() && !wait_for(fd, POLLIN, kKeepAliveIdleMs)) break;
     s.set_deadline(Clock::now() + timeout());
     bool closed = false;
     if (!parser_.serve(s, n + 1 == kKeepAliveRequests, closed) || closed || s.close_after) break;
@@ -336,32 +338,66 @@ void HttpServer::Impl::worker() {
   }
 }
 
+void HttpServer::Impl::dispatch(int fd) {
+  bool queued = false;
+  {
+    std::lock_guard lock(mutex_);
+    if (waiting_.size() < o_.queue) {
+      waiting_.push_back(fd);
+      queued = true;
+    }
+  }
+  if (queued)
+    ready_.notify_one();
+  else
+    reject(fd);
+}
+
+// The acceptor: new connections wait here, polled, until their first byte arrives (then they go
+// to the workers' queue) or --timeout-ms passes (then they are closed), so that connections that
+// send nothing hold no worker; at most max_connections of them, beyond which a new one gets 503.
 void HttpServer::Impl::run() {
   std::vector<std::thread> workers;
   for (unsigned i = 0; i < std::max(1u, o_.threads); ++i)
     workers.emplace_back([this] { worker(); });
-  pollfd fds[2] = {{listen_fd_, POLLIN, 0}, {stop_pipe_[0], POLLIN, 0}};
+  struct Pending {
+    int fd;
+    Clock::time_point deadline;
+  };
+  std::vector<Pending> pending;
+  std::vector<pollfd> fds;
   while (!stopping_) {
-    if (::poll(fds, 2, 1000) <= 0 || (fds[1].revents & POLLIN) != 0) continue;
+    fds.assign({{listen_fd_, POLLIN, 0}, {stop_pipe_[0], POLLIN, 0}});
+    int wait_ms = 1000;
+    for (const Pending& p : pending) {
+      fds.push_back({p.fd, POLLIN, 0});
+      wait_ms = std::min(wait_ms, remaining_ms(p.deadline) + 1);
+    }
+    if (::poll(fds.data(), fds.size(), wait_ms) < 0 || (fds[1].revents & POLLIN) != 0) continue;
+    const auto now = Clock::now();
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < pending.size(); ++i) {
+      if (fds[i + 2].revents != 0)
+        dispatch(pending[i].fd);  // readable, or closed: a worker finds out which
+      else if (now >= pending[i].deadline)
+        ::close(pending[i].fd);
+      else
+        pending[kept++] = pending[i];
+    }
+    pending.resize(kept);
+    if ((fds[0].revents & POLLIN) == 0) continue;
     const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC);
     if (fd < 0) {
       if (errno == EMFILE || errno == ENFILE)
         std::this_thread::sleep_for(std::chrono::milliseconds(10));
       continue;
     }
-    bool queued = false;
-    {
-      std::lock_guard lock(mutex_);
-      if (waiting_.size() < o_.queue) {
-        waiting_.push_back(fd);
-        queued = true;
-      }
-    }
-    if (queued)
-      ready_.notify_one();
-    else
+    if (pending.size() >= o_.max_connections)
       reject(fd);
+    else
+      pending.push_back({fd, now + timeout()});
   }
+  for (const Pending& p : pending) ::close(p.fd);
   ready_.notify_all();
   for (auto& t : workers) t.join();
   std::lock_guard lock(mutex_);

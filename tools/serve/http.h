@@ -1,8 +1,10 @@
 // smrdb serve's HTTP transport: the one place that knows cpp-httplib. httplib parses requests
 // and writes responses (Server::process_request); the connections are ours, so that limits hold
 // whatever a client does:
-//  - a bounded pool: `threads` workers and at most `queue` accepted connections waiting for one;
-//    beyond that a connection gets a canned 503 at once and is closed;
+//  - new connections wait in the acceptor (poll) for their first byte, at most max_connections of
+//    them and at most timeout_ms each, holding no thread; then a bounded pool: `threads` workers
+//    and at most `queue` connections waiting for one; beyond either bound a connection gets a
+//    canned 503 at once and is closed;
 //  - a deadline per request: its headers must arrive within timeout_ms of its first byte, and its
 //    answer must be taken within timeout_ms (a client trickling bytes, slowloris, is cut off);
 //  - keep-alive: at most 5 requests per connection, at most 2 s idle between them.
@@ -24,7 +26,8 @@ struct HttpOptions {
   std::string bind = "127.0.0.1";
   int port = 8080;  // 0: any free port
   unsigned threads = 8;
-  std::size_t queue = 64;
+  std::size_t queue = 64;              // readable connections waiting for a worker
+  std::size_t max_connections = 1024;  // connections waiting for their first byte
   int timeout_ms = 10'000;
   std::string viewer_dir;  // empty: no viewer
   bool log = false;        // a line per request on stderr
