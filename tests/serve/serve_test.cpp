@@ -571,7 +571,7 @@ TEST_P(Serve, MalformedHttpDoesNotCrashTheServer) {
       "GET /v1/databases HTTP/1.1\r\nHost: x\r\n" + std::string(20000, 'h') + "\r\n\r\n",
       "GET /" + std::string(10000, 'a') + " HTTP/1.1\r\n\r\n",
       "GET /v1/j/query/elevation?x=%zz&y=%00 HTTP/1.1\r\n\r\n",
-      std::string("\0\0\0\xff\xfe GET / HTTP/1.1\r\n\r\n", 26),
+      std::string("\0\0\0\xff\xfe GET / HTTP/1.1\r\n\r\n", 24),
       "GET /v1/databases HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\nzz\r\n"};
   for (const std::string& req : requests) {
     test::RawSocket s(server_->port());
