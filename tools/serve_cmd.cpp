@@ -1,9 +1,11 @@
 // smrdb serve: databases over HTTP (tools/serve/, docs/serve.md).
+#include <sys/prctl.h>
 #include <sys/resource.h>
 #include <chrono>
 
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -116,6 +118,10 @@ int cmd_serve(const ServeArgs& a) {
   sigaddset(&signals, SIGTERM);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
   std::signal(SIGPIPE, SIG_IGN);
+  // SMRDB_SERVE_PARENT_DEATH=1 (the tests): stop when the process that started us dies, so that
+  // a test that crashes leaves no server behind.
+  if (const char* e = std::getenv("SMRDB_SERVE_PARENT_DEATH"); e != nullptr && e[0] == '1')
+    ::prctl(PR_SET_PDEATHSIG, SIGTERM);
   rlimit files{};  // as many open connections as the system allows this process
   if (::getrlimit(RLIMIT_NOFILE, &files) == 0 && files.rlim_cur < files.rlim_max) {
     files.rlim_cur = files.rlim_max;

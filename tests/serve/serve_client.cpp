@@ -24,6 +24,7 @@ namespace smr::test {
 ServerProcess::ServerProcess(std::vector<std::string> args, const std::string& log_path) {
   args.insert(args.begin(), {SMRDB_BIN, "serve"});
   args.insert(args.end(), {"--port", "0"});
+  ::setenv("SMRDB_SERVE_PARENT_DEATH", "1", 1);  // no server left behind if the test crashes
   pid_ = spawn(args, log_path);
   const std::string marker = "listening on http://127.0.0.1:";
   for (int i = 0; i < 400 && port_ == 0 && alive(); ++i) {
