@@ -33,9 +33,9 @@ function surface(L, x, y) {
 
 function frame(session, f, outL, inL) {
   const out = outL === null ? [] : level(outL), inn = level(inL);
-  const morph = outL !== null ? inn : [];
+  const morph = outL === null ? [] : level(Math.max(outL, inL)); // the finer level refines both
   const header = { session, frame: f, n_out: out.length, n_in: inn.length, n_mv: morph.length * 3, n_mt: morph.length, origin,
-    stats: { complete: inL >= LEVELS, triangles: inn.length, triangles_in: inn.length, triangles_out: out.length,
+    stats: { complete: inL >= LEVELS || inL < outL, triangles: inn.length, triangles_in: inn.length, triangles_out: out.length,
       morph_groups: morph.length ? 1 : 0, seconds: 0.001, pages_read: inn.length >> 6 } };
   let json = Buffer.from(JSON.stringify(header));
   const pad = (n) => (n + 3) & ~3;
@@ -49,7 +49,7 @@ function frame(session, f, outL, inL) {
   parts.push(u32(out.flatMap((_, i) => [i, outL, i])), u32(inn.flatMap((_, i) => [i, inL, i])));
   parts.push(f32(inn.flatMap((t) => t.flatMap((p) => rel(p, height(p[0], p[1]))))), u8(inn.map(() => 0)));
   parts.push(f32(morph.flatMap((t) => t.flatMap((p) => rel(p, surface(outL, p[0], p[1]))))));
-  parts.push(f32(morph.flatMap((t) => t.flatMap((p) => rel(p, height(p[0], p[1]))))));
+  parts.push(f32(morph.flatMap((t) => t.flatMap((p) => rel(p, surface(inL, p[0], p[1]))))));
   parts.push(u32(morph.flatMap(() => [0, 0, 0])), u32(morph.flatMap((_, i) => [3 * i, 3 * i + 1, 3 * i + 2])), u8(morph.map(() => 0)));
   return Buffer.concat(parts);
 }
@@ -72,7 +72,7 @@ const server = createServer((req, res) => {
     const s = sessions.get(m[1]);
     if (!s) return send(404, 'application/json', '{"error":"no such session"}');
     const outL = s.L;
-    s.L = Math.min(LEVELS, s.L + 1); s.f += 1;
+    s.L = s.L === LEVELS ? LEVELS - 2 : s.L + 1; s.f += 1; // at the finest level a move coarsens (to show morphs)
     const body = outL === s.L ? frame(m[1], s.f, null, 0).subarray(0, 0) : frame(m[1], s.f, outL, s.L);
     if (outL === s.L) { // nothing to do: an empty frame
       const h = { session: m[1], frame: s.f, n_out: 0, n_in: 0, n_mv: 0, n_mt: 0, origin, stats: { complete: true, triangles: 2 << (2 * s.L) } };
