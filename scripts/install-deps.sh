@@ -10,7 +10,7 @@ $SUDO apt-get install -y -qq --no-install-recommends \
   libcgal-dev libgmp-dev libmpfr-dev libboost-dev \
   libgdal-dev gdal-bin libglm-dev libcli11-dev nlohmann-json3-dev libpng-dev zlib1g-dev \
   liblmdb-dev lmdb-utils libdraco-dev libmeshoptimizer-dev libxxhash-dev libzstd-dev \
-  libgtest-dev libgmock-dev libbenchmark-dev clang-format >/dev/null
+  libgtest-dev libgmock-dev libbenchmark-dev clang-format pkg-config libcpp-httplib-dev >/dev/null
 # node and npm for the JavaScript tools the tests run (tests/js: the Khronos glTF-Validator);
 # a node that came with its own npm (NodeSource's) is kept.
 if ! command -v npm >/dev/null; then

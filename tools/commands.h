@@ -126,6 +126,23 @@ struct TilesArgs {
   void add_to(CLI::App& app);
 };
 
+/// `serve`: databases over HTTP (serve_cmd.cpp, tools/serve/, docs/serve.md).
+struct ServeArgs {
+  std::vector<std::string> databases;  // NAME=PATH or PATH
+  int port = 8080;
+  std::string bind = "127.0.0.1";
+  unsigned threads = 8;
+  std::size_t queue = 64;
+  std::uint64_t cache_mb = 256;
+  std::size_t max_sessions = 64;
+  std::uint64_t max_triangles = 2'000'000;
+  int timeout_ms = 10'000;
+  std::string viewer;  // empty: the source tree's built viewer, if any
+  bool log = false;
+
+  void add_to(CLI::App& app);
+};
+
 struct SynthArgs {
   int width = 1025, height = 0;  // height 0: = width
   std::uint64_t seed = 1;
@@ -167,5 +184,6 @@ int cmd_synth(const SynthArgs& a, bool quiet);
 int cmd_query(const std::string& db_path, const std::string& kind, const QueryArgs& a);
 int cmd_flythrough(const std::string& db_path, const FlythroughArgs& a, const CommonFlags& f);
 int cmd_tiles(const std::string& db_path, const TilesArgs& a, const CommonFlags& f);
+int cmd_serve(const ServeArgs& a);
 
 }  // namespace smr::tools

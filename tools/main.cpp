@@ -33,6 +33,7 @@ int main(int argc, char** argv) {
   smr::tools::FlythroughArgs fly_args;
   smr::tools::QueryArgs query_args;
   smr::tools::TilesArgs tiles_args;
+  smr::tools::ServeArgs serve_args;
   std::string db_path;
 
   CLI::App* ingest = app.add_subcommand(
@@ -105,6 +106,10 @@ int main(int argc, char** argv) {
   tiles->add_flag("--json", flags.json, "Print statistics as JSON on stdout");
   tiles->add_flag("-q,--quiet", flags.quiet, "No progress or summary on stderr");
 
+  CLI::App* serve = app.add_subcommand(
+      "serve", "Serve databases over HTTP: extraction, tiles, queries, progressive sessions");
+  serve_args.add_to(*serve);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -115,7 +120,7 @@ int main(int argc, char** argv) {
     if (app.get_subcommands().empty() && argc > 1 && argv[1][0] != '-') {
       std::fprintf(stderr,
                    "smrdb: error: unknown subcommand '%s' (ingest, extract, info, verify, build, "
-                   "synth, flythrough, query, tiles; --help lists them)\n",
+                   "synth, flythrough, query, tiles, serve; --help lists them)\n",
                    argv[1]);
       return 1;
     }
@@ -133,6 +138,7 @@ int main(int argc, char** argv) {
     if (*fly) return cmd_flythrough(db_path, fly_args, flags);
     if (*query) return cmd_query(db_path, query->get_subcommands().at(0)->get_name(), query_args);
     if (*tiles) return cmd_tiles(db_path, tiles_args, flags);
+    if (*serve) return cmd_serve(serve_args);
   } catch (const smr::Error& e) {
     std::fprintf(stderr, "smrdb: error: %s\n", e.what());
     return e.exit_code();

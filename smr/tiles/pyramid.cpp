@@ -502,4 +502,24 @@ PyramidReport write_pyramid(const Database& db, const std::string& dir,
   return report;
 }
 
+std::string covering_layer_json(const Database& db, int max_zoom) {
+  const TilingScheme scheme = TilingScheme::for_terrain(db.info());
+  PyramidReport report;
+  report.max_zoom = max_zoom < 0 ? scheme.default_max_zoom(db.info().err_final) : max_zoom;
+  if (report.max_zoom > kMaxZoom)
+    throw_input("--max-zoom must be in [0, " + std::to_string(kMaxZoom) + "], got " +
+                std::to_string(report.max_zoom));
+  report.height_step = global_height_step(db);
+  json available = json::array();
+  for (int z = 0; z <= report.max_zoom; ++z) {
+    report.level_errors.push_back(scheme.level_error(z));
+    const TileRange r = scheme.covering(z);
+    json ranges = json::array();
+    if (!r.empty())
+      ranges.push_back({{"startX", r.x0}, {"endX", r.x1}, {"startY", r.y0}, {"endY", r.y1}});
+    available.push_back(ranges);
+  }
+  return layer_json(db, scheme, report, available).dump(2) + "\n";
+}
+
 }  // namespace smr::tiles

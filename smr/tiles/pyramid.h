@@ -72,4 +72,10 @@ QuantizedMeshTile cut_tile(const Database& db, const TilingScheme& scheme, const
 PyramidReport write_pyramid(const Database& db, const std::string& dir,
                             const PyramidOptions& options);
 
+/// The layer.json of a pyramid of zooms 0..max_zoom (-1: the default) served on demand (smrdb
+/// serve): what write_pyramid writes, except that "available" lists every tile of the scheme's
+/// covering(z) (write_pyramid lists the tiles it wrote: the same unless a covered tile holds no
+/// triangle). kInvalidInput like write_pyramid.
+std::string covering_layer_json(const Database& db, int max_zoom);
+
 }  // namespace smr::tiles
