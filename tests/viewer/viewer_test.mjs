@@ -9,7 +9,7 @@
 //     reference (mean difference bound), and a second render of the same camera after a flight
 //     matches the first;
 //   - the query overlay answers (elevation, contours).
-// Usage: node viewer_test.mjs --smrdb BIN --dem FILE --viewer DIST --reference PNG
+// Usage: node viewer_test.mjs --smrdb BIN --dem FILE [--warp SRS] --viewer DIST --reference PNG
 //        [--update-reference] [--shots DIR]   (or --url URL --db NAME: an already running server)
 import { spawn, execFileSync } from 'node:child_process';
 import { mkdtempSync, rmSync, readFileSync, writeFileSync, mkdirSync } from 'node:fs';
@@ -37,7 +37,15 @@ function check(ok, what) {
 
 function startServer(dir) {
   const db = join(dir, 'terrain.smrdb');
-  execFileSync(args.smrdb, ['ingest', args.dem, '-o', db, '--force'], { stdio: ['ignore', 'ignore', 'inherit'] });
+  let dem = args.dem;
+  if (args.warp) {
+    // The camera RCF works in model coordinates: on a geographic raster (x, y in degrees, z in
+    // metres) every view looks straight down to it and nothing refines. A projected copy of the
+    // real DEM (GDAL, metres) gives the session work to do.
+    dem = join(dir, 'dem.tif');
+    execFileSync('gdalwarp', ['-q', '-t_srs', args.warp, '-r', 'bilinear', args.dem, dem], { stdio: 'inherit' });
+  }
+  execFileSync(args.smrdb, ['ingest', dem, '-o', db, '--force'], { stdio: ['ignore', 'ignore', 'inherit'] });
   const proc = spawn(args.smrdb, ['serve', `terrain=${db}`, '--port', '0', '--viewer', args.viewer], { stdio: ['ignore', 'pipe', 'inherit'] });
   return new Promise((resolve, reject) => {
     let out = '';

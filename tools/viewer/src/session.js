@@ -101,7 +101,7 @@ export class SessionClient {
       frame: h.frame, triangles: s.triangles, held: 0, drawn: 0, triangles_in: s.triangles_in,
       triangles_out: s.triangles_out, morph_groups: s.morph_groups || 0,
       morph_vertices: frame.mStart.length / 3, morph_triangles: frame.mTris.length / 3,
-      pages_read: s.pages_read || 0, server_ms: (s.seconds || 0) * 1000, update_ms: frame.updateMs,
+      pages_read: s.pages_read || 0, server_ms: s.update_ms ?? (s.seconds || 0) * 1000, update_ms: frame.updateMs,
       bytes: frame.bytes, complete: this.lastComplete, applied_at: now,
     };
     this.stats.push(rec);
