@@ -202,15 +202,45 @@ async function run(url, db) {
   }
 }
 
-/** A fly-through's screenshots (JPEG-like small PNGs) for benchmarks/results/viewer. */
+/** Writes a screenshot with 4 bits per channel (smaller files for the results directory). */
+function small(png, path) {
+  const img = decode(png);
+  for (let i = 0; i < img.data.length; ++i) if (i % 4 !== 3) img.data[i] &= 0xf0;
+  writeFileSync(path, PNG.sync.write(img, { colorType: 2 }));
+}
+
+/** A fly-through's screenshots for benchmarks/results/viewer: two orbit cameras, and one move
+ *  closer held at t = 0.5 with the morph groups tinted. */
 async function shots(page, dir) {
   mkdirSync(dir, { recursive: true });
-  const cams = await page.evaluate(() => window.smrdbViewer.orbit(4));
-  for (let i = 0; i < 4; ++i) {
+  await page.setViewport({ width: 360, height: 225 });
+  await page.evaluate(() => {
+    window.smrdbViewer.viewer.overlay.clear();
+    for (const id of ['tools', 'query', 'chart']) document.getElementById(id).style.visibility = 'hidden';
+  });
+  // Two orbit cameras pulled back to see the whole terrain.
+  const cams = await page.evaluate(() =>
+    window.smrdbViewer.orbit(2).map((c) => ({ ...c, eye: c.eye.map((e, k) => c.target[k] + 1.6 * (e - c.target[k])) })));
+  for (let i = 0; i < 2; ++i) {
     await page.evaluate(async (c) => window.smrdbViewer.flyPath([c]), cams[i]);
+    await new Promise((r) => setTimeout(r, 300)); // the HUD refreshes every 200 ms
     await page.evaluate(() => window.smrdbViewer.render());
-    await page.screenshot({ path: join(dir, `flythrough_${i}.png`) });
+    small(await page.screenshot({ type: 'png' }), join(dir, `flythrough_${i}.png`));
   }
+  const held = await page.evaluate(async () => {
+    const v = window.smrdbViewer;
+    v.viewer.uniforms.tint.value = 0.6;
+    v.holdMorph(0.5);
+    const c = v.camera();
+    v.setView({ eye: c.eye.map((e, i) => c.target[i] + (e - c.target[i]) * 0.4), target: c.target });
+    const t0 = performance.now();
+    while (!v.hasMorph() && performance.now() - t0 < 15000) await new Promise((r) => setTimeout(r, 20));
+    await new Promise((r) => setTimeout(r, 300)); // the HUD refreshes every 200 ms
+    v.render();
+    return v.hasMorph();
+  });
+  if (held) small(await page.screenshot({ type: 'png' }), join(dir, 'geomorph_t0.5.png'));
+  await page.evaluate(() => window.smrdbViewer.holdMorph(null));
 }
 
 async function main() {

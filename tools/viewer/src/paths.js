@@ -3,8 +3,9 @@
 
 /**
  * One turn around the model (a camera per degree), like `smrdb flythrough --orbit` but measured in
- * display metres (a geographic raster's degrees converted), so that it looks the same for both:
- * at 0.4 of the horizontal extent from the centre and 0.2 of it above the highest point.
+ * display metres (a geographic raster's degrees converted) and farther out, so that the whole
+ * terrain is in view: at 0.6 of the horizontal extent from the centre and 0.45 of it above the
+ * highest point.
  */
 export function orbitPath(info, bounds, fov) {
   const lo = bounds.min, hi = bounds.max;
@@ -14,7 +15,7 @@ export function orbitPath(info, bounds, fov) {
   const sy = g && g.geographic ? 110574 : 1;
   const e = Math.max((hi[0] - lo[0]) * sx, (hi[1] - lo[1]) * sy);
   const terrain = (info.kind || (info.meta && info.meta.model && info.meta.model.kind)) !== 'mesh';
-  let radius = 0.4 * e, height = hi[2] + 0.2 * e;
+  let radius = 0.6 * e, height = hi[2] + 0.45 * e;
   if (!terrain) {
     const d = (1.2 * 0.5 * Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2])) / Math.sin((fov * Math.PI) / 360);
     radius = d * Math.cos(Math.PI / 9);
