@@ -8,8 +8,9 @@
 //   - the terrain renders: a screenshot covers the view with terrain, matches a committed
 //     reference (mean difference bound), and a second render of the same camera after a flight
 //     matches the first;
-//   - the query overlay answers (elevation, contours).
-// Usage: node viewer_test.mjs --smrdb BIN --dem FILE [--warp SRS] --viewer DIST --reference PNG
+//   - the query overlay answers (elevation, contours);
+//   - with --cesium: cesium.html loads the server's quantized-mesh tiles of the DEM as it is.
+// Usage: node viewer_test.mjs --smrdb BIN --dem FILE [--warp SRS] [--cesium] --viewer DIST --reference PNG
 //        [--update-reference] [--shots DIR]   (or --url URL --db NAME: an already running server)
 import { spawn, execFileSync } from 'node:child_process';
 import { mkdtempSync, rmSync, readFileSync, writeFileSync, mkdirSync } from 'node:fs';
@@ -46,7 +47,13 @@ function startServer(dir) {
     execFileSync('gdalwarp', ['-q', '-t_srs', args.warp, '-r', 'bilinear', args.dem, dem], { stdio: 'inherit' });
   }
   execFileSync(args.smrdb, ['ingest', dem, '-o', db, '--force'], { stdio: ['ignore', 'ignore', 'inherit'] });
-  const proc = spawn(args.smrdb, ['serve', `terrain=${db}`, '--port', '0', '--viewer', args.viewer], { stdio: ['ignore', 'pipe', 'inherit'] });
+  const dbs = [`terrain=${db}`];
+  if (args.cesium) {
+    // CesiumJS needs the geographic (EPSG:4326) tiling: the DEM as it is.
+    execFileSync(args.smrdb, ['ingest', args.dem, '-o', join(dir, 'geo.smrdb'), '--force'], { stdio: ['ignore', 'ignore', 'inherit'] });
+    dbs.push(`geo=${join(dir, 'geo.smrdb')}`);
+  }
+  const proc = spawn(args.smrdb, ['serve', ...dbs, '--port', '0', '--viewer', args.viewer], { stdio: ['ignore', 'pipe', 'inherit'] });
   return new Promise((resolve, reject) => {
     let out = '';
     const timer = setTimeout(() => reject(new Error(`smrdb serve printed no URL: ${out}`)), 15000);
@@ -146,7 +153,7 @@ async function run(url, db) {
     page.on('pageerror', (e) => console.log(`page error: ${e.message}`));
     page.on('console', (m) => m.type() === 'error' && !m.text().includes('favicon') && console.log(`page console: ${m.text()}`));
     await page.setViewport({ width: 480, height: 320 });
-    await page.goto(`${url}?db=${db}&morph_ms=200&px=2`);
+    await page.goto(`${url}index.html?db=${db}&morph_ms=200&px=2`);
     await page.waitForFunction('window.smrdbViewer && (window.smrdbViewer.ready || window.smrdbViewer.error)', { timeout: 20000 });
     const err = await page.evaluate(() => window.smrdbViewer.error || null);
     check(!err, `the viewer opens the database${err ? `: ${err}` : ''}`);
@@ -197,9 +204,23 @@ async function run(url, db) {
     check(Number.isFinite(q.z) && q.z >= q.lo - 1 && q.z <= q.hi + 1, `elevation at the centre is within the bounds (${q.z})`);
     check(q.lines > 0, `contours draw lines (${q.lines})`);
     if (args.shots) await shots(page, args.shots);
+    if (args.cesium) await cesium(browser, url);
   } finally {
     await browser.close();
   }
+}
+
+/** cesium.html: CesiumJS's own CesiumTerrainProvider loads the server's quantized-mesh tiles. */
+async function cesium(browser, url) {
+  const page = await browser.newPage();
+  await page.setViewport({ width: 480, height: 320 });
+  await page.goto(`${url}cesium.html?db=geo`);
+  const done = 'window.smrdbCesium && (window.smrdbCesium.failed || window.smrdbCesium.errors.length > 0 || ' +
+    '(window.smrdbCesium.ready && window.smrdbCesium.tilesLoaded > 0))';
+  await page.waitForFunction(done, { timeout: 40000 }).catch(() => {});
+  const r = await page.evaluate(() => ({ loaded: window.smrdbCesium.tilesLoaded, errors: window.smrdbCesium.errors }));
+  check(r.loaded > 0 && r.errors.length === 0, `CesiumJS loads the tiles (${r.loaded} tiles${r.errors.length ? `; ${r.errors[0]}` : ''})`);
+  await page.close();
 }
 
 /** Writes a screenshot with 4 bits per channel (smaller files for the results directory). */
