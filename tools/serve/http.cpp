@@ -56,6 +56,7 @@ class DeadlineStream final : public httplib::Stream {
  public:
   explicit DeadlineStream(int fd) : fd_(fd) {}
   void set_deadline(Clock::time_point d) { deadline_ = d; }
+  bool close_after = false;  // the answer ends the connection
   bool buffered() const { return pos_ < end_; }
 
   bool is_readable() const override {
@@ -220,6 +221,16 @@ void HttpServer::Impl::respond(const httplib::Request& req, httplib::Response& r
     res.set_header("Access-Control-Max-Age", "86400");
     return;
   }
+  // No request here has a body, and it is never read: refuse one so that its bytes are not
+  // taken for the next request.
+  const std::string length = req.get_header_value("Content-Length");
+  if ((!length.empty() && length != "0") || req.has_header("Transfer-Encoding")) {
+    if (t_stream != nullptr) t_stream->close_after = true;
+    res.status = 413;
+    res.set_header("Connection", "close");
+    res.set_content("{\"error\":\"request bodies are not accepted\"}", "application/json");
+    return;
+  }
   if (req.path.rfind("/v1/", 0) != 0) return serve_static(req, res);
   Request r{req.method, req.path, {}, req.get_header_value("If-None-Match")};
   for (const auto& [k, v] : req.params) r.params.emplace_back(k, v);
@@ -304,7 +315,7 @@ void HttpServer::Impl::connection(int fd) {
     if (!s.buffered() && !wait_for(fd, POLLIN, n == 0 ? o_.timeout_ms : kKeepAliveIdleMs)) break;
     s.set_deadline(Clock::now() + timeout());
     bool closed = false;
-    if (!parser_.serve(s, n + 1 == kKeepAliveRequests, closed) || closed) break;
+    if (!parser_.serve(s, n + 1 == kKeepAliveRequests, closed) || closed || s.close_after) break;
   }
   t_stream = nullptr;
   ::shutdown(fd, SHUT_RDWR);
