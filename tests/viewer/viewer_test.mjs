@@ -199,10 +199,18 @@ async function run(url, db) {
       const v = window.smrdbViewer.viewer, o = v.frame.origin;
       const e = await v.overlay.elevation([o[0], o[1]]);
       const c = await v.overlay.contours(Number(document.getElementById('interval').value));
-      return { z: e.z, lines: c.lines, lo: v.bounds.min[2], hi: v.bounds.max[2] };
+      // A profile across the middle and a sight line from high above to the centre.
+      const w = 0.25 * (v.bounds.max[0] - v.bounds.min[0]);
+      const p = await v.overlay.profile([o[0] - w, o[1]], [o[0] + w, o[1]]);
+      const s = await v.overlay.los([o[0], o[1], v.bounds.max[2] + 1000], [o[0] + w, o[1], e.z]);
+      const chart = document.getElementById('chart').style.display;
+      return { z: e.z, lines: c.lines, lo: v.bounds.min[2], hi: v.bounds.max[2], profile: p.points.length, chart,
+               overlay: v.overlay.objects.children.length, sight: typeof s.visible };
     });
     check(Number.isFinite(q.z) && q.z >= q.lo - 1 && q.z <= q.hi + 1, `elevation at the centre is within the bounds (${q.z})`);
     check(q.lines > 0, `contours draw lines (${q.lines})`);
+    check(q.profile > 2 && q.chart === 'block', `a profile is charted (${q.profile} points)`);
+    check(q.sight === 'boolean' && q.overlay >= 4, `a line of sight is answered and drawn (${q.overlay} overlay objects)`);
     if (args.shots) await shots(page, args.shots);
     if (args.cesium) await cesium(browser, url);
   } finally {
