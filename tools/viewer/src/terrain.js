@@ -128,6 +128,8 @@ export class TriangleStore {
     }
     this.capacity = capacity;
     this.positions = positions;
+    this.dirtyLo = Infinity; // a new buffer uploads whole
+    this.dirtyHi = -1;
     const g = new THREE.BufferGeometry();
     g.setAttribute('position', new THREE.BufferAttribute(positions, 3));
     g.setAttribute('bary', new THREE.BufferAttribute(baryArray(capacity * 3), 3));
@@ -152,6 +154,7 @@ export class TriangleStore {
       slot = this.high++;
     }
     this.positions.set(pos.subarray(offset, offset + 9), slot * 9);
+    this.touch(slot);
     this.slots.set(key, slot);
     ++this.drawn;
   }
@@ -162,13 +165,26 @@ export class TriangleStore {
     this.slots.delete(key);
     if (slot < 0) return;
     this.positions.fill(0, slot * 9, slot * 9 + 9); // degenerate: draws nothing
+    this.touch(slot);
     this.free.push(slot);
     --this.drawn;
   }
 
+  touch(slot) {
+    this.dirtyLo = Math.min(this.dirtyLo, slot);
+    this.dirtyHi = Math.max(this.dirtyHi, slot);
+  }
+
+  /** Uploads the slots changed since the last flush (one range) and sets the draw range. */
   flush() {
-    const g = this.mesh.geometry;
-    g.attributes.position.needsUpdate = true;
+    const g = this.mesh.geometry, attr = g.attributes.position;
+    if (this.dirtyHi >= this.dirtyLo) {
+      attr.clearUpdateRanges();
+      attr.addUpdateRange(this.dirtyLo * 9, (this.dirtyHi - this.dirtyLo + 1) * 9);
+      attr.needsUpdate = true;
+    }
+    this.dirtyLo = Infinity;
+    this.dirtyHi = -1;
     g.setDrawRange(0, this.high * 3);
   }
 }
