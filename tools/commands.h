@@ -135,7 +135,9 @@ struct ServeArgs {
   std::size_t queue = 64;
   std::uint64_t cache_mb = 256;
   std::size_t max_sessions = 64;
+  int session_idle_s = 60;
   std::uint64_t max_triangles = 2'000'000;
+  std::uint64_t tile_cache_mb = 64;
   int timeout_ms = 10'000;
   std::string viewer;  // empty: the source tree's built viewer, if any
   bool log = false;

@@ -1,4 +1,5 @@
 // smrdb serve: databases over HTTP (tools/serve/, docs/serve.md).
+#include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
@@ -62,7 +63,11 @@ void ServeArgs::add_to(CLI::App& app) {
   app.add_option("--cache-mb", cache_mb, "Page cache of each database, MiB")->capture_default_str();
   app.add_option("--max-sessions", max_sessions, "Open progressive sessions (then 503)")
       ->capture_default_str();
+  app.add_option("--session-idle-s", session_idle_s, "A session idle this long is dropped")
+      ->capture_default_str();
   app.add_option("--max-triangles", max_triangles, "Most triangles in one answer")
+      ->capture_default_str();
+  app.add_option("--tile-cache-mb", tile_cache_mb, "Encoded tiles kept in memory, MiB (0: none)")
       ->capture_default_str();
   app.add_option("--timeout-ms", timeout_ms,
                  "Socket timeout, request-header deadline and compute budget, ms")
@@ -83,6 +88,10 @@ int cmd_serve(const ServeArgs& a) {
     throw_input("--max-sessions must be in [1, 100000]");
   if (a.max_triangles < 1 || a.max_triangles > (std::uint64_t{1} << 32))
     throw_input("--max-triangles must be in [1, 2^32]");
+  if (a.session_idle_s < 1 || a.session_idle_s > 86400)
+    throw_input("--session-idle-s must be in [1, 86400]");
+  if (a.tile_cache_mb > (std::uint64_t{1} << 20))
+    throw_input("--tile-cache-mb must be in [0, 1048576]");
   if (a.timeout_ms < 100 || a.timeout_ms > 3'600'000)
     throw_input("--timeout-ms must be in [100, 3600000]");
   std::vector<std::pair<std::string, std::string>> named;
@@ -105,6 +114,8 @@ int cmd_serve(const ServeArgs& a) {
   ao.max_triangles = a.max_triangles;
   ao.timeout_ms = double(a.timeout_ms);
   ao.max_sessions = a.max_sessions;
+  ao.session_idle = std::chrono::seconds(a.session_idle_s);
+  ao.tile_cache_bytes = std::size_t(a.tile_cache_mb) << 20;
   serve::Api api(named, std::size_t(a.cache_mb) << 20, ao, glb_bytes);
   serve::HttpOptions ho;
   ho.bind = a.bind;

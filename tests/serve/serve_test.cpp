@@ -27,6 +27,7 @@
 #include "tests/serve/serve_client.h"
 #include "tests/support/datasets.h"
 #include "tests/support/files.h"
+#include "tests/support/meshes.h"
 #include "tests/support/process.h"
 
 namespace smr {
@@ -36,8 +37,10 @@ using nlohmann::json;
 
 constexpr int kTimeoutMs = 1500;
 
-// One server for the suite: jacksboro (geographic) written to a scratch database.
-class Serve : public ::testing::Test {
+// One server for the suite: jacksboro (geographic) and fbm257 (grid units) written to scratch
+// databases. The suite has one parameter so that CTest runs it in one process
+// (tests/discover_grouped.cmake): one server, one build of each dataset.
+class Serve : public ::testing::TestWithParam<std::string> {
  protected:
   static void SetUpTestSuite() {
     dir_ = new test::TempDir("smrdb-serve");
@@ -51,14 +54,19 @@ class Serve : public ::testing::Test {
     write_database(fbm, fbm_path_, {});
     fbm_ = Database::open(fbm_path_, {std::size_t{64} << 20}).release();
     fbm_source_ = new IndexedSource(*fbm_);
+    mesh_path_ = dir_->file("bunny.smrdb");
+    Crmr bunny = test::built_mesh("bunny00.off").crmr;
+    write_database(bunny, mesh_path_, {});
+    mesh_ = Database::open(mesh_path_, {std::size_t{64} << 20}).release();
+    mesh_source_ = new IndexedSource(*mesh_);
     std::filesystem::create_directories(dir_->file("viewer/assets"));
     test::write_file(dir_->file("viewer/index.html"), "<html>viewer</html>");
     test::write_file(dir_->file("viewer/assets/app.js"), "console.log(1);");
-    server_ =
-        new test::ServerProcess({"j=" + db_path_, fbm_path_, "--threads", "4", "--queue", "8",
-                                 "--timeout-ms", std::to_string(kTimeoutMs), "--max-sessions", "3",
-                                 "--max-triangles", "50000", "--viewer", dir_->file("viewer")},
-                                dir_->file("server.log"));
+    server_ = new test::ServerProcess(
+        {"j=" + db_path_, fbm_path_, "bunny=" + mesh_path_, "--threads", "4", "--queue", "8",
+         "--timeout-ms", std::to_string(kTimeoutMs), "--max-sessions", "3", "--max-triangles",
+         "50000", "--session-idle-s", "2", "--viewer", dir_->file("viewer")},
+        dir_->file("server.log"));
   }
   static void TearDownTestSuite() {
     const int status = server_->stop();
@@ -69,6 +77,8 @@ class Serve : public ::testing::Test {
     delete db_;
     delete fbm_source_;
     delete fbm_;
+    delete mesh_source_;
+    delete mesh_;
     delete dir_;
   }
   static httplib::Result get(const std::string& path, const httplib::Headers& headers = {}) {
@@ -92,6 +102,9 @@ class Serve : public ::testing::Test {
   static std::string fbm_path_;  // served as "fbm257" (a bare path: named by its stem)
   static Database* fbm_;
   static IndexedSource* fbm_source_;
+  static std::string mesh_path_;  // "bunny": a 3-D mesh
+  static Database* mesh_;
+  static IndexedSource* mesh_source_;
   static test::ServerProcess* server_;
 };
 
@@ -102,6 +115,9 @@ IndexedSource* Serve::source_ = nullptr;
 std::string Serve::fbm_path_;
 Database* Serve::fbm_ = nullptr;
 IndexedSource* Serve::fbm_source_ = nullptr;
+std::string Serve::mesh_path_;
+Database* Serve::mesh_ = nullptr;
+IndexedSource* Serve::mesh_source_ = nullptr;
 test::ServerProcess* Serve::server_ = nullptr;
 
 // A camera over a database in grid units (fbm257): eye and target as fractions of its bounds.
@@ -149,10 +165,12 @@ std::vector<View> views(const Box3& b) {
           {at(-0.5, -0.5, 3.0), at(0.5, 0.5, 0.3), 4.0}};
 }
 
-TEST_F(Serve, DatabasesAndInfo) {
+TEST_P(Serve, DatabasesAndInfo) {
   const json list = get_json("/v1/databases");
-  EXPECT_EQ(list,
-            json::parse(R"([{"name":"j","kind":"terrain"},{"name":"fbm257","kind":"terrain"}])"));
+  EXPECT_EQ(
+      list,
+      json::parse(
+          R"([{"name":"j","kind":"terrain"},{"name":"fbm257","kind":"terrain"},{"name":"bunny","kind":"mesh"}])"));
   const json info = get_json("/v1/j/info");
   const Box3& b = db_->info().bounds;
   EXPECT_EQ(info["kind"], "terrain");
@@ -164,7 +182,7 @@ TEST_F(Serve, DatabasesAndInfo) {
   EXPECT_EQ(info["dag_depth"], info["meta"]["counts"]["dag_depth"]);
 }
 
-TEST_F(Serve, ExtractGlbIsTheCliGlb) {
+TEST_P(Serve, ExtractGlbIsTheCliGlb) {
   const View v = views(fbm_->info().bounds)[1];
   struct Case {
     std::string query, flags;
@@ -195,7 +213,7 @@ TEST_F(Serve, ExtractGlbIsTheCliGlb) {
   EXPECT_NE(big["error"].get<std::string>().find("max_triangles"), std::string::npos);
 }
 
-TEST_F(Serve, TilesAreTheStaticPyramidsBytes) {
+TEST_P(Serve, TilesAreTheStaticPyramidsBytes) {
   const std::string out = dir_->file("pyramid");
   const tiles::PyramidReport report = tiles::write_pyramid(*db_, out, {});
   const tiles::TilingScheme scheme = tiles::TilingScheme::for_terrain(db_->info());
@@ -250,7 +268,7 @@ TEST_F(Serve, TilesAreTheStaticPyramidsBytes) {
   get_json("/v1/j/tiles/0/99/0.terrain", 404);
 }
 
-TEST_F(Serve, QueriesAnswerAsTheLibrary) {
+TEST_P(Serve, QueriesAnswerAsTheLibrary) {
   const query::ElevationQuery eq(*source_);
   for (const Vec2 p : {Vec2{-84.3, 36.6}, Vec2{-84.2, 36.5}, Vec2{-84.12345, 36.7}}) {
     std::ostringstream q;
@@ -337,10 +355,14 @@ double morph_area(const test::DecodedFrame& f, bool end, bool flat) {
   return sum;
 }
 
-TEST_F(Serve, SessionFramesRebuildTheMesh) {
-  httplib::Client c("127.0.0.1", server_->port());
+// A session on database `name` along `path`, its frames applied by a Client: after each update the
+// client's triangles are the fresh extraction's, and the morph covers what changed. `terrain`: the
+// x-y areas are checked too (a terrain's morph keeps x-y; a 3-D morph moves vertices).
+void fly_session(int port, const std::string& name, const Database& db, const IndexedSource& src,
+                 const std::vector<View>& path, bool terrain) {
+  httplib::Client c("127.0.0.1", port);
   c.set_read_timeout(20, 0);
-  const auto created = c.Post("/v1/fbm257/session");
+  const auto created = c.Post(("/v1/" + name + "/session").c_str());
   ASSERT_TRUE(created);
   ASSERT_EQ(created->status, 200) << created->body;
   const test::DecodedFrame f0 = test::decode_frame(created->body);
@@ -351,16 +373,22 @@ TEST_F(Serve, SessionFramesRebuildTheMesh) {
   Client client;
   for (const auto& t : f0.in) client.held[t.key] = t;
   EXPECT_EQ(client.held.size(), f0.in.size());
-  const Vec3 origin = (fbm_->info().bounds.lo + fbm_->info().bounds.hi) * 0.5;
-  const std::vector<View> path = views(fbm_->info().bounds);
+  const Vec3 origin = (db.info().bounds.lo + db.info().bounds.hi) * 0.5;
   for (std::size_t k = 0; k < path.size(); ++k) {
     const View& v = path[k];
     const auto res =
-        c.Get(("/v1/fbm257/session/" + id + "/update?" + v.query() + "&max_ms=1400").c_str());
+        c.Get(("/v1/" + name + "/session/" + id + "/update?" + v.query() + "&max_ms=1400").c_str());
     ASSERT_TRUE(res);
     ASSERT_EQ(res->status, 200) << res->body;
     const test::DecodedFrame f = test::decode_frame(res->body);
     EXPECT_EQ(f.header["frame"], k + 1);
+    for (const char* field :
+         {"coarsenings", "refinings", "pending_coarsenings", "pending_refinings", "complete", "x",
+          "triangles", "triangles_in", "triangles_out", "ops_tested", "morph_triangles", "seconds",
+          "pages_read"})
+      EXPECT_TRUE(f.header["stats"].contains(field)) << field;
+    EXPECT_EQ(f.header["stats"]["triangles_in"], f.in.size());
+    EXPECT_EQ(f.header["stats"]["triangles_out"], f.out.size());
     double out_flat = 0, out_area = 0, in_flat = 0, in_area = 0;
     for (const auto& key : f.out) {
       const auto it = client.held.find(key);
@@ -375,8 +403,10 @@ TEST_F(Serve, SessionFramesRebuildTheMesh) {
       if ((t.flags & 1) == 0) in_area += area(t, false);
     }
     // The morph covers the region out covered (t = 0) and becomes the in triangles (t = 1).
-    EXPECT_NEAR(morph_area(f, false, true), out_flat, 1e-6 * out_flat + 1e-12);
-    EXPECT_NEAR(morph_area(f, true, true), in_flat, 1e-6 * in_flat + 1e-12);
+    if (terrain) {
+      EXPECT_NEAR(morph_area(f, false, true), out_flat, 1e-6 * out_flat + 1e-12);
+      EXPECT_NEAR(morph_area(f, true, true), in_flat, 1e-6 * in_flat + 1e-12);
+    }
     EXPECT_NEAR(morph_area(f, false, false), out_area, 1e-4 * out_area + 1e-9);
     EXPECT_NEAR(morph_area(f, true, false), in_area, 1e-4 * in_area + 1e-9);
     if (!f.out.empty()) {
@@ -384,7 +414,7 @@ TEST_F(Serve, SessionFramesRebuildTheMesh) {
     }
     // The client's mesh is the fresh extraction's, key for key and corner for corner.
     ASSERT_TRUE(f.header["stats"]["complete"].get<bool>());
-    const Extraction e = extract_minimal_surface(*fbm_source_, v.rcf(fbm_->info()), {});
+    const Extraction e = extract_minimal_surface(src, v.rcf(db.info()), {});
     EXPECT_GT(e.triangles.size(), 100u);
     ASSERT_EQ(client.held.size(), e.triangles.size()) << "frame " << k + 1;
     for (const TriRef& t : e.triangles) {
@@ -392,7 +422,7 @@ TEST_F(Serve, SessionFramesRebuildTheMesh) {
                                              std::uint32_t(t.op.value >> 32), t.index};
       const auto it = client.held.find(key);
       ASSERT_NE(it, client.held.end());
-      const OpRef op = fbm_->op(t.op);
+      const OpRef op = db.op(t.op);
       const FragmentTriangle& ft = op->fragment[t.index];
       for (int corner = 0; corner < 3; ++corner) {
         const Vec3 p = op->position(ft, corner) - origin;
@@ -402,13 +432,46 @@ TEST_F(Serve, SessionFramesRebuildTheMesh) {
       EXPECT_EQ(it->second.flags & 1, ft.is_void() ? 1 : 0);
     }
   }
-  const auto del = c.Delete(("/v1/fbm257/session/" + id).c_str());
+  const auto del = c.Delete(("/v1/" + name + "/session/" + id).c_str());
   ASSERT_TRUE(del);
   EXPECT_EQ(del->status, 200);
-  get_json("/v1/fbm257/session/" + id + "/update?" + path[0].query(), 404);
+  const auto gone =
+      c.Get(("/v1/" + name + "/session/" + id + "/update?" + path[0].query()).c_str());
+  ASSERT_TRUE(gone);
+  EXPECT_EQ(gone->status, 404);
 }
 
-TEST_F(Serve, SessionTableIsBounded) {
+TEST_P(Serve, SessionFramesRebuildTheMesh) {
+  fly_session(server_->port(), "fbm257", *fbm_, *fbm_source_, views(fbm_->info().bounds), true);
+}
+
+TEST_P(Serve, MeshDatabase) {
+  const json info = get_json("/v1/bunny/info");
+  EXPECT_EQ(info["kind"], "mesh");
+  EXPECT_FALSE(info.contains("tiles"));
+  get_json("/v1/bunny/layer.json", 404);
+  get_json("/v1/bunny/tiles/0/0/0.terrain", 404);
+  get_json("/v1/bunny/query/elevation?x=0&y=0", 400);
+  const std::string out = dir_->file("bunny.glb");
+  const auto r = test::run_command(std::string(SMRDB_BIN) + " extract " + mesh_path_ + " -o " +
+                                   out + " -q --floor 0.6");
+  ASSERT_EQ(r.code, 0) << r.out;
+  const auto glb = get("/v1/bunny/extract?floor=0.6");
+  ASSERT_TRUE(glb);
+  ASSERT_EQ(glb->status, 200) << glb->body.substr(0, 200);
+  EXPECT_EQ(glb->body, test::read_file(out));
+  // A 3-D session: cameras around the model at 3 and 1.5 radii.
+  const Box3& b = mesh_->info().bounds;
+  const Vec3 c = (b.lo + b.hi) * 0.5;
+  const double r3 = 1.5 * std::max({b.hi.x - b.lo.x, b.hi.y - b.lo.y, b.hi.z - b.lo.z});
+  const std::vector<View> path = {{c + Vec3{r3, -r3, 0.5 * r3}, c, 2.0},
+                                  {c + Vec3{0.5 * r3, -0.5 * r3, 0.3 * r3}, c, 1.0},
+                                  {c + Vec3{-0.5 * r3, -0.5 * r3, 0.3 * r3}, c, 1.0},
+                                  {c + Vec3{-2 * r3, 2 * r3, r3}, c, 4.0}};
+  fly_session(server_->port(), "bunny", *mesh_, *mesh_source_, path, false);
+}
+
+TEST_P(Serve, SessionTableIsBounded) {
   httplib::Client c("127.0.0.1", server_->port());
   std::vector<std::string> ids;
   for (int i = 0; i < 3; ++i) {
@@ -425,7 +488,20 @@ TEST_F(Serve, SessionTableIsBounded) {
   EXPECT_EQ(c.Delete(("/v1/j/session/" + ids[0]).c_str())->status, 404);
 }
 
-TEST_F(Serve, BadParametersAre400NamingTheParameter) {
+TEST_P(Serve, IdleSessionsExpire) {
+  httplib::Client c("127.0.0.1", server_->port());
+  const auto r = c.Post("/v1/fbm257/session");
+  ASSERT_TRUE(r);
+  ASSERT_EQ(r->status, 200);
+  const std::string id = test::decode_frame(r->body).header["session"];
+  const std::string update =
+      "/v1/fbm257/session/" + id + "/update?" + views(fbm_->info().bounds)[3].query();
+  EXPECT_EQ(get(update)->status, 200);  // touched: idle from now
+  std::this_thread::sleep_for(std::chrono::milliseconds(2300));
+  get_json(update, 404);
+}
+
+TEST_P(Serve, BadParametersAre400NamingTheParameter) {
   const std::string cam = "eye=-84.3,36.4,3000&target=-84.25,36.6,500";
   const std::pair<std::string, std::string> cases[] = {
       {"/v1/j/extract?eye=nan,36.4,3000&target=-84.25,36.6,500", "eye"},
@@ -462,7 +538,7 @@ TEST_F(Serve, BadParametersAre400NamingTheParameter) {
   get_json("/v1/j/extract?eye=1,1,1&target=1,1,1", 400);
 }
 
-TEST_F(Serve, UnknownNamesAndPathTricksAre404) {
+TEST_P(Serve, UnknownNamesAndPathTricksAre404) {
   for (const std::string path :
        {"/v1/nosuchdb/info", "/v1/j/nosuchroute", "/v1/j/query/nosuch?x=1", "/v2/j/info",
         "/v1/j/session/0123/update?eye=1,1,1&target=2,2,2", "/v1/../../etc/passwd",
@@ -483,7 +559,7 @@ TEST_F(Serve, UnknownNamesAndPathTricksAre404) {
   EXPECT_EQ(root->get_header_value("Location"), "/index.html");
 }
 
-TEST_F(Serve, MalformedHttpDoesNotCrashTheServer) {
+TEST_P(Serve, MalformedHttpDoesNotCrashTheServer) {
   const std::string requests[] = {
       "GARBAGE\r\n\r\n",
       "GET\r\n\r\n",
@@ -509,10 +585,10 @@ TEST_F(Serve, MalformedHttpDoesNotCrashTheServer) {
   const auto overlong = get("/v1/j/extract?floor=" + std::string(9000, '1'));
   ASSERT_TRUE(overlong);
   EXPECT_GE(overlong->status, 400);
-  EXPECT_EQ(get_json("/v1/databases").size(), 2u);
+  EXPECT_EQ(get_json("/v1/databases").size(), 3u);
 }
 
-TEST_F(Serve, SlowClientIsCutOff) {
+TEST_P(Serve, SlowClientIsCutOff) {
   // A request's headers must arrive within --timeout-ms of its first byte: a byte every 200 ms
   // (slowloris) is disconnected before the request is complete.
   test::RawSocket s(server_->port());
@@ -532,7 +608,7 @@ TEST_F(Serve, SlowClientIsCutOff) {
   EXPECT_GT(seconds, kTimeoutMs / 1000.0 - 0.5);
 }
 
-TEST_F(Serve, ParallelConnectionsAreBounded) {
+TEST_P(Serve, ParallelConnectionsAreBounded) {
   // 4 threads and 8 waiting: 200 idle connections get 503 at once beyond that, and the server
   // answers again once they are gone.
   std::vector<std::unique_ptr<test::RawSocket>> idle;
@@ -563,6 +639,9 @@ TEST_F(Serve, ParallelConnectionsAreBounded) {
   ASSERT_TRUE(after);
   EXPECT_EQ(after->status, 200);
 }
+
+INSTANTIATE_TEST_SUITE_P(Loopback, Serve, ::testing::Values(std::string("loopback")),
+                         [](const auto& p) { return p.param; });
 
 }  // namespace
 }  // namespace smr

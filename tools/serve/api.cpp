@@ -96,6 +96,15 @@ RcfSpec camera_spec(const Params& p, bool allow_floor) {
   return s;
 }
 
+// The frame header's "stats": FrameStats as the CLI reports it (report_json.h), plus the
+// contract's "seconds" and the update's "pages_read".
+json frame_stats(const FrameStats& stats, std::uint64_t pages_read) {
+  json j = stats;
+  j["seconds"] = stats.seconds;
+  j["pages_read"] = pages_read;
+  return j;
+}
+
 }  // namespace
 
 Response error_response(int status, const std::string& message) {
@@ -121,7 +130,8 @@ Api::Api(const std::vector<std::pair<std::string, std::string>>& databases, std:
          const ApiOptions& options, GlbWriter glb)
     : options_(options),
       glb_(std::move(glb)),
-      sessions_(options.max_sessions, options.session_idle) {
+      sessions_(options.max_sessions, options.session_idle),
+      tile_cache_(options.tile_cache_bytes) {
   if (databases.empty()) throw_input("serve: give at least one database (NAME=PATH)");
   for (const auto& [name, path] : databases) {
     if (!valid_name(name))
@@ -226,8 +236,7 @@ Response Api::layer(const Db& db, const Request& request) const {
   return cacheable(db.layer_json, "application/json", db.layer_etag, request);
 }
 
-Response Api::tile(const Db& db, const std::vector<std::string>& parts,
-                   const Request& request) const {
+Response Api::tile(const Db& db, const std::vector<std::string>& parts, const Request& request) {
   if (!db.terrain) fail(404, "database '" + db.name + "' is a 3-D mesh: no terrain tiles");
   const std::string& last = parts[5];
   const std::string ext = ".terrain";
@@ -245,13 +254,23 @@ Response Api::tile(const Db& db, const std::vector<std::string>& parts,
   if (x < range.x0 || x > range.x1 || y < range.y0 || y > range.y1)
     fail(404, "tile " + std::to_string(z) + "/" + std::to_string(x) + "/" + std::to_string(y) +
                   " lies outside the database's domain");
-  const tiles::TileId id{z, std::uint32_t(x), std::uint32_t(y)};
-  const QuantizedMeshTile t = tiles::cut_tile(*db.db, *db.scheme, id, db.height_step, nullptr);
-  if (t.triangles.empty()) fail(404, "tile holds no data");
-  const std::vector<std::uint8_t> bytes = encode_quantized_mesh(t);
-  std::string body(bytes.begin(), bytes.end());
-  const std::string etag = strong_etag(body);
-  return cacheable(std::move(body), "application/vnd.quantized-mesh", etag, request);
+  const std::string key =
+      db.name + "/" + std::to_string(z) + "/" + std::to_string(x) + "/" + std::to_string(y);
+  std::shared_ptr<const CachedTile> cached = tile_cache_.get(key);
+  if (!cached) {
+    const tiles::TileId id{z, std::uint32_t(x), std::uint32_t(y)};
+    const QuantizedMeshTile t = tiles::cut_tile(*db.db, *db.scheme, id, db.height_step, nullptr);
+    auto made = std::make_shared<CachedTile>();
+    if (!t.triangles.empty()) {
+      const std::vector<std::uint8_t> bytes = encode_quantized_mesh(t);
+      made->body.assign(bytes.begin(), bytes.end());
+      made->etag = strong_etag(made->body);
+    }
+    tile_cache_.put(key, made);
+    cached = std::move(made);
+  }
+  if (cached->body.empty()) fail(404, "tile holds no data");
+  return cacheable(cached->body, "application/vnd.quantized-mesh", cached->etag, request);
 }
 
 Response Api::session_create(Db& db) {
@@ -267,8 +286,8 @@ Response Api::session_create(Db& db) {
   FrameStats stats;
   stats.x = 1;
   stats.triangles = stats.triangles_in = in.size();
-  json header = {{"session", id}, {"frame", entry->frame++}, {"stats", stats}};
-  header["stats"]["pages_read"] = 0;
+  const json header = {
+      {"session", id}, {"frame", entry->frame++}, {"stats", frame_stats(stats, 0)}};
   Response r;
   r.content_type = "application/octet-stream";
   r.body = encode_frame(*db.db, db.origin, header, {}, in, nullptr);
@@ -289,8 +308,9 @@ Response Api::session_update(Db& db, const std::string& id, const Request& reque
   const Rcf rcf = make_rcf(spec, db.db->info().kind, nullptr);
   const std::uint64_t pages_before = db.db->stats().pages_read;
   const Frame f = entry->session->update(rcf, {.max_period_ms = max_ms, .max_triangles = cap});
-  json header = {{"session", id}, {"frame", entry->frame++}, {"stats", f.stats}};
-  header["stats"]["pages_read"] = db.db->stats().pages_read - pages_before;
+  const json header = {{"session", id},
+                       {"frame", entry->frame++},
+                       {"stats", frame_stats(f.stats, db.db->stats().pages_read - pages_before)}};
   Response r;
   r.content_type = "application/octet-stream";
   r.body = encode_frame(*db.db, db.origin, header, f.triangles_out, f.triangles_in, &f.morph);

@@ -17,6 +17,7 @@
 #include "smr/db/database.h"
 #include "smr/query/indexed_source.h"
 #include "tools/serve/sessions.h"
+#include "tools/serve/tile_cache.h"
 
 namespace smr::serve {
 
@@ -24,6 +25,7 @@ struct ApiOptions {
   std::uint64_t max_triangles = 2'000'000;  // per response (extract, session frame)
   double timeout_ms = 10'000;               // compute budget of a request
   std::size_t max_sessions = 64;
+  std::size_t tile_cache_bytes = std::size_t{64} << 20;  // encoded tiles kept (0: none)
   std::chrono::milliseconds session_idle{60'000};
 };
 
@@ -69,7 +71,7 @@ class Api {
   Response info(const Db& db) const;
   Response extract(const Db& db, const Request& request);
   Response layer(const Db& db, const Request& request) const;
-  Response tile(const Db& db, const std::vector<std::string>& parts, const Request& request) const;
+  Response tile(const Db& db, const std::vector<std::string>& parts, const Request& request);
   Response query(const Db& db, const std::string& kind, const Request& request) const;
   Response session_create(Db& db);
   Response session_update(Db& db, const std::string& id, const Request& request);
@@ -79,6 +81,7 @@ class Api {
   ApiOptions options_;
   GlbWriter glb_;
   SessionTable sessions_;
+  TileCache tile_cache_;
 };
 
 /// A name for a database path given without one: its file stem.
