@@ -17,4 +17,8 @@ if ! command -v npm >/dev/null; then
   $SUDO apt-get install -y -qq --no-install-recommends nodejs npm >/dev/null
 fi
 (cd "$(dirname "$0")/../tests/js" && npm ci --no-audit --no-fund --silent)
+# The browser viewer (tools/viewer: three.js, esbuild; puppeteer-core and pngjs for its test) and
+# the headless browser its test drives (tests/viewer).
+$SUDO apt-get install -y -qq --no-install-recommends chromium >/dev/null
+(cd "$(dirname "$0")/../tools/viewer" && npm ci --no-audit --no-fund --silent)
 echo "dependencies installed"
