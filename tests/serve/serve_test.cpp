@@ -150,7 +150,7 @@ struct View {
     s.camera = cam;
     s.pixel_error = px;
     validate(s);
-    return make_rcf(s, info.kind, nullptr);
+    return make_rcf(s, info, nullptr);
   }
 };
 
@@ -234,6 +234,11 @@ TEST_P(Serve, TilesAreTheStaticPyramidsBytes) {
         ASSERT_EQ(res->status, 200) << rel << ": " << res->body;
         EXPECT_EQ(res->body, test::read_file(out + "/" + rel)) << rel;
         EXPECT_EQ(res->get_header_value("Content-Type"), "application/vnd.quantized-mesh");
+        // Where layer.json's relative template leads a standard client: the same bytes.
+        const auto beside = get("/v1/j/" + rel);
+        ASSERT_TRUE(beside);
+        EXPECT_EQ(beside->status, 200) << rel;
+        EXPECT_EQ(beside->body, res->body) << rel;
         ++compared;
       }
     }

@@ -181,6 +181,10 @@ Response Api::route(const Request& request) {
   if (m == "GET" && n == 5 && what == "session" && parts[4] == "update")
     return session_update(*db, parts[3], request);
   if (m == "DELETE" && n == 4 && what == "session") return session_delete(*db, parts[3]);
+  // layer.json's template is relative, {z}/{x}/{y}.terrain (as `smrdb tiles` writes it beside its
+  // tiles), so a standard client such as CesiumJS asks for /v1/{db}/{z}/{x}/{y}.terrain.
+  if (m == "GET" && n == 5 && parts[4].ends_with(".terrain"))
+    return tile(*db, {parts[0], parts[1], "tiles", parts[2], parts[3], parts[4]}, request);
   fail(404, "no such route: " + m + " " + request.path.substr(0, 200));
 }
 
@@ -207,7 +211,7 @@ Response Api::extract(const Db& db, const Request& request) {
   const bool user_cap = p.has("max_triangles");
   const auto cap = std::uint64_t(p.integer("max_triangles", 1, std::int64_t(options_.max_triangles),
                                            std::int64_t(options_.max_triangles)));
-  const Rcf rcf = make_rcf(spec, db.db->info().kind, nullptr);
+  const Rcf rcf = make_rcf(spec, db.db->info(), nullptr);
   ExpansionOptions expansion;  // as smrdb extract's defaults
   const SessionBudget budget{.max_period_ms = options_.timeout_ms, .max_triangles = cap};
   FrameStats fs;
@@ -305,7 +309,7 @@ Response Api::session_update(Db& db, const std::string& id, const Request& reque
   if (!entry) fail(404, "no session '" + id.substr(0, 64) + "' on database '" + db.name + "'");
   std::unique_lock lock(entry->busy, std::try_to_lock);
   if (!lock.owns_lock()) fail(409, "session '" + id + "' is busy with another update");
-  const Rcf rcf = make_rcf(spec, db.db->info().kind, nullptr);
+  const Rcf rcf = make_rcf(spec, db.db->info(), nullptr);
   const std::uint64_t pages_before = db.db->stats().pages_read;
   const Frame f = entry->session->update(rcf, {.max_period_ms = max_ms, .max_triangles = cap});
   const json header = {{"session", id},

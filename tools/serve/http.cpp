@@ -261,7 +261,9 @@ void HttpServer::Impl::serve_static(const httplib::Request& req, httplib::Respon
     return;
   }
   if (req.path == "/" && !viewer_.empty()) {
-    res.set_redirect("/index.html");
+    // The viewer's parameters (?db=...) go along.
+    const std::string query = httplib::detail::params_to_query_str(req.params);
+    res.set_redirect(query.empty() ? "/index.html" : "/index.html?" + query);
     return;
   }
   const StaticFile* f = find_static_file(viewer_, req.path);
