@@ -17,7 +17,10 @@
 // Records must be trivially copyable (they are written as bytes). Half the memory budget holds
 // records (a run is at most that), the other half the runs' read buffers: the sorter reads R runs
 // through buffers of max(budget / 2R, 4 KiB), one merge pass, so its data is written and read
-// once; the queue's buffers are a 64th of that, and every 64 runs it merges them into one.
+// once, while R is at most max(16, budget / 32 KiB); beyond, passes merge groups of that many
+// runs first (each pass writes and reads the data once more), so the buffers stay within the
+// budget whatever the input. The queue's buffers are a 64th of that, and every 64 runs it merges
+// them into one.
 #pragma once
 
 #include <algorithm>
@@ -131,8 +134,51 @@ class Runs {
   };
   const Item* head(std::size_t r) const { return &runs_[r].buffer[runs_[r].pos]; }
   void start() {
+    // A sorter's runs grow in number with its input: merged at once, their buffers' floor
+    // (4 KiB each) would pass the budget. Beyond fan_in() runs, passes merge groups of them first.
+    if (max_runs_ == 0 && heap_.empty()) {
+      while (unread_.size() > fan_in()) merge_groups();
+    }
     for (std::size_t r : unread_) push_run(r);
     unread_.clear();
+  }
+  // The most runs one merge reads within the budget, through buffers of 16 KiB or more.
+  std::size_t fan_in() const {
+    return std::max<std::size_t>(16, static_cast<std::size_t>(memory_bytes_ / 16384));
+  }
+  // One pass: each group of fan_in() consecutive unread runs becomes one run of a new file.
+  void merge_groups() {
+    auto merged = std::make_unique<TempFile>(dir_, 0);
+    const std::vector<std::size_t> all = std::move(unread_);
+    std::vector<Run> groups;
+    std::vector<Item> out;
+    std::uint64_t n = 0;
+    for (std::size_t g = 0; g < all.size(); g += fan_in()) {
+      unread_.assign(all.begin() + static_cast<std::ptrdiff_t>(g),
+                     all.begin() + static_cast<std::ptrdiff_t>(std::min(all.size(), g + fan_in())));
+      out.reserve(buffer_items());
+      const std::uint64_t first = n;
+      for (std::size_t r : unread_) push_run(r);
+      unread_.clear();
+      for (const Item* h; !heap_.empty() && (h = head(heap_.front())) != nullptr; pop()) {
+        out.push_back(*h);
+        if (out.size() == out.capacity()) {
+          merged->write(n * sizeof(Item), out.data(), out.size() * sizeof(Item));
+          n += out.size();
+          out.clear();
+        }
+      }
+      merged->write(n * sizeof(Item), out.data(), out.size() * sizeof(Item));
+      n += out.size();
+      out.clear();
+      groups.push_back({first, n, {}, 0});
+    }
+    written_ += n * sizeof(Item);
+    file_ = std::move(merged);
+    runs_ = std::move(groups);
+    unread_.resize(runs_.size());
+    for (std::size_t r = 0; r < runs_.size(); ++r) unread_[r] = r;
+    end_ = n;
   }
   // Refills run r's buffer when needed and puts the run back in the heap unless it is done.
   void push_run(std::size_t r) {

@@ -55,6 +55,11 @@ TEST(ExternalSorter, MatchesStableSortAcrossManyRuns) {
       if (memory < (std::uint64_t{1} << 20)) {
         EXPECT_GT(sorter.runs(), 8u) << "the budget should have forced runs";
         EXPECT_GT(sorter.spilled_bytes(), 0u);
+        // More runs than one merge may read within the budget (16 at these sizes): groups of
+        // them were merged first, so the data was written more than once.
+        if (sorter.runs() > 16) {
+          EXPECT_GT(sorter.spilled_bytes(), in.size() * sizeof(Rec)) << memory;
+        }
       } else {
         EXPECT_EQ(sorter.runs(), 0u);
       }
@@ -75,7 +80,10 @@ TEST(ExternalSorter, AnyTiesKeepsEveryRecordInKeyOrderWithoutArrivalNumbers) {
       Rec r{};
       while (sorter.next(r)) got.push_back(r);
       EXPECT_EQ(sorter.spilled_bytes() % sizeof(Rec), 0u);
-      EXPECT_LE(sorter.spilled_bytes(), in.size() * sizeof(Rec));
+      // Written at most twice (the runs, then one pass merging groups of them: more runs than
+      // one merge reads within these budgets), 16 bytes a record: with arrival numbers each
+      // write would take 24.
+      EXPECT_LE(sorter.spilled_bytes(), 2 * in.size() * sizeof(Rec));
       EXPECT_GT(sorter.runs(), 8u) << "the budget should have forced runs";
       return got;
     };
