@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -228,7 +229,13 @@ TEST_P(Serve, TilesAreTheStaticPyramidsBytes) {
         const auto res = get("/v1/j/tiles/" + rel);
         ASSERT_TRUE(res);
         if (!std::filesystem::exists(out + "/" + rel)) {
-          EXPECT_EQ(res->status, 404) << rel;
+          // Listed in layer.json but holding only no-data: a valid tile with no vertex (the
+          // 88-byte header, then a vertex count of 0), not a 404 a client would count as failed.
+          ASSERT_EQ(res->status, 200) << rel;
+          ASSERT_GE(res->body.size(), 92u) << rel;
+          std::uint32_t vertices = 1;
+          std::memcpy(&vertices, res->body.data() + 88, 4);
+          EXPECT_EQ(vertices, 0u) << rel;
           continue;
         }
         ASSERT_EQ(res->status, 200) << rel << ": " << res->body;

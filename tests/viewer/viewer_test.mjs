@@ -222,10 +222,10 @@ async function run(url, db) {
 async function cesium(browser, url) {
   const page = await browser.newPage();
   await page.setViewport({ width: 480, height: 320 });
-  await page.goto(`${url}cesium.html?db=geo`);
+  await page.goto(`${url}cesium.html?db=geo`, { waitUntil: "domcontentloaded", timeout: 90000 });
   const done = 'window.smrdbCesium && (window.smrdbCesium.failed || window.smrdbCesium.errors.length > 0 || ' +
     '(window.smrdbCesium.ready && window.smrdbCesium.tilesLoaded > 0))';
-  await page.waitForFunction(done, { timeout: 40000 }).catch(() => {});
+  await page.waitForFunction(done, { timeout: 90000 }).catch(() => {});
   const r = await page.evaluate(() => ({ loaded: window.smrdbCesium.tilesLoaded, errors: window.smrdbCesium.errors }));
   check(r.loaded > 0 && r.errors.length === 0, `CesiumJS loads the tiles (${r.loaded} tiles${r.errors.length ? `; ${r.errors[0]}` : ''})`);
   await page.close();

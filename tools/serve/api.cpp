@@ -265,15 +265,14 @@ Response Api::tile(const Db& db, const std::vector<std::string>& parts, const Re
     const tiles::TileId id{z, std::uint32_t(x), std::uint32_t(y)};
     const QuantizedMeshTile t = tiles::cut_tile(*db.db, *db.scheme, id, db.height_step, nullptr);
     auto made = std::make_shared<CachedTile>();
-    if (!t.triangles.empty()) {
-      const std::vector<std::uint8_t> bytes = encode_quantized_mesh(t);
-      made->body.assign(bytes.begin(), bytes.end());
-      made->etag = strong_etag(made->body);
-    }
+    // A tile that layer.json lists but that holds only no-data is a valid tile with no vertices:
+    // a standard client (CesiumJS) takes a 404 for a listed tile as a failure.
+    const std::vector<std::uint8_t> bytes = encode_quantized_mesh(t);
+    made->body.assign(bytes.begin(), bytes.end());
+    made->etag = strong_etag(made->body);
     tile_cache_.put(key, made);
     cached = std::move(made);
   }
-  if (cached->body.empty()) fail(404, "tile holds no data");
   return cacheable(cached->body, "application/vnd.quantized-mesh", cached->etag, request);
 }
 
