@@ -146,40 +146,6 @@ class Runs {
   std::size_t fan_in() const {
     return std::max<std::size_t>(16, static_cast<std::size_t>(memory_bytes_ / 16384));
   }
-  // One pass: each group of fan_in() consecutive unread runs becomes one run of a new file.
-  void merge_groups() {
-    auto merged = std::make_unique<TempFile>(dir_, 0);
-    const std::vector<std::size_t> all = std::move(unread_);
-    std::vector<Run> groups;
-    std::vector<Item> out;
-    std::uint64_t n = 0;
-    for (std::size_t g = 0; g < all.size(); g += fan_in()) {
-      unread_.assign(all.begin() + static_cast<std::ptrdiff_t>(g),
-                     all.begin() + static_cast<std::ptrdiff_t>(std::min(all.size(), g + fan_in())));
-      out.reserve(buffer_items());
-      const std::uint64_t first = n;
-      for (std::size_t r : unread_) push_run(r);
-      unread_.clear();
-      for (const Item* h; !heap_.empty() && (h = head(heap_.front())) != nullptr; pop()) {
-        out.push_back(*h);
-        if (out.size() == out.capacity()) {
-          merged->write(n * sizeof(Item), out.data(), out.size() * sizeof(Item));
-          n += out.size();
-          out.clear();
-        }
-      }
-      merged->write(n * sizeof(Item), out.data(), out.size() * sizeof(Item));
-      n += out.size();
-      out.clear();
-      groups.push_back({first, n, {}, 0});
-    }
-    written_ += n * sizeof(Item);
-    file_ = std::move(merged);
-    runs_ = std::move(groups);
-    unread_.resize(runs_.size());
-    for (std::size_t r = 0; r < runs_.size(); ++r) unread_[r] = r;
-    end_ = n;
-  }
   // Refills run r's buffer when needed and puts the run back in the heap unless it is done.
   void push_run(std::size_t r) {
     Run& run = runs_[r];
@@ -199,28 +165,54 @@ class Runs {
     heap_.push_back(r);
     std::push_heap(heap_.begin(), heap_.end(), run_after());
   }
+  // One pass: each group of fan_in() consecutive unread runs becomes one run of a new file.
+  void merge_groups() {
+    auto merged = std::make_unique<TempFile>(dir_, 0);
+    const std::vector<std::size_t> all = std::move(unread_);
+    std::vector<Run> groups;
+    std::uint64_t n = 0;
+    for (std::size_t g = 0; g < all.size(); g += fan_in()) {
+      unread_.assign(all.begin() + static_cast<std::ptrdiff_t>(g),
+                     all.begin() + static_cast<std::ptrdiff_t>(std::min(all.size(), g + fan_in())));
+      const std::uint64_t first = n;
+      n = drain_into(*merged, n);
+      groups.push_back({first, n, {}, 0});
+    }
+    reset(std::move(merged), std::move(groups), n);
+  }
   // Every item left, in leaving order, as the one run of a new file.
   void merge() {
     auto merged = std::make_unique<TempFile>(dir_, 0);
-    std::vector<Item> out;
-    out.reserve(buffer_items());
-    std::uint64_t n = 0;
+    const std::uint64_t n = drain_into(*merged, 0);
+    std::vector<Run> one;
+    one.push_back({0, n, {}, 0});
+    reset(std::move(merged), std::move(one), n);
+  }
+  // Pops every item of the runs being read (and the unread ones) into `out` from item `at`, in
+  // leaving order; returns the item count after them.
+  std::uint64_t drain_into(TempFile& out, std::uint64_t at) {
+    std::vector<Item> buffer;
+    buffer.reserve(buffer_items());
     auto flush = [&] {
-      merged->write(n * sizeof(Item), out.data(), out.size() * sizeof(Item));
-      n += out.size();
-      written_ += out.size() * sizeof(Item);
-      out.clear();
+      out.write(at * sizeof(Item), buffer.data(), buffer.size() * sizeof(Item));
+      at += buffer.size();
+      written_ += buffer.size() * sizeof(Item);
+      buffer.clear();
     };
     for (const Item* h; (h = top()) != nullptr; pop()) {
-      out.push_back(*h);
-      if (out.size() == out.capacity()) flush();
+      buffer.push_back(*h);
+      if (buffer.size() == buffer.capacity()) flush();
     }
     flush();
-    file_ = std::move(merged);
-    runs_.clear();
+    return at;
+  }
+  // The runs are now `runs`, all unread, of `file` (`n` items).
+  void reset(std::unique_ptr<TempFile> file, std::vector<Run> runs, std::uint64_t n) {
+    file_ = std::move(file);
+    runs_ = std::move(runs);
     heap_.clear();
-    runs_.push_back({0, n, {}, 0});
-    unread_.assign(1, 0);
+    unread_.resize(runs_.size());
+    for (std::size_t r = 0; r < runs_.size(); ++r) unread_[r] = r;
     end_ = n;
   }
   auto run_after() const {

@@ -21,71 +21,6 @@ void check_aoi(const AoiSpec& a, const std::string& option) {
   check_level(a.level, option);
 }
 Rcf build_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem,
-              const MetricFrame& frame);
-}  // namespace
-
-bool RcfSpec::has_similarity() const {
-  return pixel_error || floor || !aois.empty() || !discs.empty() || frustum_level || centre_cone ||
-         critical_level || !volumes.empty();
-}
-
-void validate(const RcfSpec& s) {
-  if (s.camera) s.camera->validate();
-  if (s.pixel_error) {
-    if (!s.camera) throw_input("--pixel-error needs a camera (--eye and --target)");
-    if (!(*s.pixel_error > 0.0) || !std::isfinite(*s.pixel_error)) {
-      throw_input("--pixel-error must be a positive number of pixels, got " +
-                  std::to_string(*s.pixel_error));
-    }
-  }
-  if (s.screen_aoi) {
-    if (!s.pixel_error) throw_input("--screen-aoi needs --pixel-error");
-    if (!(s.screen_aoi->radius_px > 0.0) || !(s.screen_aoi->pixel_error > 0.0) ||
-        !std::isfinite(s.screen_aoi->center_px.x) || !std::isfinite(s.screen_aoi->center_px.y)) {
-      throw_input("--screen-aoi u,v,radius_px,pixel_error needs a positive radius and pixel error");
-    }
-  }
-  if (s.floor) check_level(*s.floor, "--floor");
-  for (const AoiSpec& a : s.aois) check_aoi(a, "--aoi");
-  for (const AoiSpec& a : s.discs) check_aoi(a, "--disc");
-  for (const VolumeSpec& v : s.volumes) {
-    const std::string option = v.gaussian ? "--volume" : "--ball";
-    if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
-      throw_input(option + ": centre must be finite");
-    if (!(v.radius > 0.0) || !std::isfinite(v.radius)) {
-      throw_input(option + ": radius must be a positive number, got " + std::to_string(v.radius));
-    }
-    check_level(v.level, option);
-  }
-  if (s.frustum_level) {
-    if (!s.camera) throw_input("--frustum-level needs a camera (--eye and --target)");
-    check_level(*s.frustum_level, "--frustum-level");
-  }
-  if (s.centre_cone) {
-    if (!s.camera) throw_input("--centre-cone needs a camera (--eye and --target)");
-    if (!(s.centre_cone->first > 0.0 && s.centre_cone->first < 89.0)) {
-      throw_input("--centre-cone: half-angle must be in (0, 89) degrees");
-    }
-    check_level(s.centre_cone->second, "--centre-cone");
-  }
-  if (s.critical_level) check_level(*s.critical_level, "--critical-lines");
-  if (!(s.critical_relief >= 0.0) || !std::isfinite(s.critical_relief)) {
-    throw_input("--critical-relief must be >= 0");
-  }
-}
-
-Rcf make_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem) {
-  return build_rcf(spec, kind, dem, MetricFrame{});
-}
-
-Rcf make_rcf(const RcfSpec& spec, const CrmrInfo& info, const Heightfield* dem) {
-  const MetricFrame frame =
-      info.kind == ModelKind::kTerrain ? MetricFrame::of(info.georef, info.bounds) : MetricFrame{};
-  return build_rcf(spec, info.kind, dem, frame);
-}
-
-namespace {
-Rcf build_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem,
               const MetricFrame& frame) {
   validate(spec);
   if (kind == ModelKind::kMesh3d) {
@@ -147,5 +82,65 @@ Rcf build_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem,
   return rcf;
 }
 }  // namespace
+
+bool RcfSpec::has_similarity() const {
+  return pixel_error || floor || !aois.empty() || !discs.empty() || frustum_level || centre_cone ||
+         critical_level || !volumes.empty();
+}
+
+void validate(const RcfSpec& s) {
+  if (s.camera) s.camera->validate();
+  if (s.pixel_error) {
+    if (!s.camera) throw_input("--pixel-error needs a camera (--eye and --target)");
+    if (!(*s.pixel_error > 0.0) || !std::isfinite(*s.pixel_error)) {
+      throw_input("--pixel-error must be a positive number of pixels, got " +
+                  std::to_string(*s.pixel_error));
+    }
+  }
+  if (s.screen_aoi) {
+    if (!s.pixel_error) throw_input("--screen-aoi needs --pixel-error");
+    if (!(s.screen_aoi->radius_px > 0.0) || !(s.screen_aoi->pixel_error > 0.0) ||
+        !std::isfinite(s.screen_aoi->center_px.x) || !std::isfinite(s.screen_aoi->center_px.y)) {
+      throw_input("--screen-aoi u,v,radius_px,pixel_error needs a positive radius and pixel error");
+    }
+  }
+  if (s.floor) check_level(*s.floor, "--floor");
+  for (const AoiSpec& a : s.aois) check_aoi(a, "--aoi");
+  for (const AoiSpec& a : s.discs) check_aoi(a, "--disc");
+  for (const VolumeSpec& v : s.volumes) {
+    const std::string option = v.gaussian ? "--volume" : "--ball";
+    if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z))
+      throw_input(option + ": centre must be finite");
+    if (!(v.radius > 0.0) || !std::isfinite(v.radius)) {
+      throw_input(option + ": radius must be a positive number, got " + std::to_string(v.radius));
+    }
+    check_level(v.level, option);
+  }
+  if (s.frustum_level) {
+    if (!s.camera) throw_input("--frustum-level needs a camera (--eye and --target)");
+    check_level(*s.frustum_level, "--frustum-level");
+  }
+  if (s.centre_cone) {
+    if (!s.camera) throw_input("--centre-cone needs a camera (--eye and --target)");
+    if (!(s.centre_cone->first > 0.0 && s.centre_cone->first < 89.0)) {
+      throw_input("--centre-cone: half-angle must be in (0, 89) degrees");
+    }
+    check_level(s.centre_cone->second, "--centre-cone");
+  }
+  if (s.critical_level) check_level(*s.critical_level, "--critical-lines");
+  if (!(s.critical_relief >= 0.0) || !std::isfinite(s.critical_relief)) {
+    throw_input("--critical-relief must be >= 0");
+  }
+}
+
+Rcf make_rcf(const RcfSpec& spec, ModelKind kind, const Heightfield* dem) {
+  return build_rcf(spec, kind, dem, MetricFrame{});
+}
+
+Rcf make_rcf(const RcfSpec& spec, const CrmrInfo& info, const Heightfield* dem) {
+  const MetricFrame frame =
+      info.kind == ModelKind::kTerrain ? MetricFrame::of(info.georef, info.bounds) : MetricFrame{};
+  return build_rcf(spec, info.kind, dem, frame);
+}
 
 }  // namespace smr

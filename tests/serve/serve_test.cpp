@@ -30,6 +30,7 @@
 #include "tests/support/files.h"
 #include "tests/support/meshes.h"
 #include "tests/support/process.h"
+#include "tests/support/rcf_spread.h"
 #include "tests/support/sanitized.h"
 
 namespace smr {
@@ -146,13 +147,7 @@ struct View {
   }
   Rcf rcf(const CrmrInfo& info) const {
     RcfSpec s;
-    Camera cam;
-    cam.eye = eye;
-    cam.target = target;
-    cam.fov_y_deg = 50;
-    cam.viewport_w = 800;
-    cam.viewport_h = 600;
-    s.camera = cam;
+    s.camera = test::test_camera(eye, target);
     s.pixel_error = px;
     validate(s);
     return make_rcf(s, info, nullptr);

@@ -6,19 +6,21 @@
 namespace smr::test {
 
 // RCFs placed relative to the dataset's bounds, so they mean the same on every DEM.
+Camera test_camera(const Vec3& eye, const Vec3& target) {
+  Camera cam;
+  cam.eye = eye;
+  cam.target = target;
+  cam.fov_y_deg = 50;
+  cam.viewport_w = 800;
+  cam.viewport_h = 600;
+  return cam;
+}
+
 std::vector<NamedSpec> rcf_spread(const CrmrInfo& info) {
   const Box3& b = info.bounds;
   const Vec3 c = b.center();
   const double w = b.hi.x - b.lo.x, h = b.hi.y - b.lo.y, zr = std::max(1.0, b.hi.z - b.lo.z);
-  auto camera = [&](Vec3 eye, Vec3 target) {
-    Camera cam;
-    cam.eye = eye;
-    cam.target = target;
-    cam.fov_y_deg = 50;
-    cam.viewport_w = 800;
-    cam.viewport_h = 600;
-    return cam;
-  };
+  const auto camera = test_camera;
   // Oblique from the south-west corner, above the highest point; looking north past the domain
   // (part of it out of view); straight down from above.
   const Camera oblique =

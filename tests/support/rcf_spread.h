@@ -15,6 +15,9 @@ struct NamedSpec {
   RcfSpec spec;
 };
 
+/// The tests' camera: from `eye` to `target`, a 50 degree field of view over 800x600 pixels.
+Camera test_camera(const Vec3& eye, const Vec3& target);
+
 /// RCFs placed relative to the model's bounds, so they mean the same on every DEM.
 std::vector<NamedSpec> rcf_spread(const CrmrInfo& info);
 
