@@ -177,6 +177,7 @@ void to_json(json& j, const FrameStats& s) {
        {"triangles_out", s.triangles_out},
        {"x", s.x},
        {"ops_tested", s.ops_tested},
+       {"verdicts_kept", s.verdicts_kept},
        {"update_ms", 1000.0 * s.seconds},
        {"coarsen_ms", 1000.0 * s.coarsen_seconds},
        {"refine_ms", 1000.0 * s.refine_seconds},

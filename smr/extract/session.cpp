@@ -46,7 +46,7 @@ double ms_since(Clock::time_point t0) {
 }  // namespace
 
 Session::Session(const OpSource& source, SessionOptions options)
-    : source_(source), options_(options) {
+    : source_(source), options_(options), indexed_(dynamic_cast<const RcfIndexedSource*>(&source)) {
   const OpRef base = source_.op(kBaseOp);
   x_[kBaseOp.value] = {base->birth_res, 0};
   Changes ignored;
@@ -303,6 +303,133 @@ void Session::refine(const RcfOracle& rcf, const SessionBudget& budget, double s
   stats.refine_seconds = seconds_since(t0);
 }
 
+// The index's candidates (RcfIndexedSource::maybe_not_completely_finer) for every camera within
+// a margin of one pose, found again when the camera leaves it. The margin is 32 updates of the
+// last one's motion.
+void Session::refresh_candidates(const RcfOracle& rcf) {
+  IndexCandidates& c = candidates_;
+  const RcfPose& now = memo_.pose();
+  if (c.valid && c.pose.signature == now.signature) {
+    const Motion m = RcfPose::between(c.pose, now);
+    if (std::max(m.delta, m.theta * c.pose.scale) <= c.margin) return;
+  }
+  const double scale = now.scale > 0.0 ? now.scale : 1.0;
+  c.margin = std::max(32.0 * memo_.last_motion(), std::ldexp(scale, -10));
+  c.pose = now;
+  c.ids = IdMap<std::uint8_t>();
+  const MovedIndexRcf moved(rcf, Motion{c.margin, c.margin / scale});
+  for (OpId o : indexed_->maybe_not_completely_finer(moved)) c.ids.insert(o.value);
+  c.valid = true;
+  ++c.tag;
+}
+
+// The refining of an unbudgeted update over the memo (op_memo.h): the closure Refiner reaches
+// (AddToList from R^0: an op of X that is not finer offers its children that are not completely
+// finer, with their ancestors), found on the kept DAG links and verdicts, in any order (the
+// closure does not depend on it); then the ops of X it did not reach are removed, finest first.
+void Session::refine_kept(const RcfOracle& rcf, Changes& changes, FrameStats& stats) {
+  const auto t0 = Clock::now();
+  const std::uint64_t judged = memo_.judged(), kept = memo_.kept();
+  const std::uint32_t now = updates_;
+  constexpr std::uint8_t kQueued = 1, kRejected = 2, kSeen = 4, kReached = 8;
+  OpMemo& memo = memo_;
+  const auto marks = [&memo, now](std::uint32_t e) -> std::uint8_t& {
+    OpMemo::Entry& entry = memo[e];
+    if (entry.marked != now) {
+      entry.marked = now;
+      entry.marks = 0;
+    }
+    return entry.marks;
+  };
+  if (indexed_ != nullptr) refresh_candidates(rcf);
+  std::vector<std::uint32_t> stack, group, up, reached;
+  reached.reserve(x_.size() + 64);
+  const auto reach = [&](std::uint32_t e) {
+    marks(e) |= kReached;
+    reached.push_back(e);
+    if (memo.verdict(source_, e, OpMemo::kFiner)) return;
+    const std::uint32_t n = memo[e].children;
+    for (std::uint32_t i = 0; i < n; ++i) {
+      // Ruled out by the index (completely finer for every camera the candidates hold for).
+      if (indexed_ != nullptr && memo.child_ruled_out(e, i, candidates_.tag)) continue;
+      std::uint32_t child = memo.child_if_known(e, i);
+      if (child == OpMemo::kNone) {
+        // Not met before: read only if the index cannot rule it out (as Refiner does).
+        if (indexed_ != nullptr) {
+          if (!candidates_.ids.contains(memo.child_id(e, i).value)) {
+            memo.rule_out_child(e, i, candidates_.tag);
+            continue;
+          }
+        }
+        child = memo.child(source_, e, i);
+      }
+      std::uint8_t& m = marks(child);
+      if (m & (kReached | kQueued)) continue;
+      m |= kQueued;
+      stack.push_back(child);
+    }
+  };
+  // `c` and its ancestors not reached yet, each once, into `group`.
+  const auto collect = [&](std::uint32_t c) {
+    group.assign(1, c);
+    up.assign(1, c);
+    while (!up.empty()) {
+      const std::uint32_t e = up.back();
+      up.pop_back();
+      const std::uint32_t n = memo[e].parents;
+      for (std::uint32_t i = 0; i < n; ++i) {
+        const std::uint32_t parent = memo.parent(source_, e, i);
+        std::uint8_t& m = marks(parent);
+        if (m & (kReached | kSeen)) continue;
+        m |= kSeen;
+        group.push_back(parent);
+        up.push_back(parent);
+      }
+    }
+  };
+  reach(memo.get(source_, kBaseOp));
+  while (!stack.empty()) {
+    const std::uint32_t c = stack.back();
+    stack.pop_back();
+    if (marks(c) & (kReached | kRejected)) continue;
+    if (memo.verdict(source_, c, OpMemo::kCompletelyFiner)) {
+      marks(c) |= kRejected;
+      continue;
+    }
+    marks(c) |= kSeen;
+    collect(c);
+    std::sort(group.begin(), group.end(),
+              [&](std::uint32_t a, std::uint32_t b) { return memo.id(a) < memo.id(b); });
+    for (std::uint32_t a : group) {
+      if (!x_.contains(memo.id(a).value)) add_op(*source_.op(memo.id(a)), changes);
+      reach(a);
+    }
+  }
+  // X now holds every op reached; the others are those of the X before it that it did not reach.
+  std::vector<OpId> extra;
+  if (reached.size() != x_.size() && reached_update_ + 1 == now) {
+    for (std::uint32_t e : reached_) {
+      if (memo[e].marked != now || !(memo[e].marks & kReached)) extra.push_back(memo.id(e));
+    }
+  } else if (reached.size() != x_.size()) {  // X came from another kind of update
+    x_.for_each([&](std::uint64_t id, const XEntry&) {
+      const std::uint32_t e = memo.find(OpId{id});
+      if (e == OpMemo::kNone || memo[e].marked != now || !(memo[e].marks & kReached))
+        extra.push_back(OpId{id});
+    });
+  }
+  reached_.swap(reached);
+  reached_update_ = now;
+  std::sort(extra.begin(), extra.end(), std::greater<>());
+  for (OpId id : extra) remove_op(*source_.op(id), changes);
+  stats.unreached_coarsenings = extra.size();
+  stats.ops_tested = memo.judged() - judged;
+  stats.verdicts_kept = memo.kept() - kept;
+  constexpr std::uint32_t kIdle = 64;  // updates an op may go unmet before it is forgotten
+  if (now % kIdle == 0) memo.forget_idle(kIdle);
+  stats.refine_seconds = seconds_since(t0);
+}
+
 Frame Session::update(const RcfOracle& rcf, const SessionBudget& budget) {
   const auto t0 = Clock::now();
   Frame frame;
@@ -314,8 +441,16 @@ Frame Session::update(const RcfOracle& rcf, const SessionBudget& budget) {
   // are not each read and tested a second time.
   const bool budgeted =
       budget.max_period_ms > 0.0 || budget.max_triangles != 0 || budget.coarsen_only;
+  ++updates_;
+  // The first update reads through the index (a cold start decodes only the pages it needs); the
+  // memo then holds what later ones meet.
+  const bool kept = !budgeted && updates_ > 1 && memo_.begin(rcf, updates_);
   if (budgeted) coarsen(rcf, budget.max_period_ms, changes, frame.stats);
-  if (!budget.coarsen_only) refine(rcf, budget, ms_since(t0), changes, frame.stats);
+  if (kept) {
+    refine_kept(rcf, changes, frame.stats);
+  } else if (!budget.coarsen_only) {
+    refine(rcf, budget, ms_since(t0), changes, frame.stats);
+  }
   const auto t1 = Clock::now();
   changes.ops.for_each([&](std::uint64_t id, int d) {
     if (d > 0) frame.ops_added.push_back(OpId{id});
@@ -369,7 +504,8 @@ TriangleMesh Session::mesh() const {
 }
 
 std::uint64_t Session::memory_bytes() const {
-  return x_.memory_bytes() + slot_.memory_bytes() + triangles_.capacity() * sizeof(TriRef);
+  return x_.memory_bytes() + slot_.memory_bytes() + triangles_.capacity() * sizeof(TriRef) +
+         memo_.memory_bytes();
 }
 
 std::vector<OpId> add_to_list_budgeted(const OpSource& source, const RcfOracle& rcf,

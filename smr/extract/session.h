@@ -14,7 +14,10 @@
 //      not completely finer (AddToList, with their missing ancestors, Brown 5.1.1); they are added
 //      lowest birth_res first (the set Y). Afterwards X is the minimal-surface X of the new RCF.
 //   An update without a budget skips step 1: the refining reaches the same X on its own (the ops
-//   it does not reach are removed after it, finest first), and the frame is the same.
+//   it does not reach are removed after it, finest first), and the frame is the same. After the
+//   first update it runs over what the session kept of the ops it met (op_memo.h): their DAG
+//   links, and their verdicts for as long as the camera stays within each verdict's motion
+//   margin, so an update reads and judges only ops whose verdicts lapsed or that are new to it.
 // The update returns a Frame: what changed (ops and triangles, net) and the morph of the changed
 // region from the old mesh (t = 0) to the new one (t = 1), smr/extract/morph.h.
 //
@@ -42,6 +45,7 @@
 #include "smr/core/op_source.h"
 #include "smr/extract/extract.h"
 #include "smr/extract/morph.h"
+#include "smr/extract/op_memo.h"
 #include "smr/rcf/rcf.h"
 
 namespace smr {
@@ -80,6 +84,8 @@ struct FrameStats {
   std::uint64_t triangles = 0;   // the mesh's triangles after the update, void ones included
   std::uint64_t triangles_in = 0, triangles_out = 0;
   std::uint64_t ops_tested = 0;  // ops read and judged by the RCF in this update
+  /// Verdicts of earlier updates reused (op_memo.h: the camera stayed within their margins).
+  std::uint64_t verdicts_kept = 0;
   std::uint64_t morph_triangles = 0, morph_vertices = 0, morph_groups = 0;
   double coarsen_seconds = 0.0, refine_seconds = 0.0, morph_seconds = 0.0, seconds = 0.0;
 };
@@ -127,6 +133,8 @@ class Session {
   void coarsen(const RcfOracle& rcf, double deadline_ms, Changes& changes, FrameStats& stats);
   void refine(const RcfOracle& rcf, const SessionBudget& budget, double start_ms, Changes& changes,
               FrameStats& stats);
+  void refine_kept(const RcfOracle& rcf, Changes& changes, FrameStats& stats);
+  void refresh_candidates(const RcfOracle& rcf);
 
   const OpSource& source_;
   SessionOptions options_;
@@ -137,6 +145,21 @@ class Session {
   IdMap<XEntry> x_;
   std::vector<TriRef> triangles_;
   FlatMap<TriRef, std::uint32_t, TriKeys> slot_;  // triangle -> 1 + index in triangles_
+  OpMemo memo_;                                   // ops met and their verdicts, kept across updates
+  std::uint32_t updates_ = 0;                     // updates so far
+  // The index's candidates (RcfIndexedSource::maybe_not_completely_finer) for every camera within
+  // `margin` of `pose`: a child the memo lacks is read only if it is one.
+  struct IndexCandidates {
+    bool valid = false;
+    std::uint32_t tag = 0;  // which set: OpMemo::rule_out_child marks
+    RcfPose pose;
+    double margin = 0.0;
+    IdMap<std::uint8_t> ids;
+  } candidates_;
+  const RcfIndexedSource* indexed_ = nullptr;  // source_, if it has an index
+  // The memo entries refine_kept reached in update `reached_update_` (then X, exactly).
+  std::vector<std::uint32_t> reached_;
+  std::uint32_t reached_update_ = 0;
 };
 
 /// One-shot minimal-surface extraction within a budget (smrdb extract --max-triangles,

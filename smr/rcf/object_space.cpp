@@ -267,4 +267,9 @@ double ObjectSpaceFunction::max_over_rect(const Vec2& lo, const Vec2& hi) const 
   return std::clamp(g, 0.0, 1.0);
 }
 
+bool ObjectSpaceFunction::moves_with_camera() const {
+  return std::any_of(terms_.begin(), terms_.end(),
+                     [](const auto& t) { return t->moves_with_camera(); });
+}
+
 }  // namespace smr

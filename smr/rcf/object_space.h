@@ -24,6 +24,8 @@ class ObjectSpaceTerm {
   virtual double max_over_triangle(const Vec2& a, const Vec2& b, const Vec2& c) const = 0;
   /// >= value(p) for every p in the closed rectangle [lo, hi].
   virtual double max_over_rect(const Vec2& lo, const Vec2& hi) const = 0;
+  /// Built from a camera (it changes when the camera moves).
+  virtual bool moves_with_camera() const { return false; }
 };
 
 /// A term judged in a MetricFrame: points, triangles and rectangles are mapped into the frame
@@ -40,6 +42,7 @@ class FramedTerm final : public ObjectSpaceTerm {
   double max_over_rect(const Vec2& lo, const Vec2& hi) const override {
     return inner_->max_over_rect(frame_.apply(lo), frame_.apply(hi));
   }
+  bool moves_with_camera() const override { return inner_->moves_with_camera(); }
 
  private:
   std::shared_ptr<const ObjectSpaceTerm> inner_;
@@ -95,6 +98,7 @@ class WedgeTerm final : public ObjectSpaceTerm {
   WedgeTerm(Vec2 apex, double a0, double a1, double level, bool full_plane, std::string label);
   static WedgeTerm frustum_footprint(const Camera& cam, double level);
   static WedgeTerm centre_cone(const Camera& cam, double cone_deg, double level);
+  bool moves_with_camera() const override { return true; }
   std::string describe() const override;
   double value(const Vec2& p) const override;
   double max_over_triangle(const Vec2& a, const Vec2& b, const Vec2& c) const override;
@@ -137,6 +141,7 @@ class ObjectSpaceFunction {
   double value(const Vec2& p) const;
   double max_over_triangle(const Vec2& a, const Vec2& b, const Vec2& c) const;
   double max_over_rect(const Vec2& lo, const Vec2& hi) const;
+  bool moves_with_camera() const;
 
  private:
   std::vector<std::shared_ptr<const ObjectSpaceTerm>> terms_;

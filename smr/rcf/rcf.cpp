@@ -43,6 +43,97 @@ bool FrustumCulling::culls_triangle(const Triangle3& model) const {
   return false;
 }
 
+// ---- verdicts under motion (rcf.h: Motion, Tri) ----
+namespace {
+
+Tri tri_or(Tri a, Tri b) {
+  if (a == Tri::kTrue || b == Tri::kTrue) return Tri::kTrue;
+  return a == Tri::kFalse && b == Tri::kFalse ? Tri::kFalse : Tri::kUnknown;
+}
+
+// A point's signed distance to a frustum plane, n.(p - eye) + c with n a fixed combination of the
+// camera's basis, moves by at most delta + theta (|p - eye| + delta) when the eye moves by delta
+// and every basis vector by at most theta (the plane's normal, a unit vector in their span, then
+// moves by at most theta as well).
+double plane_shift(const Motion& m, double reach) {
+  return m.delta + m.theta * (reach + m.delta);
+}
+
+// The farthest distance from `eye` to a point of the box.
+double farthest(const Vec3& eye, const Box3& b) {
+  const Vec3 d = glm::max(glm::abs(b.lo - eye), glm::abs(b.hi - eye));
+  return glm::length(d);
+}
+
+// The verdict of "some plane has every point of the set outside" given, per plane, the largest
+// signed distance of the set (`worst`, filled by the caller) and how far motion shifts them.
+template <class Worst>
+Tri outside_within(const Frustum& f, double shift, Worst worst) {
+  bool may = false;
+  for (int i = 0; i < f.count; ++i) {
+    const double d = worst(f.planes[i]);  // culled by this plane when d < 0
+    if (d < -shift) return Tri::kTrue;
+    if (d < shift) may = true;
+  }
+  return may ? Tri::kUnknown : Tri::kFalse;
+}
+
+}  // namespace
+
+Tri FrustumCulling::culls_within(const OpView& op, const Motion& m) const {
+  const Sphere s = frame_.apply(op.sphere);
+  const Box3 b = frame_.apply(op.box);
+  if (b.empty()) return Tri::kTrue;
+  const double reach = std::max(glm::length(s.center - cam_.eye) + s.radius, farthest(cam_.eye, b));
+  // culls() is "the sphere or the box outside one plane": the smaller of the two distances.
+  return outside_within(frustum_, plane_shift(m, reach), [&](const Plane& pl) {
+    const Vec3 far{pl.n.x >= 0 ? b.hi.x : b.lo.x, pl.n.y >= 0 ? b.hi.y : b.lo.y,
+                   pl.n.z >= 0 ? b.hi.z : b.lo.z};
+    return std::min(pl.signed_distance(s.center) + s.radius, pl.signed_distance(far));
+  });
+}
+
+bool FrustumCulling::culls_region_within(const Box3& box, const Motion& m) const {
+  const Box3 b = frame_.apply(box);
+  if (b.empty()) return true;
+  const double shift = plane_shift(m, farthest(cam_.eye, b));
+  return outside_within(frustum_, shift, [&](const Plane& pl) {
+           const Vec3 far{pl.n.x >= 0 ? b.hi.x : b.lo.x, pl.n.y >= 0 ? b.hi.y : b.lo.y,
+                          pl.n.z >= 0 ? b.hi.z : b.lo.z};
+           return pl.signed_distance(far);
+         }) == Tri::kTrue;
+}
+
+Tri FrustumCulling::culls_triangle_within(const Triangle3& model, const Motion& m) const {
+  const Triangle3 v = frame_.apply(model);
+  double reach = 0.0;
+  for (const Vec3& p : v) reach = std::max(reach, glm::length(p - cam_.eye));
+  return outside_within(frustum_, plane_shift(m, reach), [&](const Plane& pl) {
+    return std::max({pl.signed_distance(v[0]), pl.signed_distance(v[1]), pl.signed_distance(v[2])});
+  });
+}
+
+Tri BackfaceCulling::culls_within(const OpView& op, const Motion& m) const {
+  if (m.zero()) return to_tri(culls(op));
+  if (op.subtree_cone.half_angle >= M_PI / 2) return Tri::kFalse;
+  const Vec3 centre = op.roi.center();
+  const double r = glm::length(op.roi.hi - centre);
+  // The eye moved by delta sees the sphere where the unmoved eye sees it moved by -delta, inside
+  // the sphere grown by delta: back-facing from every point of that one, it is from them all.
+  if (backfacing(cam_, Sphere{centre, r + m.delta}, op.subtree_cone)) return Tri::kTrue;
+  // Not back-facing from any of those eyes when even the least angle sum reaches pi/2: the
+  // direction to the centre turns by at most asin(delta / dist), the spread is at least
+  // asin(r / (dist + delta)).
+  const Vec3 d = centre - cam_.eye;
+  const double dist = glm::length(d);
+  if (dist <= r + m.delta) return Tri::kUnknown;
+  const double axis_angle =
+      std::acos(std::clamp(glm::dot(op.subtree_cone.axis, d / dist), -1.0, 1.0));
+  const double least = axis_angle - std::asin(std::min(1.0, m.delta / dist)) +
+                       op.subtree_cone.half_angle + std::asin(std::min(1.0, r / (dist + m.delta)));
+  return least >= M_PI / 2 ? Tri::kFalse : Tri::kUnknown;
+}
+
 bool BackfaceCulling::culls(const OpView& op) const {
   const Vec3 centre = op.roi.center();
   return backfacing(cam_, Sphere{centre, glm::length(op.roi.hi - centre)}, op.subtree_cone);
@@ -158,6 +249,42 @@ bool ScreenSpaceCriterion::region_satisfies(const Box3& box, double min_res,
   return pixel_error_bound(error_at(info, min_res), b) <= tolerance(b);
 }
 
+Tri ScreenSpaceCriterion::satisfies_within(const Box3& b, double error, const Motion& m) const {
+  if (m.zero()) return to_tri(pixel_error_bound(error, b) <= tolerance(b));
+  if (aoi_ && aoi_->pixel_error < tau_) return Tri::kUnknown;  // the tolerance moves on screen
+  if (error <= 0.0) return Tri::kTrue;
+  // The view direction does not matter; an eye moved by delta sees the box where the unmoved eye
+  // sees it moved by -delta, inside the box grown by delta, and pixel_error_bound is monotone in
+  // the box: its value there bounds every moved eye's.
+  const Vec3 grow(m.delta);
+  if (pixel_error_bound(error, Box3{b.lo - grow, b.hi + grow}) <= tau_) return Tri::kTrue;
+  // The least projected error: distance at most dist + delta, the sine at least that of the
+  // nearest horizontal reach and the farthest vertical gap.
+  double s = 1.0;
+  if (vertical_) {
+    const Vec3& e = cam_.eye;
+    const double dz = std::max({b.lo.z - e.z, 0.0, e.z - b.hi.z}) + m.delta;
+    const double hx =
+        std::max(std::max(std::abs(b.lo.x - e.x), std::abs(b.hi.x - e.x)) - m.delta, 0.0);
+    const double hy =
+        std::max(std::max(std::abs(b.lo.y - e.y), std::abs(b.hi.y - e.y)) - m.delta, 0.0);
+    const double h = std::sqrt(hx * hx + hy * hy);
+    s = h / std::sqrt(h * h + dz * dz);
+  }
+  const double dist = distance_to_box(cam_.eye, b) + m.delta;
+  return error * s * focal_px_ / dist > tau_ ? Tri::kFalse : Tri::kUnknown;
+}
+
+Tri ScreenSpaceCriterion::triangle_satisfies_within(const Triangle3& v, double res,
+                                                    const CrmrInfo& info, const Motion& m) const {
+  return satisfies_within(triangle_box(frame_.apply(v)), error_at(info, res), m);
+}
+
+Tri ScreenSpaceCriterion::region_satisfies_within(const Box3& box, double min_res,
+                                                  const CrmrInfo& info, const Motion& m) const {
+  return satisfies_within(frame_.apply(box), error_at(info, min_res), m);
+}
+
 // ---- composition ----
 bool Rcf::culled(const OpView& op) const {
   for (const auto& c : culling_) {
@@ -224,6 +351,135 @@ bool Rcf::region_completely_finer(const Box3& box, const Box3& /*roi*/, double m
     if (c->culls_region(box)) return true;
   }
   return region_satisfied(box, min_birth_res, info);
+}
+
+Tri Rcf::culled_within(const OpView& op, const Motion& m) const {
+  Tri t = Tri::kFalse;
+  for (const auto& c : culling_) t = tri_or(t, c->culls_within(op, m));
+  return t;
+}
+
+// Every similarity component accepts the triangle at `res`, or (culling) a culling one drops it.
+Tri Rcf::triangle_within(const Triangle3& v, double res, const CrmrInfo& info,
+                         const Motion& m) const {
+  Tri all = Tri::kTrue;
+  for (const auto& s : similarity_) {
+    const Tri t = s->triangle_satisfies_within(v, res, info, m);
+    if (t == Tri::kFalse) return Tri::kFalse;
+    if (t == Tri::kUnknown) all = Tri::kUnknown;
+  }
+  return all;
+}
+
+// is_finer and is_completely_finer with each test replaced by its value over the motion (Kleene's
+// logic): their shortcuts (culling, the region test) only ever settle a verdict they imply.
+Tri Rcf::finer_within(const OpView& op, const OpSource& source, const Motion& m) const {
+  const Tri culled = culled_within(op, m);
+  if (culled == Tri::kTrue) return Tri::kTrue;
+  double least = 1.0;
+  for (const FragmentTriangle& t : op.fragment) {
+    if (!is_final_or_void(t)) least = std::min(least, t.death_res);
+  }
+  Tri region = Tri::kTrue;
+  for (const auto& s : similarity_) {
+    if (s->region_satisfies_within(op.box, least, source.info(), m) != Tri::kTrue) {
+      region = Tri::kUnknown;
+      break;
+    }
+  }
+  if (region == Tri::kTrue) return Tri::kTrue;
+  Tri all = Tri::kTrue;
+  for (const FragmentTriangle& t : op.fragment) {
+    if (is_final_or_void(t)) continue;
+    const Tri s = triangle_within(corners(op, t), t.death_res, source.info(), m);
+    if (s == Tri::kFalse) return tri_or(culled, Tri::kFalse);
+    if (s == Tri::kUnknown) all = Tri::kUnknown;
+  }
+  return tri_or(culled, all);
+}
+
+Tri Rcf::completely_finer_within(const OpView& op, const OpSource& source, const Motion& m) const {
+  if (op.id == kBaseOp) return Tri::kFalse;
+  const Tri culled = culled_within(op, m);
+  if (culled == Tri::kTrue || similarity_.empty()) return Tri::kTrue;
+  bool region = true;
+  for (const auto& s : similarity_) {
+    region =
+        region && s->region_satisfies_within(op.box, op.birth_res, source.info(), m) == Tri::kTrue;
+  }
+  if (region) return Tri::kTrue;
+  Tri all = Tri::kTrue;
+  for (const PreTriangle& t : op.pre_tris) {
+    if (t.is_void()) continue;
+    const Triangle3 v = corners(op, t);
+    Tri dropped = Tri::kFalse;
+    for (const auto& c : culling_) dropped = tri_or(dropped, c->culls_triangle_within(v, m));
+    const Tri s = tri_or(dropped, triangle_within(v, op.birth_res, source.info(), m));
+    if (s == Tri::kFalse) return tri_or(culled, Tri::kFalse);
+    if (s == Tri::kUnknown) all = Tri::kUnknown;
+  }
+  return tri_or(culled, all);
+}
+
+bool Rcf::region_completely_finer_within(const Box3& box, const Box3& /*roi*/, double min_birth_res,
+                                         const CrmrInfo& info, const Motion& m) const {
+  for (const auto& c : culling_) {
+    if (c->culls_region_within(box, m)) return true;
+  }
+  for (const auto& s : similarity_) {
+    if (s->region_satisfies_within(box, min_birth_res, info, m) != Tri::kTrue) return false;
+  }
+  return true;
+}
+
+namespace {
+bool same_camera(const Camera& a, const Camera& b) {
+  return a.eye == b.eye && a.target == b.target && a.up == b.up && a.fov_y_deg == b.fov_y_deg &&
+         a.viewport_w == b.viewport_w && a.viewport_h == b.viewport_h &&
+         a.near_distance == b.near_distance && a.far_distance == b.far_distance;
+}
+}  // namespace
+
+std::optional<RcfPose> Rcf::pose() const {
+  const Camera* cam = nullptr;
+  const auto take = [&](const Camera* c) {
+    if (c == nullptr) return true;
+    if (cam == nullptr) cam = c;
+    return same_camera(*cam, *c);
+  };
+  for (const auto& c : culling_) {
+    if (!take(c->camera())) return std::nullopt;
+  }
+  for (const auto& s : similarity_) {
+    if (!take(s->camera())) return std::nullopt;
+  }
+  RcfPose p;
+  p.signature = describe();
+  if (cam != nullptr) {
+    std::ostringstream os;
+    os.precision(17);
+    os << " | fov " << cam->fov_y_deg << " viewport " << cam->viewport_w << "x" << cam->viewport_h
+       << " near " << cam->near_distance << " far " << cam->far_distance;
+    p.signature += os.str();
+    p.eye = cam->eye;
+    p.basis = {cam->right(), cam->true_up(), cam->forward()};
+    p.scale = glm::length(cam->target - cam->eye);
+  }
+  return p;
+}
+
+Motion RcfPose::between(const RcfPose& a, const RcfPose& b) {
+  // A unit vector n = sum n_i a_i moves to sum n_i b_i, by at most sqrt(sum |b_i - a_i|^2)
+  // (Cauchy-Schwarz): a bound on the rotation's effect that needs no angle.
+  double turn2 = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    const Vec3 d = b.basis[i] - a.basis[i];
+    turn2 += glm::dot(d, d);
+  }
+  // Rounded up by more than the arithmetic's error.
+  const double delta = glm::length(b.eye - a.eye);
+  return {delta + 1e-12 * (1.0 + glm::length(a.eye) + glm::length(b.eye)),
+          std::sqrt(turn2) + 1e-12};
 }
 
 std::string Rcf::describe() const {

@@ -13,6 +13,8 @@
 // ops, with a minimum birth_res): true only if every such op is completely finer.
 #pragma once
 
+#include <array>
+#include <cstdint>
 #include <memory>
 #include <optional>
 #include <string>
@@ -23,6 +25,21 @@
 #include "smr/rcf/object_space.h"
 
 namespace smr {
+
+/// A verdict over a set of cameras (Kleene's three values): true for every camera of the set,
+/// false for every one, or not the same for all.
+enum class Tri : std::uint8_t { kFalse, kTrue, kUnknown };
+inline Tri to_tri(bool b) {
+  return b ? Tri::kTrue : Tri::kFalse;
+}
+
+/// A set of cameras about a component's own: the eye moved by at most `delta` (in the component's
+/// MetricFrame) and the view turned by at most `theta` radians, every other parameter the same.
+/// Sessions keep a verdict while the camera stays in such a set (Session, smr/extract).
+struct Motion {
+  double delta = 0.0, theta = 0.0;
+  bool zero() const { return delta == 0.0 && theta == 0.0; }
+};
 
 class CullingComponent {
  public:
@@ -35,6 +52,20 @@ class CullingComponent {
   /// The triangle with these corners is invisible, so it may stand at any resolution. Never true
   /// unless culls(op) would be for an op holding only that triangle.
   virtual bool culls_triangle(const Triangle3& v) const = 0;
+  /// culls / culls_triangle for every camera within `m` of this one; a component that cannot
+  /// bound them answers kUnknown for any motion but none.
+  virtual Tri culls_within(const OpView& op, const Motion& m) const {
+    return m.zero() ? to_tri(culls(op)) : Tri::kUnknown;
+  }
+  virtual Tri culls_triangle_within(const Triangle3& v, const Motion& m) const {
+    return m.zero() ? to_tri(culls_triangle(v)) : Tri::kUnknown;
+  }
+  /// culls_region for every camera within `m`: true only if it holds for them all.
+  virtual bool culls_region_within(const Box3& box, const Motion& m) const {
+    return m.zero() && culls_region(box);
+  }
+  /// The camera the component judges by, in its MetricFrame (nullptr: it has none).
+  virtual const Camera* camera() const { return nullptr; }
 };
 
 /// A triangle that no op replaces is as fine as the model gets: it satisfies every similarity
@@ -61,6 +92,17 @@ class SimilarityComponent {
   /// Conservative: true only if triangle_satisfies for every triangle inside `box` at every
   /// resolution >= min_res.
   virtual bool region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const = 0;
+  /// triangle_satisfies / region_satisfies for every camera within `m` (CullingComponent's
+  /// culls_within); components that no camera affects answer as for none.
+  virtual Tri triangle_satisfies_within(const Triangle3& v, double res, const CrmrInfo& info,
+                                        const Motion& m) const {
+    return m.zero() ? to_tri(triangle_satisfies(v, res, info)) : Tri::kUnknown;
+  }
+  virtual Tri region_satisfies_within(const Box3& box, double min_res, const CrmrInfo& info,
+                                      const Motion& m) const {
+    return m.zero() ? to_tri(region_satisfies(box, min_res, info)) : Tri::kUnknown;
+  }
+  virtual const Camera* camera() const { return nullptr; }
 };
 
 class FrustumCulling final : public CullingComponent {
@@ -74,6 +116,10 @@ class FrustumCulling final : public CullingComponent {
     return box_outside(frustum_, frame_.apply(box));
   }
   bool culls_triangle(const Triangle3& v) const override;
+  Tri culls_within(const OpView& op, const Motion& m) const override;
+  Tri culls_triangle_within(const Triangle3& v, const Motion& m) const override;
+  bool culls_region_within(const Box3& box, const Motion& m) const override;
+  const Camera* camera() const override { return &cam_; }
 
  private:
   MetricFrame frame_;
@@ -92,6 +138,9 @@ class BackfaceCulling final : public CullingComponent {
   bool culls_region(const Box3&) const override { return false; }  // no normals for a region
   /// Never: a triangle's corners say nothing about the refinements that replace it.
   bool culls_triangle(const Triangle3&) const override { return false; }
+  Tri culls_within(const OpView& op, const Motion& m) const override;
+  Tri culls_triangle_within(const Triangle3&, const Motion&) const override { return Tri::kFalse; }
+  const Camera* camera() const override { return &cam_; }
 
  private:
   Camera cam_;
@@ -105,6 +154,17 @@ class ObjectSpaceCriterion final : public SimilarityComponent {
   std::string describe() const override;
   bool triangle_satisfies(const Triangle3& v, double res, const CrmrInfo& info) const override;
   bool region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const override;
+  /// Exact for any motion unless a term is built from the camera (then kUnknown but for none).
+  Tri triangle_satisfies_within(const Triangle3& v, double res, const CrmrInfo& info,
+                                const Motion& m) const override {
+    return !m.zero() && g_.moves_with_camera() ? Tri::kUnknown
+                                               : to_tri(triangle_satisfies(v, res, info));
+  }
+  Tri region_satisfies_within(const Box3& box, double min_res, const CrmrInfo& info,
+                              const Motion& m) const override {
+    return !m.zero() && g_.moves_with_camera() ? Tri::kUnknown
+                                               : to_tri(region_satisfies(box, min_res, info));
+  }
   const ObjectSpaceFunction& function() const { return g_; }
 
  private:
@@ -133,6 +193,14 @@ class VolumeCriterion final : public SimilarityComponent {
   std::string describe() const override;
   bool triangle_satisfies(const Triangle3& v, double res, const CrmrInfo& info) const override;
   bool region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const override;
+  Tri triangle_satisfies_within(const Triangle3& v, double res, const CrmrInfo& info,
+                                const Motion&) const override {
+    return to_tri(triangle_satisfies(v, res, info));  // no camera
+  }
+  Tri region_satisfies_within(const Box3& box, double min_res, const CrmrInfo& info,
+                              const Motion&) const override {
+    return to_tri(region_satisfies(box, min_res, info));
+  }
   /// g3 at a point.
   double value(const Vec3& p) const;
 
@@ -170,18 +238,42 @@ class ScreenSpaceCriterion final : public SimilarityComponent {
   bool triangle_satisfies(const Triangle3& v, double res, const CrmrInfo& info) const override;
   bool region_satisfies(const Box3& box, double min_res, const CrmrInfo& info) const override;
 
+  /// With a screen-space area of interest the tolerance depends on where a region projects, which
+  /// these do not bound: kUnknown for any motion but none.
+  Tri triangle_satisfies_within(const Triangle3& v, double res, const CrmrInfo& info,
+                                const Motion& m) const override;
+  Tri region_satisfies_within(const Box3& box, double min_res, const CrmrInfo& info,
+                              const Motion& m) const override;
+  const Camera* camera() const override { return &cam_; }
+
   double pixel_error_bound(double error, const Box3& region) const;
   double tolerance(const Box3& region) const;
   double tolerance_at(const Vec2& pixel) const;
-  const Camera& camera() const { return cam_; }
 
  private:
+  Tri satisfies_within(const Box3& b, double error, const Motion& m) const;  // b in the frame
+
   MetricFrame frame_;
   Camera cam_;       // in the frame
   double focal_px_;  // cam_.focal_px(), once (a tangent per test otherwise)
   double tau_;
   std::optional<ScreenAoi> aoi_;
   bool vertical_;
+};
+
+/// An RCF's camera as a session compares it (RcfOracle::pose): verdicts carry over between RCFs
+/// of one signature only (components, tolerances, field of view, viewport, clipping, frame), and
+/// the motion between two poses bounds how far their verdicts may differ.
+struct RcfPose {
+  std::string signature;
+  Vec3 eye{0.0};
+  std::array<Vec3, 3> basis{Vec3{1, 0, 0}, Vec3{0, 1, 0}, Vec3{0, 0, 1}};  // right, up, forward
+  /// A length (the eye's distance to its target, 1 without a camera): a session's verdict kept
+  /// for motions up to m holds while the eye moves by at most m and the view turns by m / scale.
+  double scale = 1.0;
+  /// The motion between two poses: the eye's displacement and the angle of the rotation taking
+  /// one basis to the other (both rounded up).
+  static Motion between(const RcfPose& a, const RcfPose& b);
 };
 
 /// What extraction asks of an RCF (Brown 4.6, Fig. 4.19): IsFiner, IsCompletelyFiner, and the
@@ -197,6 +289,45 @@ class RcfOracle {
   /// by the boxes; a query about heights, smr/query/region.h, by the ROIs).
   virtual bool region_completely_finer(const Box3& box, const Box3& roi, double min_birth_res,
                                        const CrmrInfo& info) const = 0;
+
+  /// For verdicts kept from one camera to the next (Session): the camera the RCF judges by and
+  /// all else it depends on, or nullopt when it cannot bound its verdicts under motion.
+  virtual std::optional<RcfPose> pose() const { return std::nullopt; }
+  /// IsFiner / IsCompletelyFiner for every camera within `m` of pose()'s.
+  virtual Tri finer_within(const OpView& op, const OpSource& source, const Motion& m) const {
+    return m.zero() ? to_tri(is_finer(op, source)) : Tri::kUnknown;
+  }
+  virtual Tri completely_finer_within(const OpView& op, const OpSource& source,
+                                      const Motion& m) const {
+    return m.zero() ? to_tri(is_completely_finer(op, source)) : Tri::kUnknown;
+  }
+  /// region_completely_finer for every camera within `m`: true only if it holds for them all.
+  virtual bool region_completely_finer_within(const Box3& box, const Box3& roi,
+                                              double min_birth_res, const CrmrInfo& info,
+                                              const Motion& m) const {
+    return m.zero() && region_completely_finer(box, roi, min_birth_res, info);
+  }
+};
+
+/// An RCF whose index test holds for every camera within a motion of `rcf`'s (the other tests
+/// are rcf's): an index query with it finds the candidates of every such camera at once.
+class MovedIndexRcf final : public RcfOracle {
+ public:
+  MovedIndexRcf(const RcfOracle& rcf, Motion m) : rcf_(rcf), m_(m) {}
+  bool is_finer(const OpView& op, const OpSource& source) const override {
+    return rcf_.is_finer(op, source);
+  }
+  bool is_completely_finer(const OpView& op, const OpSource& source) const override {
+    return rcf_.is_completely_finer(op, source);
+  }
+  bool region_completely_finer(const Box3& box, const Box3& roi, double min_birth_res,
+                               const CrmrInfo& info) const override {
+    return rcf_.region_completely_finer_within(box, roi, min_birth_res, info, m_);
+  }
+
+ private:
+  const RcfOracle& rcf_;
+  Motion m_;
 };
 
 class Rcf final : public RcfOracle {
@@ -218,6 +349,14 @@ class Rcf final : public RcfOracle {
   /// birth_res >= min_birth_res is completely finer than the RCF.
   bool region_completely_finer(const Box3& box, const Box3& roi, double min_birth_res,
                                const CrmrInfo& info) const override;
+  /// Every camera-dependent component's camera (they must be one), and describe() with the
+  /// camera's intrinsics as the signature; nullopt when the components' cameras differ.
+  std::optional<RcfPose> pose() const override;
+  Tri finer_within(const OpView& op, const OpSource& source, const Motion& m) const override;
+  Tri completely_finer_within(const OpView& op, const OpSource& source,
+                              const Motion& m) const override;
+  bool region_completely_finer_within(const Box3& box, const Box3& roi, double min_birth_res,
+                                      const CrmrInfo& info, const Motion& m) const override;
 
   const std::vector<std::shared_ptr<const CullingComponent>>& culling() const { return culling_; }
   const std::vector<std::shared_ptr<const SimilarityComponent>>& similarity() const {
@@ -227,6 +366,8 @@ class Rcf final : public RcfOracle {
 
  private:
   bool region_satisfied(const Box3& box, double min_res, const CrmrInfo& info) const;
+  Tri culled_within(const OpView& op, const Motion& m) const;
+  Tri triangle_within(const Triangle3& v, double res, const CrmrInfo& info, const Motion& m) const;
 
   std::vector<std::shared_ptr<const CullingComponent>> culling_;
   std::vector<std::shared_ptr<const SimilarityComponent>> similarity_;

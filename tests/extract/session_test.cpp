@@ -9,9 +9,12 @@
 #include <cstdio>
 #include <set>
 
+#include <glm/geometric.hpp>
+
 #include "smr/core/invariants.h"
 #include "smr/extract/extract.h"
 #include "smr/extract/session.h"
+#include "tests/query/written_database.h"
 #include "tests/support/datasets.h"
 #include "tests/support/meshes.h"
 #include "tests/support/rcf_spread.h"
@@ -320,6 +323,55 @@ TEST(Session, MorphsOfAFlightCoverTheChangedRegionAndEndOnTheStoredMesh) {
     }
   }
   EXPECT_GT(morph_frames, kFrames / 10);
+}
+
+// A flight through a database (read through its R-tree, as smrdb flythrough and serve read it):
+// small steps, turning as it goes, with a jump away and back halfway. Every unbudgeted update
+// after the first runs over the verdicts kept from earlier ones (op_memo.h); each must still be
+// the fresh extraction's X and mesh, and most verdicts must be kept rather than judged again.
+void fly_kept(const Crmr& crmr, ModelKind kind, const Heightfield* dem, double pixel_error) {
+  const test::WrittenDatabase written(crmr, std::size_t{64} << 20);
+  const IndexedSource& source = written.source();
+  const Box3 b = crmr.header.bounds;
+  const Vec3 c = b.center();
+  const double r = glm::length(b.hi - b.lo);
+  Session session(source, {.morph = false});
+  std::uint64_t kept = 0, judged = 0;
+  constexpr int kFrames = 40;
+  for (int f = 0; f < kFrames; ++f) {
+    SCOPED_TRACE("frame " + std::to_string(f));
+    const double a = 0.006 * f + (f == kFrames / 2 ? 2.5 : 0.0);  // an orbit; one jump
+    RcfSpec spec;
+    spec.camera = test::test_camera(
+        c + Vec3{std::cos(a) * 0.8 * r, std::sin(a) * 0.8 * r, 0.5 * r - 0.001 * r * f}, c);
+    spec.pixel_error = pixel_error;
+    const Rcf rcf = make_rcf(spec, kind, dem);
+    const Frame fr = session.update(rcf);
+    ASSERT_TRUE(fr.stats.complete);
+    if (f > 1 && f != kFrames / 2) {
+      kept += fr.stats.verdicts_kept;
+      judged += fr.stats.ops_tested;
+    }
+    ASSERT_EQ(session.x(), add_to_list(source, rcf));
+    if (f % 15 == 0) {
+      EXPECT_EQ(sorted(session.triangles()),
+                sorted(extract_minimal_surface(source, rcf).triangles));
+    }
+  }
+  EXPECT_GT(kept, 4 * judged) << "verdicts kept " << kept << ", judged again " << judged;
+}
+
+TEST(Session, FlightsOverADatabaseKeepVerdictsAndReachEachFreshExtraction) {
+  {
+    SCOPED_TRACE("topobathy");
+    const test::Dataset& d = test::dataset("topobathy");
+    fly_kept(d.crmr, ModelKind::kTerrain, &d.dem, 1.0);
+  }
+  {
+    SCOPED_TRACE("bunny00.off");
+    const test::BuiltMesh& m = test::built_mesh("bunny00.off");
+    fly_kept(m.crmr, ModelKind::kMesh3d, nullptr, 1.0);
+  }
 }
 
 TEST(Session, AnExpiredPeriodChangesNothingAndTheNextUpdateCatchesUp) {

@@ -13,6 +13,8 @@
 #include "smr/io/synthetic.h"
 #include "smr/rcf/spec.h"
 #include "tests/support/datasets.h"
+#include "tests/support/meshes.h"
+#include "tests/support/rcf_spread.h"
 #include "tests/support/sanitized.h"
 
 namespace smr {
@@ -198,6 +200,145 @@ TEST(CriticalLines, PeuckerDouglasFindsRidgesAndChannels) {
   EXPECT_EQ(cl.count_in_rect(11, 1, 29, 19), 0u);
   // A relief threshold above the local relief removes everything.
   EXPECT_EQ(CriticalLines::detect(h, {5.0}).count(), 0u);
+}
+
+// ---- verdicts over a motion (rcf.h Motion; sessions keep verdicts across updates with them) ----
+
+Vec3 unframe(const MetricFrame& f, const Vec3& p) {
+  return {p.x / f.kx + f.origin.x, p.y / f.ky + f.origin.y, p.z};
+}
+
+Vec3 random_unit(std::mt19937_64& rng) {
+  std::normal_distribution<double> n;
+  Vec3 v{n(rng), n(rng), n(rng)};
+  return glm::normalize(v);
+}
+
+// `v` turned by `angle` about the unit `axis` (Rodrigues).
+Vec3 turned(const Vec3& v, const Vec3& axis, double angle) {
+  return v * std::cos(angle) + glm::cross(axis, v) * std::sin(angle) +
+         axis * glm::dot(axis, v) * (1.0 - std::cos(angle));
+}
+
+// Every definite answer of finer_within / completely_finer_within over motions of a few sizes
+// equals the exact verdict under cameras moved at random within the motion (the eye shifted, the
+// view turned about a random axis, in the model's metric frame). Returns the answers checked.
+std::uint64_t check_motion_verdicts(const Crmr& crmr, const Heightfield* dem, RcfSpec spec,
+                                    std::mt19937_64& rng) {
+  const CrmrInfo& info = crmr.header;
+  const MetricFrame frame = MetricFrame::of(info.georef, info.bounds);
+  const Rcf rcf = make_rcf(spec, info, dem);
+  const std::optional<RcfPose> pose = rcf.pose();
+  EXPECT_TRUE(pose.has_value());
+  if (!pose) return 0;
+  const Camera cam = frame.apply(*spec.camera);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::uniform_int_distribution<std::uint64_t> pick(0, crmr.op_count() - 1);
+  std::uint64_t checked = 0;
+  std::array<std::uint64_t, 2> values{0, 0};
+  const bool failed_before = ::testing::Test::HasFailure();
+  for (const double fraction : {1e-3, 1e-2, 5e-2}) {
+    const double m = fraction * pose->scale;
+    const Motion motion{m, m / pose->scale};
+    std::vector<Rcf> moved;
+    while (moved.size() < 6) {
+      // Alternately the whole shift or the whole turn (the cases at the bounds), then mixes.
+      const std::size_t k = moved.size();
+      Camera c = cam;
+      c.eye += random_unit(rng) * (k % 3 == 1 ? 0.0 : (k % 3 == 0 ? 0.999 : u(rng)) * m);
+      const Vec3 axis = random_unit(rng);
+      const double angle = (k % 3 == 0 ? 0.0 : (k % 3 == 1 ? 1.0 : u(rng))) * motion.theta / 1.5;
+      c.target = c.eye + turned(cam.target - cam.eye, axis, angle);
+      c.up = turned(cam.up, axis, angle);
+      RcfSpec s = spec;
+      s.camera = c;
+      s.camera->eye = unframe(frame, c.eye);
+      s.camera->target = unframe(frame, c.target);
+      Rcf r = make_rcf(s, info, dem);
+      const Motion actual = RcfPose::between(*pose, *r.pose());
+      if (actual.delta <= motion.delta && actual.theta <= motion.theta) moved.push_back(r);
+    }
+    for (int i = 0; i < 2000; ++i) {
+      const OpRef op = crmr.op(OpId{pick(rng)});
+      const Tri finer = rcf.finer_within(*op, crmr, motion);
+      const Tri complete = rcf.completely_finer_within(*op, crmr, motion);
+      for (const Rcf& r : moved) {
+        if (finer != Tri::kUnknown) {
+          EXPECT_EQ(r.is_finer(*op, crmr), finer == Tri::kTrue) << "op " << op->id.value;
+          ++checked;
+          ++values[finer == Tri::kTrue];
+        }
+        if (complete != Tri::kUnknown) {
+          EXPECT_EQ(r.is_completely_finer(*op, crmr), complete == Tri::kTrue)
+              << "op " << op->id.value;
+          ++checked;
+          ++values[complete == Tri::kTrue];
+        }
+      }
+      // The index test over the motion, on the op's box, binds every moved camera too.
+      if (rcf.region_completely_finer_within(op->box, op->roi, op->birth_res, info, motion)) {
+        for (const Rcf& r : moved)
+          EXPECT_TRUE(r.region_completely_finer(op->box, op->roi, op->birth_res, info));
+      }
+      if (::testing::Test::HasFailure() && !failed_before) return checked;
+    }
+  }
+  EXPECT_GT(values[0], 10u) << "too few definite false verdicts to test";
+  EXPECT_GT(values[1], 10u) << "too few definite true verdicts to test";
+  return checked;
+}
+
+TEST(Rcf, VerdictsOverAMotionHoldForEveryCameraInIt) {
+  std::mt19937_64 rng(20261206);
+  for (const std::string name : {"jacksboro", "elev", "fbm129"}) {
+    SCOPED_TRACE(name);
+    const test::Dataset& d = test::dataset(name);
+    const Box3& b = d.crmr.header.bounds;
+    const Vec3 size = b.hi - b.lo;
+    RcfSpec spec;
+    // Oblique, from beyond a corner, above the highest point (model units: degrees for elev).
+    spec.camera = test::test_camera(
+        {b.lo.x - 0.1 * size.x, b.lo.y - 0.2 * size.y, b.hi.z + 0.3 * std::max(size.z, 100.0)},
+        b.center());
+    for (const double px : {1.0, 0.1}) {  // finer tolerances leave more to the culling
+      spec.pixel_error = px;
+      EXPECT_GT(check_motion_verdicts(d.crmr, &d.dem, spec, rng), 10000u);
+    }
+  }
+  for (const std::string name : {"bunny00.off"}) {
+    SCOPED_TRACE(name);
+    const test::BuiltMesh& m = test::built_mesh(name);
+    const Box3& b = m.crmr.header.bounds;
+    const double r = glm::length(b.hi - b.lo);
+    RcfSpec spec;
+    spec.camera = test::test_camera(b.center() + Vec3{0.3, -0.9, 0.4} * r, b.center());
+    spec.pixel_error = 0.5;
+    EXPECT_GT(check_motion_verdicts(m.crmr, nullptr, spec, rng), 10000u);
+  }
+}
+
+// Turning the view moves a far triangle across a side plane by its distance times the angle: a
+// triangle 1 unit outside the left plane, 1000 units away, is culled for every camera within a
+// 0.5 shift, but not for every camera within that shift and a turn of 0.002 rad, and one turned
+// by 0.0015 rad sees it.
+TEST(Rcf, FrustumVerdictsOverAMotionAllowForTurning) {
+  Camera cam;
+  cam.eye = {0, 0, 0};
+  cam.target = {0, 1, 0};
+  cam.up = {0, 0, 1};
+  cam.fov_y_deg = 60;
+  cam.viewport_w = cam.viewport_h = 100;
+  const FrustumCulling frustum(cam);
+  const Plane left = cam.planes()[0];
+  const Vec3 far = Vec3{0, 1000, 0} - left.n * (left.signed_distance({0, 1000, 0}) + 1.0);
+  const Triangle3 t{far, far + Vec3{0, 0, 1}, far + Vec3{0, 1, 0}};
+  ASSERT_NEAR(left.signed_distance(far), -1.0, 1e-9);
+  EXPECT_TRUE(frustum.culls_triangle(t));
+  EXPECT_EQ(frustum.culls_triangle_within(t, {0.5, 0.0}), Tri::kTrue);
+  EXPECT_EQ(frustum.culls_triangle_within(t, {0.5, 0.002}), Tri::kUnknown);
+  Camera turned = cam;  // towards the triangle, about the up axis
+  turned.target = {-std::sin(0.0015), std::cos(0.0015), 0};
+  EXPECT_FALSE(FrustumCulling(turned).culls_triangle(t));
 }
 
 }  // namespace

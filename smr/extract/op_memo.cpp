@@ -1,0 +1,154 @@
+// Verdicts kept across a session's updates (op_memo.h).
+#include "smr/extract/op_memo.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace smr {
+
+bool OpMemo::begin(const RcfOracle& rcf, std::uint32_t update) {
+  update_ = update;
+  rcf_ = &rcf;
+  std::optional<RcfPose> pose = rcf.pose();
+  if (!pose) {
+    valid_from_ = update + 1;  // nothing judged before survives a gap
+    return false;
+  }
+  if (pose->signature != signature_) {
+    signature_ = pose->signature;
+    valid_from_ = update;
+  }
+  for (Epoch& e : ring_) {
+    if (e.update == 0 || e.update < valid_from_) continue;
+    const Motion m = RcfPose::between(e.pose, *pose);
+    e.needed = std::max(m.delta, m.theta * e.pose.scale);
+  }
+  Epoch& now = ring_[update % kRing];
+  now.update = update;
+  now.pose = std::move(*pose);
+  now.needed = 0.0;
+  return true;
+}
+
+std::uint32_t OpMemo::get(const OpSource& source, OpId id) {
+  std::uint32_t& slot = index_[id.value];
+  if (slot != 0) return slot - 1;
+  const OpRef op = source.op(id);
+  std::uint32_t e = 0;
+  if (!free_.empty()) {
+    e = free_.back();
+    free_.pop_back();
+  } else {
+    e = static_cast<std::uint32_t>(entries_.size());
+    entries_.emplace_back();
+    ids_.emplace_back();
+  }
+  slot = e + 1;  // before anything else may grow index_
+  std::vector<OpId> children;
+  for (const FragmentTriangle& t : op->fragment) {
+    if (t.killer.valid()) children.push_back(t.killer);
+  }
+  std::sort(children.begin(), children.end());
+  children.erase(std::unique(children.begin(), children.end()), children.end());
+  Entry& entry = entries_[e];
+  entry = Entry{};
+  entry.links = static_cast<std::uint32_t>(links_.size());
+  entry.parents = static_cast<std::uint32_t>(op->parents.size());
+  entry.children = static_cast<std::uint32_t>(children.size());
+  entry.marked = update_;
+  ids_[e] = id;
+  link_ids_.insert(link_ids_.end(), op->parents.begin(), op->parents.end());
+  link_ids_.insert(link_ids_.end(), children.begin(), children.end());
+  links_.resize(link_ids_.size(), kNone);
+  ruled_out_.resize(link_ids_.size(), 0);
+  return e;
+}
+
+// The largest motion of the ladder scale * 2^(k - 40), k = 0..48, over which the RCF's verdict
+// provably stays `value`; 0 when none (judged again next update). Holding is monotone in the
+// motion (each bound only loosens as it grows), so a binary search finds it.
+double OpMemo::margin_of(const OpView& op, const OpSource& source, int which, bool value,
+                         double scale) const {
+  const Tri want = to_tri(value);
+  const auto holds = [&](int k) {
+    const double m = std::ldexp(scale, k - 40);
+    const Motion motion{m, m / scale};
+    return (which == kFiner ? rcf_->finer_within(op, source, motion)
+                            : rcf_->completely_finer_within(op, source, motion)) == want;
+  };
+  int lo = -1, hi = 49;  // holds(k) for k <= lo; not for k >= hi
+  while (hi - lo > 1) {
+    const int mid = (lo + hi) / 2;
+    (holds(mid) ? lo : hi) = mid;
+  }
+  return lo < 0 ? 0.0 : std::ldexp(scale, lo - 40);
+}
+
+bool OpMemo::verdict(const OpSource& source, std::uint32_t e, int which) {
+  Entry& entry = entries_[e];
+  const std::uint8_t bit = std::uint8_t(1u << which);
+  const std::uint32_t at = entry.epoch[which];
+  if (at != 0 && at >= valid_from_ && update_ - at < kRing) {
+    const Epoch& ep = ring_[at % kRing];
+    if (ep.update == at && ep.needed <= double(entry.margin[which])) {
+      ++kept_;
+      return (entry.verdicts & bit) != 0;
+    }
+  }
+  const OpRef op = source.op(ids_[e]);
+  const bool value =
+      which == kFiner ? rcf_->is_finer(*op, source) : rcf_->is_completely_finer(*op, source);
+  ++judged_;
+  const double scale = ring_[update_ % kRing].pose.scale;
+  const double m = margin_of(*op, source, which, value, scale > 0.0 ? scale : 1.0);
+  // Stored as a float no larger than the margin found.
+  float f = static_cast<float>(m);
+  if (double(f) > m) f = std::nextafter(f, 0.0f);
+  entry.margin[which] = f;
+  entry.epoch[which] = update_;
+  entry.verdicts = std::uint8_t(value ? (entry.verdicts | bit) : (entry.verdicts & ~bit));
+  return value;
+}
+
+void OpMemo::forget_idle(std::uint32_t idle) {
+  std::vector<std::uint64_t> gone;
+  index_.for_each([&](std::uint64_t id, std::uint32_t slot) {
+    if (update_ - entries_[slot - 1].marked > idle) gone.push_back(id);
+  });
+  if (gone.empty()) return;
+  for (std::uint64_t id : gone) {
+    const std::uint32_t e = *index_.find(id) - 1;
+    entries_[e] = Entry{};
+    free_.push_back(e);
+    index_.erase(id);
+  }
+  // The live entries' links, packed again (a forgotten entry's are garbage, and links to it
+  // would dangle: every link is looked up again).
+  std::vector<std::uint32_t> links;
+  std::vector<OpId> ids;
+  index_.for_each([&](std::uint64_t, std::uint32_t slot) {
+    Entry& entry = entries_[slot - 1];
+    const std::uint32_t n = entry.parents + entry.children;
+    const auto from = link_ids_.begin() + entry.links;
+    entry.links = static_cast<std::uint32_t>(ids.size());
+    ids.insert(ids.end(), from, from + n);
+  });
+  links.assign(ids.size(), kNone);
+  links_.swap(links);
+  link_ids_.swap(ids);
+  ruled_out_.assign(link_ids_.size(), 0);
+}
+
+double OpMemo::last_motion() const {
+  const Epoch& before = ring_[(update_ - 1) % kRing];
+  return before.update + 1 == update_ && before.update >= valid_from_ ? before.needed : 0.0;
+}
+
+std::uint64_t OpMemo::memory_bytes() const {
+  return index_.memory_bytes() + entries_.capacity() * sizeof(Entry) +
+         ids_.capacity() * sizeof(OpId) + free_.capacity() * sizeof(std::uint32_t) +
+         (links_.capacity() + ruled_out_.capacity()) * sizeof(std::uint32_t) +
+         link_ids_.capacity() * sizeof(OpId);
+}
+
+}  // namespace smr

@@ -1,0 +1,121 @@
+// What a session keeps of the ops its traversals meet, from one update to the next (session.h):
+// each op's DAG links (the database never changes them) and its two RCF verdicts, each with the
+// camera it was judged for and a motion margin. A verdict is reused while the camera stays within
+// its margin of that camera: the RCF's components bound their tests over every camera of such a
+// set (RcfOracle::finer_within, rcf.h), and the margin is the largest of a geometric ladder of
+// motions over which the verdict provably holds. An update's traversal then reads and judges only
+// the ops whose verdicts lapsed or that it meets for the first time.
+//
+// The traversal visits every entry of X and of its candidates each update, so entries are small
+// records in one array (their links, entry numbers, in another): they stay in cache.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "smr/core/id_map.h"
+#include "smr/core/op_source.h"
+#include "smr/rcf/rcf.h"
+
+namespace smr {
+
+class OpMemo {
+ public:
+  static constexpr int kFiner = 0, kCompletelyFiner = 1;
+  static constexpr std::uint32_t kNone = ~std::uint32_t{0};
+
+  struct Entry {
+    std::uint32_t links = 0;    // its parents', then its children's, entries in links_
+    std::uint32_t parents = 0;  // how many of each
+    std::uint32_t children = 0;
+    std::uint32_t marked = 0;  // update `marks` belong to (and the last that met the entry)
+    std::array<std::uint32_t, 2> epoch{0, 0};  // update that judged each verdict (0: never)
+    std::array<float, 2> margin{0.0f, 0.0f};   // motion each verdict holds for (rounded down)
+    std::uint8_t verdicts = 0;                 // bit kFiner, bit kCompletelyFiner
+    std::uint8_t marks = 0;                    // the current traversal's (Session)
+  };
+
+  /// Starts update number `update` (increasing from 1) for `rcf`: verdicts judged under another
+  /// signature lapse; returns false if the RCF cannot bound its verdicts (no pose).
+  bool begin(const RcfOracle& rcf, std::uint32_t update);
+
+  /// The entry of `id` (its number), read from `source` the first time.
+  std::uint32_t get(const OpSource& source, OpId id);
+  /// The entry of `id`, or kNone.
+  std::uint32_t find(OpId id) const {
+    const std::uint32_t* slot = index_.find(id.value);
+    return slot == nullptr ? kNone : *slot - 1;
+  }
+  Entry& operator[](std::uint32_t e) { return entries_[e]; }
+  OpId id(std::uint32_t e) const { return ids_[e]; }
+  /// Parent i of entry e, read the first time.
+  std::uint32_t parent(const OpSource& source, std::uint32_t e, std::uint32_t i) {
+    return linked(source, entries_[e].links + i);
+  }
+  /// Child i of entry e if the memo has it, else kNone (child() reads it).
+  std::uint32_t child_if_known(std::uint32_t e, std::uint32_t i) {
+    const std::uint32_t at = entries_[e].links + entries_[e].parents + i;
+    if (links_[at] == kNone) links_[at] = find(link_ids_[at]);
+    return links_[at];
+  }
+  std::uint32_t child(const OpSource& source, std::uint32_t e, std::uint32_t i) {
+    return linked(source, entries_[e].links + entries_[e].parents + i);
+  }
+  OpId child_id(std::uint32_t e, std::uint32_t i) const {
+    return link_ids_[entries_[e].links + entries_[e].parents + i];
+  }
+  /// A child the memo lacks, marked as ruled out by the caller's test number `tag` (not 0).
+  bool child_ruled_out(std::uint32_t e, std::uint32_t i, std::uint32_t tag) const {
+    return ruled_out_[entries_[e].links + entries_[e].parents + i] == tag;
+  }
+  void rule_out_child(std::uint32_t e, std::uint32_t i, std::uint32_t tag) {
+    ruled_out_[entries_[e].links + entries_[e].parents + i] = tag;
+  }
+  /// A verdict of entry e's op for the current RCF: kept, or judged again (counted).
+  bool verdict(const OpSource& source, std::uint32_t e, int which);
+
+  /// Forgets entries no update met in the last `idle` updates.
+  void forget_idle(std::uint32_t idle);
+  std::uint64_t judged() const { return judged_; }
+  std::uint64_t kept() const { return kept_; }
+  std::size_t size() const { return index_.size(); }
+  std::uint64_t memory_bytes() const;
+  /// The motion from the previous update's camera to the current one (0 without one).
+  double last_motion() const;
+  const RcfPose& pose() const { return ring_[update_ % kRing].pose; }
+
+ private:
+  std::uint32_t linked(const OpSource& source, std::uint32_t at) {
+    if (links_[at] == kNone) {
+      const std::uint32_t e = get(source, link_ids_[at]);  // may grow links_
+      links_[at] = e;
+    }
+    return links_[at];
+  }
+  double margin_of(const OpView& op, const OpSource& source, int which, bool value,
+                   double scale) const;
+
+  static constexpr std::uint32_t kRing = 256;  // poses kept: older verdicts lapse
+  struct Epoch {
+    std::uint32_t update = 0;
+    RcfPose pose;
+    double needed = 0.0;  // the motion from this pose to the current one, in its scale
+  };
+  const RcfOracle* rcf_ = nullptr;
+  std::uint32_t update_ = 0;
+  std::uint32_t valid_from_ = 1;  // verdicts of earlier updates lapse (another signature)
+  std::string signature_;
+  std::array<Epoch, kRing> ring_{};
+  IdMap<std::uint32_t> index_;  // op id -> 1 + entry
+  std::vector<Entry> entries_;
+  std::vector<OpId> ids_;                 // by entry
+  std::vector<std::uint32_t> free_;       // entries forgotten
+  std::vector<std::uint32_t> links_;      // entry numbers (kNone: not looked up yet)
+  std::vector<OpId> link_ids_;            // parallel to links_
+  std::vector<std::uint32_t> ruled_out_;  // parallel to links_ (rule_out_child)
+  std::uint64_t judged_ = 0, kept_ = 0;
+};
+
+}  // namespace smr
