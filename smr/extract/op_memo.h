@@ -2,9 +2,9 @@
 // each op's DAG links (the database never changes them) and its two RCF verdicts, each with the
 // camera it was judged for and a motion margin. A verdict is reused while the camera stays within
 // its margin of that camera: the RCF's components bound their tests over every camera of such a
-// set (RcfOracle::finer_within, rcf.h), and the margin is the largest of a geometric ladder of
-// motions over which the verdict provably holds. An update's traversal then reads and judges only
-// the ops whose verdicts lapsed or that it meets for the first time.
+// set (RcfOracle::finer_within, rcf.h), and the margin is a motion over which the verdict
+// provably holds (a few updates' worth, more for verdicts far from changing). An update's
+// traversal then reads and judges only the ops whose verdicts lapsed or that it meets first.
 //
 // The traversal visits every entry of X and of its candidates each update, so entries are small
 // records in one array (their links, entry numbers, in another): they stay in cache.

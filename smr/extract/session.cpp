@@ -304,7 +304,7 @@ void Session::refine(const RcfOracle& rcf, const SessionBudget& budget, double s
 }
 
 // The index's candidates (RcfIndexedSource::maybe_not_completely_finer) for every camera within
-// a margin of one pose, found again when the camera leaves it. The margin is 32 updates of the
+// a margin of one pose, found again when the camera leaves it. The margin is 8 updates of the
 // last one's motion.
 void Session::refresh_candidates(const RcfOracle& rcf) {
   IndexCandidates& c = candidates_;
@@ -314,7 +314,7 @@ void Session::refresh_candidates(const RcfOracle& rcf) {
     if (std::max(m.delta, m.theta * c.pose.scale) <= c.margin) return;
   }
   const double scale = now.scale > 0.0 ? now.scale : 1.0;
-  c.margin = std::max(32.0 * memo_.last_motion(), std::ldexp(scale, -10));
+  c.margin = std::max(8.0 * memo_.last_motion(), std::ldexp(scale, -10));
   c.pose = now;
   c.ids = IdMap<std::uint8_t>();
   const MovedIndexRcf moved(rcf, Motion{c.margin, c.margin / scale});
@@ -442,9 +442,9 @@ Frame Session::update(const RcfOracle& rcf, const SessionBudget& budget) {
   const bool budgeted =
       budget.max_period_ms > 0.0 || budget.max_triangles != 0 || budget.coarsen_only;
   ++updates_;
-  // The first update reads through the index (a cold start decodes only the pages it needs); the
-  // memo then holds what later ones meet.
-  const bool kept = !budgeted && updates_ > 1 && memo_.begin(rcf, updates_);
+  // Unbudgeted updates run over the memo (it reads through the index what it lacks, so a cold
+  // start decodes only the pages it needs).
+  const bool kept = !budgeted && memo_.begin(rcf, updates_);
   if (budgeted) coarsen(rcf, budget.max_period_ms, changes, frame.stats);
   if (kept) {
     refine_kept(rcf, changes, frame.stats);
