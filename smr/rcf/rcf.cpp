@@ -59,6 +59,12 @@ double plane_shift(const Motion& m, double reach) {
   return m.delta + m.theta * (reach + m.delta);
 }
 
+// The box's corner farthest along the plane's normal (box_outside's test point).
+double far_corner_distance(const Plane& pl, const Box3& b) {
+  return pl.signed_distance({pl.n.x >= 0 ? b.hi.x : b.lo.x, pl.n.y >= 0 ? b.hi.y : b.lo.y,
+                             pl.n.z >= 0 ? b.hi.z : b.lo.z});
+}
+
 // The farthest distance from `eye` to a point of the box.
 double farthest(const Vec3& eye, const Box3& b) {
   const Vec3 d = glm::max(glm::abs(b.lo - eye), glm::abs(b.hi - eye));
@@ -87,21 +93,15 @@ Tri FrustumCulling::culls_within(const OpView& op, const Motion& m) const {
   const double reach = std::max(glm::length(s.center - cam_.eye) + s.radius, farthest(cam_.eye, b));
   // culls() is "the sphere or the box outside one plane": the smaller of the two distances.
   return outside_within(frustum_, plane_shift(m, reach), [&](const Plane& pl) {
-    const Vec3 far{pl.n.x >= 0 ? b.hi.x : b.lo.x, pl.n.y >= 0 ? b.hi.y : b.lo.y,
-                   pl.n.z >= 0 ? b.hi.z : b.lo.z};
-    return std::min(pl.signed_distance(s.center) + s.radius, pl.signed_distance(far));
+    return std::min(pl.signed_distance(s.center) + s.radius, far_corner_distance(pl, b));
   });
 }
 
 bool FrustumCulling::culls_region_within(const Box3& box, const Motion& m) const {
   const Box3 b = frame_.apply(box);
   if (b.empty()) return true;
-  const double shift = plane_shift(m, farthest(cam_.eye, b));
-  return outside_within(frustum_, shift, [&](const Plane& pl) {
-           const Vec3 far{pl.n.x >= 0 ? b.hi.x : b.lo.x, pl.n.y >= 0 ? b.hi.y : b.lo.y,
-                          pl.n.z >= 0 ? b.hi.z : b.lo.z};
-           return pl.signed_distance(far);
-         }) == Tri::kTrue;
+  return outside_within(frustum_, plane_shift(m, farthest(cam_.eye, b)),
+                        [&](const Plane& pl) { return far_corner_distance(pl, b); }) == Tri::kTrue;
 }
 
 Tri FrustumCulling::culls_triangle_within(const Triangle3& model, const Motion& m) const {
