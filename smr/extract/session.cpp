@@ -425,7 +425,7 @@ void Session::refine_kept(const RcfOracle& rcf, Changes& changes, FrameStats& st
   stats.unreached_coarsenings = extra.size();
   stats.ops_tested = memo.judged() - judged;
   stats.verdicts_kept = memo.kept() - kept;
-  constexpr std::uint32_t kIdle = 64;  // updates an op may go unmet before it is forgotten
+  constexpr std::uint32_t kIdle = 16;  // updates an op may go unmet before it is forgotten
   if (now % kIdle == 0) memo.forget_idle(kIdle);
   stats.refine_seconds = seconds_since(t0);
 }
