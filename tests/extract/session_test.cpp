@@ -18,6 +18,7 @@
 #include "tests/support/datasets.h"
 #include "tests/support/meshes.h"
 #include "tests/support/rcf_spread.h"
+#include "tests/support/sanitized.h"
 
 namespace smr {
 namespace {
@@ -337,7 +338,7 @@ void fly_kept(const Crmr& crmr, ModelKind kind, const Heightfield* dem, double p
   const double r = glm::length(b.hi - b.lo);
   Session session(source, {.morph = false});
   std::uint64_t kept = 0, judged = 0;
-  constexpr int kFrames = 40;
+  const int kFrames = test::kSanitized ? 16 : 40;
   for (int f = 0; f < kFrames; ++f) {
     SCOPED_TRACE("frame " + std::to_string(f));
     const double a = 0.006 * f + (f == kFrames / 2 ? 2.5 : 0.0);  // an orbit; one jump

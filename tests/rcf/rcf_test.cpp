@@ -258,7 +258,7 @@ std::uint64_t check_motion_verdicts(const Crmr& crmr, const Heightfield* dem, Rc
       const Motion actual = RcfPose::between(*pose, *r.pose());
       if (actual.delta <= motion.delta && actual.theta <= motion.theta) moved.push_back(r);
     }
-    for (int i = 0; i < 2000; ++i) {
+    for (int i = 0; i < (test::kSanitized ? 500 : 2000); ++i) {
       const OpRef op = crmr.op(OpId{pick(rng)});
       const Tri finer = rcf.finer_within(*op, crmr, motion);
       const Tri complete = rcf.completely_finer_within(*op, crmr, motion);
@@ -302,7 +302,8 @@ TEST(Rcf, VerdictsOverAMotionHoldForEveryCameraInIt) {
         b.center());
     for (const double px : {1.0, 0.1}) {  // finer tolerances leave more to the culling
       spec.pixel_error = px;
-      EXPECT_GT(check_motion_verdicts(d.crmr, &d.dem, spec, rng), 10000u);
+      EXPECT_GT(check_motion_verdicts(d.crmr, &d.dem, spec, rng),
+                test::kSanitized ? 2000u : 10000u);
     }
   }
   for (const std::string name : {"bunny00.off"}) {
@@ -313,7 +314,7 @@ TEST(Rcf, VerdictsOverAMotionHoldForEveryCameraInIt) {
     RcfSpec spec;
     spec.camera = test::test_camera(b.center() + Vec3{0.3, -0.9, 0.4} * r, b.center());
     spec.pixel_error = 0.5;
-    EXPECT_GT(check_motion_verdicts(m.crmr, nullptr, spec, rng), 10000u);
+    EXPECT_GT(check_motion_verdicts(m.crmr, nullptr, spec, rng), test::kSanitized ? 2000u : 10000u);
   }
 }
 
