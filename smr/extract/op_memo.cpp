@@ -105,7 +105,10 @@ bool OpMemo::verdict(const OpSource& source, std::uint32_t e, int which) {
   // A verdict that lapsed one update after it was judged is likely to lapse again: it is judged
   // alone (no margin) on 7 updates of 8 (which ones varies by op, so no update pays for all), so
   // ops near the RCF's edge cost one test an update.
-  const bool restless = at + 1 == update_ && (update_ + ids_[e].value) % 8 != 0;
+  // Nor is a margin sought in the first update of a run of poses (a cold start): with no motion
+  // seen yet, a guess would be wasted more often than not.
+  const bool restless =
+      previous() == nullptr || (at + 1 == update_ && (update_ + ids_[e].value) % 8 != 0);
   const double m = restless ? 0.0 : margin_of(*op, source, which, value, scale > 0.0 ? scale : 1.0);
   // Stored as a float no larger than the margin found.
   float f = static_cast<float>(m);
@@ -145,9 +148,14 @@ void OpMemo::forget_idle(std::uint32_t idle) {
   ruled_out_.assign(link_ids_.size(), 0);
 }
 
-double OpMemo::last_motion() const {
+const OpMemo::Epoch* OpMemo::previous() const {
   const Epoch& before = ring_[(update_ - 1) % kRing];
-  return before.update + 1 == update_ && before.update >= valid_from_ ? before.needed : 0.0;
+  return before.update + 1 == update_ && before.update >= valid_from_ ? &before : nullptr;
+}
+
+double OpMemo::last_motion() const {
+  const Epoch* before = previous();
+  return before == nullptr ? 0.0 : before->needed;
 }
 
 std::uint64_t OpMemo::memory_bytes() const {

@@ -103,6 +103,8 @@ class OpMemo {
     RcfPose pose;
     double needed = 0.0;  // the motion from this pose to the current one, in its scale
   };
+  const Epoch* previous() const;  // the previous update's, if it was the one before this
+
   const RcfOracle* rcf_ = nullptr;
   std::uint32_t update_ = 0;
   std::uint32_t valid_from_ = 1;  // verdicts of earlier updates lapse (another signature)

@@ -304,8 +304,8 @@ void Session::refine(const RcfOracle& rcf, const SessionBudget& budget, double s
 }
 
 // The index's candidates (RcfIndexedSource::maybe_not_completely_finer) for every camera within
-// a margin of one pose, found again when the camera leaves it. The margin is 8 updates of the
-// last one's motion.
+// a margin of one pose, found again when the camera leaves it. The margin is 2 updates of the
+// last one's motion, within [scale / 1024, scale / 16] (a wide one reads pages no view needs).
 void Session::refresh_candidates(const RcfOracle& rcf) {
   IndexCandidates& c = candidates_;
   const RcfPose& now = memo_.pose();
@@ -314,7 +314,7 @@ void Session::refresh_candidates(const RcfOracle& rcf) {
     if (std::max(m.delta, m.theta * c.pose.scale) <= c.margin) return;
   }
   const double scale = now.scale > 0.0 ? now.scale : 1.0;
-  c.margin = std::max(8.0 * memo_.last_motion(), std::ldexp(scale, -10));
+  c.margin = std::clamp(2.0 * memo_.last_motion(), std::ldexp(scale, -10), std::ldexp(scale, -4));
   c.pose = now;
   c.ids = IdMap<std::uint8_t>();
   const MovedIndexRcf moved(rcf, Motion{c.margin, c.margin / scale});
