@@ -60,7 +60,6 @@ std::uint32_t OpMemo::get(const OpSource& source, OpId id) {
   link_ids_.insert(link_ids_.end(), op->parents.begin(), op->parents.end());
   link_ids_.insert(link_ids_.end(), children.begin(), children.end());
   links_.resize(link_ids_.size(), kNone);
-  ruled_out_.resize(link_ids_.size(), 0);
   return e;
 }
 
@@ -145,7 +144,6 @@ void OpMemo::forget_idle(std::uint32_t idle) {
   links.assign(ids.size(), kNone);
   links_.swap(links);
   link_ids_.swap(ids);
-  ruled_out_.assign(link_ids_.size(), 0);
 }
 
 const OpMemo::Epoch* OpMemo::previous() const {
@@ -161,8 +159,7 @@ double OpMemo::last_motion() const {
 std::uint64_t OpMemo::memory_bytes() const {
   return index_.memory_bytes() + entries_.capacity() * sizeof(Entry) +
          ids_.capacity() * sizeof(OpId) + free_.capacity() * sizeof(std::uint32_t) +
-         (links_.capacity() + ruled_out_.capacity()) * sizeof(std::uint32_t) +
-         link_ids_.capacity() * sizeof(OpId);
+         links_.capacity() * sizeof(std::uint32_t) + link_ids_.capacity() * sizeof(OpId);
 }
 
 }  // namespace smr

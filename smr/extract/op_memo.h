@@ -25,6 +25,7 @@ class OpMemo {
  public:
   static constexpr int kFiner = 0, kCompletelyFiner = 1;
   static constexpr std::uint32_t kNone = ~std::uint32_t{0};
+  static constexpr std::uint32_t kRuledOut = std::uint32_t{1} << 31;  // links_: not an entry
 
   struct Entry {
     std::uint32_t links = 0;    // its parents', then its children's, entries in links_
@@ -57,7 +58,11 @@ class OpMemo {
   /// Child i of entry e if the memo has it, else kNone (child() reads it).
   std::uint32_t child_if_known(std::uint32_t e, std::uint32_t i) {
     const std::uint32_t at = entries_[e].links + entries_[e].parents + i;
-    if (links_[at] == kNone) links_[at] = find(link_ids_[at]);
+    if (links_[at] & kRuledOut) {  // not looked up yet (or ruled out by an older test)
+      const std::uint32_t found = find(link_ids_[at]);
+      if (found == kNone) return kNone;
+      links_[at] = found;
+    }
     return links_[at];
   }
   std::uint32_t child(const OpSource& source, std::uint32_t e, std::uint32_t i) {
@@ -66,12 +71,14 @@ class OpMemo {
   OpId child_id(std::uint32_t e, std::uint32_t i) const {
     return link_ids_[entries_[e].links + entries_[e].parents + i];
   }
-  /// A child the memo lacks, marked as ruled out by the caller's test number `tag` (not 0).
+  /// A child the memo lacks, marked as ruled out by the caller's test number `tag` (1 to
+  /// kRuledOut - 2; a link holds either an entry number or such a mark).
   bool child_ruled_out(std::uint32_t e, std::uint32_t i, std::uint32_t tag) const {
-    return ruled_out_[entries_[e].links + entries_[e].parents + i] == tag;
+    return links_[entries_[e].links + entries_[e].parents + i] == (kRuledOut | tag);
   }
   void rule_out_child(std::uint32_t e, std::uint32_t i, std::uint32_t tag) {
-    ruled_out_[entries_[e].links + entries_[e].parents + i] = tag;
+    std::uint32_t& link = links_[entries_[e].links + entries_[e].parents + i];
+    if (link & kRuledOut) link = kRuledOut | tag;  // a child the memo has is not marked
   }
   /// A verdict of entry e's op for the current RCF: kept, or judged again (counted).
   bool verdict(const OpSource& source, std::uint32_t e, int which);
@@ -88,7 +95,7 @@ class OpMemo {
 
  private:
   std::uint32_t linked(const OpSource& source, std::uint32_t at) {
-    if (links_[at] == kNone) {
+    if (links_[at] & kRuledOut) {
       const std::uint32_t e = get(source, link_ids_[at]);  // may grow links_
       links_[at] = e;
     }
@@ -112,11 +119,10 @@ class OpMemo {
   std::array<Epoch, kRing> ring_{};
   IdMap<std::uint32_t> index_;  // op id -> 1 + entry
   std::vector<Entry> entries_;
-  std::vector<OpId> ids_;                 // by entry
-  std::vector<std::uint32_t> free_;       // entries forgotten
-  std::vector<std::uint32_t> links_;      // entry numbers (kNone: not looked up yet)
-  std::vector<OpId> link_ids_;            // parallel to links_
-  std::vector<std::uint32_t> ruled_out_;  // parallel to links_ (rule_out_child)
+  std::vector<OpId> ids_;             // by entry
+  std::vector<std::uint32_t> free_;   // entries forgotten
+  std::vector<std::uint32_t> links_;  // entry numbers; kNone: not looked up; kRuledOut | tag
+  std::vector<OpId> link_ids_;        // parallel to links_
   std::uint64_t judged_ = 0, kept_ = 0;
 };
 

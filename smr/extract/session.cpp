@@ -320,7 +320,7 @@ void Session::refresh_candidates(const RcfOracle& rcf) {
   const MovedIndexRcf moved(rcf, Motion{c.margin, c.margin / scale});
   for (OpId o : indexed_->maybe_not_completely_finer(moved)) c.ids.insert(o.value);
   c.valid = true;
-  ++c.tag;
+  if (++c.tag >= OpMemo::kRuledOut - 1) c.tag = 1;  // marks of 2^31 sets ago are long gone
 }
 
 // The refining of an unbudgeted update over the memo (op_memo.h): the closure Refiner reaches
