@@ -883,6 +883,20 @@ void DatabaseWriter::flush() {
   ++commits_;
   ops_.clear();
   arena_.clear();
+  drop_mapped_pages();
+}
+
+// Each batch reads the path to each table's last page through LMDB's map (the pages it writes go
+// out by pwrite): mapped pages count in the resident set, and one batch's path after another they
+// would pile up with the file (tens of MiB for a GB database). So they are dropped after every
+// commit: clean file pages, faulted back in from the page cache when read again. The map moves
+// when it grows, so its place is found again then.
+void DatabaseWriter::drop_mapped_pages() {
+  if (map_found_bytes_ != map_bytes_) {
+    map_ = mapping_of_written();
+    map_found_bytes_ = map_bytes_;
+  }
+  if (map_ != nullptr) (void)::madvise(const_cast<std::uint8_t*>(map_), map_bytes_, MADV_DONTNEED);
 }
 
 const std::uint8_t* DatabaseWriter::mapping_of_written() const {
