@@ -15,6 +15,7 @@
 #include "index/hilbert.h"
 #include "index/node_codec.h"
 #include "storage/checksum.h"
+#include "storage/record_file.h"
 
 namespace smr::index {
 namespace {
@@ -230,10 +231,14 @@ Plan plan(std::vector<Entry> entries, const BuildOptions& options) {
 }
 
 TreeWriter::TreeWriter(const BuildOptions& options,
-                       std::function<void(std::uint64_t node_id, ByteView node)> put)
+                       std::function<void(std::uint64_t node_id, ByteView node)> put,
+                       const std::string& scratch_dir)
     : options_(options), put_(std::move(put)) {
   check_options(options);
+  if (!scratch_dir.empty()) spilled_ = std::make_unique<storage::RecordFile<Summary>>(scratch_dir);
 }
+
+TreeWriter::~TreeWriter() = default;
 
 Summary TreeWriter::emit(const detail::Node& node) {
   payload_.clear();
@@ -246,7 +251,7 @@ Summary TreeWriter::emit(const detail::Node& node) {
 
 void TreeWriter::add_leaf(std::span<const Entry> leaf) {
   if (leaf.empty()) throw_internal("R-tree write: an empty leaf");
-  if (leaves_.size() >= std::numeric_limits<std::uint32_t>::max()) {
+  if (node_id_ >= std::numeric_limits<std::uint32_t>::max()) {  // leaves so far
     throw_input("R-tree: more than 2^32 leaves");
   }
   detail::Node node;
@@ -256,21 +261,47 @@ void TreeWriter::add_leaf(std::span<const Entry> leaf) {
     node.items.push_back({e.roi, e.box, e.res, e.id});
   }
   entries_ += leaf.size();
-  leaves_.push_back(emit(node));
+  const Summary s = emit(node);
+  if (spilled_) {
+    spilled_->push(s);
+  } else {
+    leaves_.push_back(s);
+  }
 }
 
 Bytes TreeWriter::finish() {
-  const std::vector<std::uint64_t> level_sizes = level_sizes_for(leaves_.size(), options_.fanout);
-  std::vector<Summary> level = std::move(leaves_);
+  const std::uint64_t leaves = node_id_;  // only leaves are emitted before finish()
+  const std::vector<std::uint64_t> level_sizes = level_sizes_for(leaves, options_.fanout);
+  std::vector<Summary> level;  // the level below, but spilled leaves
+  if (spilled_) {
+    spilled_->flush();
+    if (level_sizes.size() == 1) {  // one leaf or none: the root is read back
+      level.resize(static_cast<std::size_t>(leaves));
+      spilled_->read(0, level);
+    }
+  } else {
+    level = std::move(leaves_);
+  }
+  std::vector<Summary> children;  // a node's spilled leaves
   for (std::uint64_t lvl = 1; lvl < level_sizes.size(); ++lvl) {
-    const std::uint64_t first_of_level_below = node_id_ - level.size();
+    const bool from_file = spilled_ && lvl == 1;
+    const std::uint64_t below = from_file ? leaves : level.size();
+    const std::uint64_t first_of_level_below = node_id_ - below;
     std::vector<Summary> above;
-    for (std::size_t g = 0; g < level.size(); g += options_.fanout) {
+    for (std::uint64_t g = 0; g < below; g += options_.fanout) {
       detail::Node node;
       node.level = lvl;
       node.first_child = first_of_level_below + g;
-      const std::size_t end = std::min(level.size(), g + options_.fanout);
-      for (std::size_t c = g; c < end; ++c) node.items.push_back(as_item(level[c]));
+      const std::uint64_t end = std::min<std::uint64_t>(below, g + options_.fanout);
+      std::span<const Summary> kids;
+      if (from_file) {
+        children.resize(static_cast<std::size_t>(end - g));
+        spilled_->read(g, children);
+        kids = children;
+      } else {
+        kids = std::span<const Summary>(level).subspan(g, end - g);
+      }
+      for (const Summary& c : kids) node.items.push_back(as_item(c));
       above.push_back(emit(node));
     }
     level = std::move(above);

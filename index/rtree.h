@@ -55,12 +55,18 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
 
 #include "index/box.h"
 #include "storage/bytes.h"
+
+namespace smr::storage {
+template <class T>
+class RecordFile;
+}
 
 namespace smr::index {
 
@@ -156,11 +162,18 @@ class LeafPacker {
 };
 
 // Serialises a tree leaf by leaf, in order, then its internal levels from the leaves' summaries
-// (held in memory: a few dozen bytes a leaf). Nodes go to `put` as in write().
+// (a hundred bytes a leaf: held in memory, or with `scratch_dir` in a scratch file there, read
+// back a node's children at a time, so that the writer's memory does not grow with the leaves;
+// the levels above, a fanout-th of them each, stay in memory). Nodes go to `put` as in write().
 class TreeWriter {
  public:
+  // `scratch_dir`: already resolved by storage::scratch_dir(); empty keeps the summaries in memory.
   TreeWriter(const BuildOptions& options,
-             std::function<void(std::uint64_t node_id, ByteView node)> put);
+             std::function<void(std::uint64_t node_id, ByteView node)> put,
+             const std::string& scratch_dir = {});
+  ~TreeWriter();
+  TreeWriter(const TreeWriter&) = delete;
+  TreeWriter& operator=(const TreeWriter&) = delete;
   // Throws kInvalidInput on an entry check_entry rejects, kInternal on an empty leaf.
   void add_leaf(std::span<const Entry> leaf);
   // Writes the internal levels; returns the sealed header (as write()).
@@ -170,7 +183,8 @@ class TreeWriter {
   Summary emit(const detail::Node& node);
   BuildOptions options_;
   std::function<void(std::uint64_t, ByteView)> put_;
-  std::vector<Summary> leaves_;
+  std::vector<Summary> leaves_;                            // without a scratch dir
+  std::unique_ptr<storage::RecordFile<Summary>> spilled_;  // with one
   std::uint64_t node_id_ = 0, entries_ = 0;
   Bytes payload_, sealed_;
 };

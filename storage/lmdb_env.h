@@ -156,6 +156,8 @@ class DatabaseWriter {
   void add(Table table, ByteView key, ByteView value, bool append);
   // Where LMDB mapped the file written so far (after a commit), or nullptr if it cannot tell.
   const std::uint8_t* mapping_of_written() const;
+  // Drops the map's resident pages (after a commit): see flush().
+  void drop_mapped_pages();
   /// LMDB's compacting copy of the written database to `fd`, through a pipe whose pump drops
   /// `map`'s pages as it goes (lmdb_env.cpp); 0 or an errno/LMDB code.
   int copy_through_pump(void* env, int fd, const std::uint8_t* map) const;
@@ -172,6 +174,8 @@ class DatabaseWriter {
   Bytes arena_;                                         // keys and values of the pending batch
   std::vector<std::optional<std::uint64_t>> last_key_;  // per Table
   std::uint64_t bytes_written_ = 0, commits_ = 0;
+  const std::uint8_t* map_ = nullptr;  // mapping_of_written(), found for a map of map_found_bytes_
+  std::uint64_t map_found_bytes_ = 0;
   bool finished_ = false;
 };
 

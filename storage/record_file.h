@@ -1,5 +1,5 @@
 // Fixed-size records appended to an anonymous scratch file (storage::TempFile) through a buffer
-// of 4 MiB, and read back by position (many scattered pieces in runs of nearby ones): the spools
+// of 1 MiB, and read back by position (many scattered pieces in runs of nearby ones): the spools
 // of the out-of-core builders and writers.
 #pragma once
 
@@ -90,7 +90,9 @@ class RecordFile {
   }
 
  private:
-  static constexpr std::size_t kFlushBytes = std::size_t{4} << 20;
+  // A build holds several spools at once (the op assembler's two, the stream writer's three):
+  // 4 MiB each was a third of a 32 MiB budget, for writes no faster than 1 MiB ones.
+  static constexpr std::size_t kFlushBytes = std::size_t{1} << 20;
   static constexpr std::uint64_t kGapBytes = 16384, kRunBytes = std::uint64_t{1} << 20;
   TempFile file_;
   std::vector<T> buffer_;

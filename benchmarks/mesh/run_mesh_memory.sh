@@ -14,7 +14,8 @@
 #
 # Environment: BUILD_DIR (build/release), WORK_DIR ($BUILD_DIR/bench-mesh-memory), SMRDB_DATA_DIR
 # (data), MESH (bunny00.off), LEVELS ("2 3 4"), MEMORY (32M), THREADS (0), PEER (1),
-# PEER_LEVEL (3), OUT.
+# PEER_LEVEL (3), OUT. REUSE=1 takes each level's sub$k.json and sub$k.time already in WORK_DIR
+# (the ingest command below run by hand, e.g. the sizes side by side) instead of ingesting.
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -28,13 +29,18 @@ MEMORY="${MEMORY:-32M}"
 THREADS="${THREADS:-0}"
 PEER="${PEER:-1}"
 PEER_LEVEL="${PEER_LEVEL:-3}"
+REUSE="${REUSE:-0}"
 OUT="${OUT:-$root/benchmarks/results/mesh_memory.json}"
 
 smrdb="$BUILD_DIR/tools/smrdb"
 bench_mesh="$BUILD_DIR/benchmarks/mesh/bench_mesh_build"
 # shellcheck source=../lib.sh
 source "$root/benchmarks/lib.sh"
-require_executables "$BUILD_DIR" "$smrdb" "$bench_mesh"
+if [[ "$REUSE" == 1 && "$PEER" != 1 ]]; then
+  require_executables "$BUILD_DIR" "$smrdb"
+else
+  require_executables "$BUILD_DIR" "$smrdb" "$bench_mesh"
+fi
 require_tools
 mkdir -p "$WORK_DIR" "$(dirname "$OUT")"
 
@@ -42,7 +48,7 @@ stem="${MESH%.*}"
 ply_of() { echo "$WORK_DIR/${stem}_sub$1.ply"; }
 for k in $LEVELS; do
   ply="$(ply_of "$k")"
-  if [[ ! -f "$ply" ]]; then
+  if [[ ! -f "$ply" && "$REUSE" != 1 ]]; then
     log "generating $ply"
     "$bench_mesh" "$DATA_DIR/meshes/$MESH" --subdivide "$k" -o "$ply" >/dev/null
   fi
@@ -54,9 +60,13 @@ ingest() {
   ply="$(ply_of "$k")"
   db="$WORK_DIR/${stem}_sub$k.smrdb"
   t="$WORK_DIR/sub$k.time"
-  log "ingest $(basename "$ply") --memory $MEMORY"
-  /usr/bin/time -f "%M %e %U %S" -o "$t" "$smrdb" ingest "$ply" --memory "$MEMORY" \
-    --threads "$THREADS" --tmp "$WORK_DIR" -o "$db" --force -q --json >"$WORK_DIR/sub$k.json"
+  if [[ "$REUSE" == 1 ]]; then
+    log "reusing $WORK_DIR/sub$k.json and $t"
+  else
+    log "ingest $(basename "$ply") --memory $MEMORY"
+    /usr/bin/time -f "%M %e %U %S" -o "$t" "$smrdb" ingest "$ply" --memory "$MEMORY" \
+      --threads "$THREADS" --tmp "$WORK_DIR" -o "$db" --force -q --json >"$WORK_DIR/sub$k.json"
+  fi
   log "  $(cat "$t") (KiB, s wall, s user, s sys)"
   rm -f "$db"
   jq -c -n --slurpfile r "$WORK_DIR/sub$k.json" --arg t "$(cat "$t")" --argjson level "$k" \

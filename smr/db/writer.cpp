@@ -212,11 +212,15 @@ WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header
   report.z_shift = z_shift;
   report.ops = counts.ops;
   const index::BuildOptions bo = rtree_options(header, options);
-  index::TreeWriter tree(bo, [&](std::uint64_t id, ByteView node) {
-    report.rtree_bytes += node.size();
-    ++report.rtree_nodes;
-    writer.append(Table::kRtree, id, node);
-  });
+  // The leaves' summaries (one per page) wait in a scratch file for the upper levels.
+  index::TreeWriter tree(
+      bo,
+      [&](std::uint64_t id, ByteView node) {
+        report.rtree_bytes += node.size();
+        ++report.rtree_nodes;
+        writer.append(Table::kRtree, id, node);
+      },
+      tmp_dir);
   LocatorSorter locators(tmp_dir, side_sort_bytes(options));
   const std::uint64_t placed =
       write_pages(writer, sorted, ops_of, grid, bo, options, counts.ops, tree, locators, report);

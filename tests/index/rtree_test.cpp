@@ -11,6 +11,7 @@
 #include <set>
 
 #include "index/visitors.h"
+#include "storage/temp_file.h"
 #include "tests/index/index_test_util.h"
 
 namespace smr::index {
@@ -94,6 +95,33 @@ TEST(RTree, NodesArePutLeavesFirstRootLastAndStayCompact) {
     biggest = std::max(biggest, built.store.nodes.at(leaf).size());
   }
   EXPECT_LT(biggest, 20u * 1024);
+}
+
+// TreeWriter with a scratch dir keeps the leaves' summaries in a file (the database writer's
+// memory does not grow with its pages): the same nodes and header as write()'s, whose summaries
+// stay in memory, for trees of 0, 1 and several levels.
+TEST(RTree, SpilledLeafSummariesWriteTheSameTree) {
+  for (const std::size_t n : {std::size_t{0}, std::size_t{1}, std::size_t{20000}}) {
+    const auto entries = random_entries(n, 9);
+    BuildOptions options;
+    options.fanout = 8;
+    const auto built = build(entries, options);
+    test::MemoryStore spilled;
+    TreeWriter writer(options, spilled.putter(), storage::scratch_dir(""));
+    std::vector<Entry> leaf;
+    const auto truth = by_id(entries);
+    for (const auto& ids : built.plan.leaves) {
+      leaf.clear();
+      for (std::uint64_t id : ids) leaf.push_back(truth.at(id));
+      writer.add_leaf(leaf);
+    }
+    spilled.header = writer.finish();
+    EXPECT_EQ(spilled.header, built.store.header) << n;
+    EXPECT_EQ(spilled.nodes, built.store.nodes) << n;
+    if (n > 1) {
+      EXPECT_GE(built.plan.level_sizes.size(), 3u);
+    }
+  }
 }
 
 TEST(RTree, EveryEntryInExactlyOneLeafAndLeavesRespectWeights) {

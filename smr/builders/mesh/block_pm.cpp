@@ -233,6 +233,12 @@ void BlockPmBuilder::push(int level, std::uint64_t code, BlockState b) {
 
 void BlockPmBuilder::flush(int level) {
   if (pending_[level].empty()) return;
+  push(level + 1, pending_code_[level] >> 3, simplify(level + 1, merge(level)));
+}
+
+// The pending blocks of `level` as one (their children's copies freed before it is simplified:
+// a parent's simplification may flush the levels above it in turn).
+BlockState BlockPmBuilder::merge(int level) {
   BlockState merged;
   std::vector<BlockVertex> verts;
   for (BlockState& b : pending_[level]) {
@@ -249,7 +255,7 @@ void BlockPmBuilder::flush(int level) {
       merged.verts.push_back(v);
     }
   }
-  push(level + 1, pending_code_[level] >> 3, simplify(level + 1, std::move(merged)));
+  return merged;
 }
 
 // Simplifies one block and hands its collapses to the assembler.
@@ -266,6 +272,13 @@ BlockState BlockPmBuilder::simplify(int level, BlockState in) {
 // A block simplified, not yet handed over: reads only what stays fixed while blocks are made
 // (positions, octree spans, options), so blocks of a level run on several threads.
 SimplifiedBlock BlockPmBuilder::compute(int level, const BlockState& in) const {
+  SimplifiedBlock out = load(level, in);  // its tables of the block's vertices freed
+  out.rounds = simplify_block(level, *out.s);
+  return out;
+}
+
+// The block's simplification, loaded (local vertices in Morton order), not run yet.
+SimplifiedBlock BlockPmBuilder::load(int level, const BlockState& in) const {
   const std::size_t n = in.verts.size();
   std::vector<std::uint32_t> gid(n), src(n);
   std::vector<Vec3> pos(n);
@@ -301,7 +314,6 @@ SimplifiedBlock BlockPmBuilder::compute(int level, const BlockState& in) const {
   out.s = std::make_unique<Simplification>();
   load_block(*out.s, qem_, std::move(pos), std::move(quad), std::move(locked), constrain, tris,
              mesh_.name(), gid);
-  out.rounds = simplify_block(level, *out.s);
   out.gid = std::move(gid);
   out.src = std::move(src);
   return out;

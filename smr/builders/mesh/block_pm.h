@@ -64,8 +64,10 @@ class BlockPmBuilder {
   BlockState leaf_state(const LeafInput& leaf) const;
   void push(int level, std::uint64_t code, BlockState b);
   void flush(int level);
+  BlockState merge(int level);
   BlockState simplify(int level, BlockState in);
   SimplifiedBlock compute(int level, const BlockState& in) const;
+  SimplifiedBlock load(int level, const BlockState& in) const;
   std::uint64_t simplify_block(int level, Simplification& s) const;
   BlockState commit(BlockState in, SimplifiedBlock done);
   void add_removals(const Simplification& s, const std::vector<std::uint32_t>& gid,

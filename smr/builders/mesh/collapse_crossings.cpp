@@ -39,9 +39,8 @@ void build_grid(Crossings& c, const PmMesh& m) {
   const Vec3 origin = bounds.empty() ? Vec3(0.0) : bounds.lo;
   const double cell = count ? 2.0 * edges / double(count) : 1.0;
   c.grid.reset(origin, cell);
-  c.archive.reset(origin, cell);
   for (std::uint32_t id = 0; id < m.tris.size(); ++id) {
-    if (m.tris[id].destroyer == kNone) c.grid.insert(id, box_of(m, m.tris[id].v));
+    if (m.tris[id].destroyer == kNone) c.grid.insert(id, box_of(m, m.tris[id].v), c.kNear);
   }
   c.grid_ready = true;
 }
@@ -149,8 +148,8 @@ bool crosses_after(Crossings& c, const PmMesh& m, const CollapseLog& log, QemPmS
       s.dead_near.push_back({id, tb});
     }
   };
-  c.grid.visit(all, sort_near);
-  if (c.archive_largest > above) c.archive.visit(all, sort_near);
+  c.grid.visit(all, sort_near, c.kNear);
+  if (c.archive_largest > above) c.grid.visit(all, sort_near, c.kArchive);
   bool crossed = false;
   for (std::size_t i = 0; i < s.made.size() && !crossed; ++i) {
     const MeshTriangle& t = s.made[i];
@@ -176,7 +175,7 @@ void record_collapse(Crossings& c, const PmMesh& m, const CollapseLog& log) {
   }
   for (std::uint32_t k = col.new_begin; k < col.new_end; ++k) {
     const std::uint32_t id = log.new_tris[k];
-    c.grid.insert(id, box_of(m, m.tris[id].v));
+    c.grid.insert(id, box_of(m, m.tris[id].v), c.kNear);
   }
 }
 
@@ -190,8 +189,7 @@ void retire_dead(Crossings& c, const PmMesh& m, const CollapseLog& log, double l
       c.dead[kept++] = id;
       continue;
     }
-    c.grid.erase(id);
-    c.archive.insert(id, box_of(m, m.tris[id].v));
+    c.grid.insert(id, box_of(m, m.tris[id].v), c.kArchive);  // out of kNear
     c.archive_largest = std::max(c.archive_largest, b);
   }
   c.dead.resize(kept);

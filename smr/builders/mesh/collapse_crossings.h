@@ -27,16 +27,17 @@ struct CrossingScratch {
 };
 
 // The test's state: the live triangles by box, made at the first test, and the dead ones a
-// collapse may still need (crosses_dead in collapse_crossings.cpp): they stay in `grid` while
-// bounds near theirs are still to come (`dead`), then move to `archive` (retire_dead).
+// collapse may still need (crosses_dead in collapse_crossings.cpp): they stay in the grid's set
+// kNear while bounds near theirs are still to come (`dead`), then move to its set kArchive
+// (retire_dead).
 struct Crossings {
-  bool enabled = false;  // !QemPmOptions::allow_self_intersections
-  double ratio = 0.0;    // QemPmOptions::coalesce_error_ratio (r in crosses_dead)
+  static constexpr int kNear = 0, kArchive = 1;  // TriangleGrid sets
+  bool enabled = false;                          // !QemPmOptions::allow_self_intersections
+  double ratio = 0.0;  // QemPmOptions::coalesce_error_ratio (r in crosses_dead)
   TriangleGrid grid;
   bool grid_ready = false;
-  std::vector<std::uint32_t> dead;  // the dead triangles still in grid
-  TriangleGrid archive;             // the others (retire_dead)
-  double archive_largest = 0.0;     // the largest bound of their destroyers
+  std::vector<std::uint32_t> dead;  // the dead triangles still in kNear
+  double archive_largest = 0.0;     // the largest bound of the destroyers of kArchive's
   CrossingScratch scratch;
 };
 

@@ -4,9 +4,11 @@
 // made the lookups most of the test's time on large meshes), each triangle in the one cell of
 // the level whose cells are at least its box's extent that holds its box's centre. At a level of
 // cell size s, a box then meets only triangles of the cells holding its own box grown by s / 2;
-// where that range has more cells than the level holds, the level's cells are scanned instead. A
-// cell keeps its triangles' boxes, so the boxes that miss the query are dropped without touching
-// the mesh.
+// where that range has more cells than the level holds, the level's cells are scanned instead.
+// The grid keeps each triangle's box, so the boxes that miss the query are dropped without
+// touching the mesh: one record of 36 bytes per triangle id, chained from its cell (a vector per
+// cell cost three times that, and a block's grids hold every triangle it ever made), visited in
+// no particular order.
 #pragma once
 
 #include <algorithm>
@@ -24,15 +26,21 @@ namespace smr::qem {
 
 class TriangleGrid {
  public:
+  // Two sets of triangles share the grid's records (a triangle is in one of them at most): the
+  // self-intersection test's live and recently dead triangles, and the others it keeps
+  // (collapse_crossings.h).
+  static constexpr int kSets = 2;
   void reset(const Vec3& origin, double cell);
-  void insert(std::uint32_t id, const Box3& b);
+  // Puts triangle `id` in `set` (taking it out of where it was).
+  void insert(std::uint32_t id, const Box3& b, int set = 0);
   void erase(std::uint32_t id);
-  // f(id, box) for every triangle whose box meets b (box: its box, rounded outwards to floats).
+  // f(id, box) for every triangle of `set` whose box meets b (box: its box, rounded outwards to
+  // floats).
   template <class F>
-  void visit(const Box3& b, F&& f) const {
+  void visit(const Box3& b, F&& f, int set = 0) const {
     double size = cell_;
     for (int level = 0; level < kLevels; ++level, size *= 2.0) {
-      const Level& l = levels_[std::size_t(level)];
+      const Level& l = levels_[std::size_t(set * kLevels + level)];
       if (l.occupied == 0) continue;
       const Vec3 half(0.5 * size);
       const std::array<std::int64_t, 3> lo = index_of(b.lo - half, size),
@@ -48,8 +56,8 @@ class TriangleGrid {
       };
       if (range > double(l.keys.size())) {  // fewer cells than the range: all of them
         for (std::size_t c = 0; c < l.keys.size(); ++c) {
-          if (l.ids[c].empty() || !inside(l.keys[c])) continue;
-          for (const Entry& e : l.ids[c]) e.visit(b, f);
+          if (l.head[c] == 0 || !inside(l.keys[c])) continue;
+          visit_cell(l.head[c], b, f);
         }
         continue;
       }
@@ -57,8 +65,7 @@ class TriangleGrid {
         for (std::int64_t y = lo[1]; y <= hi[1]; ++y) {
           for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
             const std::uint32_t* slot = l.index.find(key_of({x, y, z}));
-            if (slot == nullptr) continue;
-            for (const Entry& e : l.ids[*slot - 1]) e.visit(b, f);
+            if (slot != nullptr) visit_cell(l.head[*slot - 1], b, f);
           }
         }
       }
@@ -70,18 +77,19 @@ class TriangleGrid {
   static constexpr int kNoLevel = -1;
   static constexpr std::int64_t kOffset = std::int64_t{1} << 20;
   static constexpr std::uint64_t kMask = (std::uint64_t{1} << 21) - 1;
-  // A triangle and its box in floats, rounded outwards: the box test runs on the cell's own
-  // memory (looking up each triangle's corners missed the cache on most visits).
+  // A triangle's box in floats, rounded outwards (the box test runs on the grid's own memory:
+  // looking up each triangle's corners missed the cache on most visits), where it is, and the
+  // next triangle of its cell. By triangle id.
   struct Entry {
-    std::uint32_t id;
     std::array<float, 3> lo, hi;
-    static Entry of(std::uint32_t id, const Box3& b) {
-      Entry e{id, {}, {}};
+    std::uint32_t next = 0;  // the cell's next triangle's id + 1; 0: none
+    std::uint32_t cell = 0;
+    std::int32_t level = kNoLevel;  // set * kLevels + level; kNoLevel: not in the grid
+    void set_box(const Box3& b) {
       for (int k = 0; k < 3; ++k) {
-        e.lo[std::size_t(k)] = below(b.lo[k]);
-        e.hi[std::size_t(k)] = above(b.hi[k]);
+        lo[std::size_t(k)] = below(b.lo[k]);
+        hi[std::size_t(k)] = above(b.hi[k]);
       }
-      return e;
     }
     static float below(double x) {
       const auto f = static_cast<float>(x);
@@ -92,7 +100,7 @@ class TriangleGrid {
       return double(f) >= x ? f : std::nextafter(f, std::numeric_limits<float>::infinity());
     }
     template <class F>
-    void visit(const Box3& b, F& f) const {
+    void visit(std::uint32_t id, const Box3& b, F& f) const {
       for (int k = 0; k < 3; ++k) {
         if (double(lo[std::size_t(k)]) > b.hi[k] || double(hi[std::size_t(k)]) < b.lo[k]) return;
       }
@@ -104,11 +112,17 @@ class TriangleGrid {
   };
   // One grid: its cells in a flat hash table (cells emptied stay, to be filled again).
   struct Level {
-    IdMap<std::uint32_t> index;           // cell key -> its index + 1
-    std::vector<std::uint64_t> keys;      // per cell
-    std::vector<std::vector<Entry>> ids;  // per cell: its triangles
-    std::size_t occupied = 0;             // cells holding a triangle
+    IdMap<std::uint32_t> index;       // cell key -> its index + 1
+    std::vector<std::uint64_t> keys;  // per cell
+    std::vector<std::uint32_t> head;  // per cell: its first triangle's id + 1; 0: empty
+    std::size_t occupied = 0;         // cells holding a triangle
   };
+  // f(id, box) for the triangles of the cell whose first is `first` (id + 1) that meet b.
+  template <class F>
+  void visit_cell(std::uint32_t first, const Box3& b, F& f) const {
+    for (std::uint32_t n = first; n != 0; n = entries_[n - 1].next)
+      entries_[n - 1].visit(n - 1, b, f);
+  }
   std::array<std::int64_t, 3> index_of(const Vec3& p, double size) const {
     std::array<std::int64_t, 3> i{};
     for (int k = 0; k < 3; ++k) {
@@ -126,7 +140,7 @@ class TriangleGrid {
   Vec3 origin_{0.0};
   double cell_ = 1.0;
   std::vector<Level> levels_;
-  std::vector<std::pair<int, std::uint32_t>> where_;  // triangle -> (level, cell); kNoLevel: none
+  std::vector<Entry> entries_;  // by triangle id
 };
 
 }  // namespace smr::qem
