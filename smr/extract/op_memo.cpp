@@ -20,8 +20,7 @@ bool OpMemo::begin(const RcfOracle& rcf, std::uint32_t update) {
   }
   for (Epoch& e : ring_) {
     if (e.update == 0 || e.update < valid_from_) continue;
-    const Motion m = RcfPose::between(e.pose, *pose);
-    e.needed = std::max(m.delta, m.theta * e.pose.scale);
+    e.needed = e.pose.needed_to(*pose);
   }
   Epoch& now = ring_[update % kRing];
   now.update = update;

@@ -309,10 +309,7 @@ void Session::refine(const RcfOracle& rcf, const SessionBudget& budget, double s
 void Session::refresh_candidates(const RcfOracle& rcf) {
   IndexCandidates& c = candidates_;
   const RcfPose& now = memo_.pose();
-  if (c.valid && c.pose.signature == now.signature) {
-    const Motion m = RcfPose::between(c.pose, now);
-    if (std::max(m.delta, m.theta * c.pose.scale) <= c.margin) return;
-  }
+  if (c.valid && c.pose.signature == now.signature && c.pose.needed_to(now) <= c.margin) return;
   const double scale = now.scale > 0.0 ? now.scale : 1.0;
   c.margin = std::clamp(2.0 * memo_.last_motion(), std::ldexp(scale, -10), std::ldexp(scale, -4));
   c.pose = now;

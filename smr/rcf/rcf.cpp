@@ -87,6 +87,7 @@ Tri outside_within(const Frustum& f, double shift, Worst worst) {
 }  // namespace
 
 Tri FrustumCulling::culls_within(const OpView& op, const Motion& m) const {
+  if (m.zero()) return to_tri(culls(op));
   const Sphere s = frame_.apply(op.sphere);
   const Box3 b = frame_.apply(op.box);
   if (b.empty()) return Tri::kTrue;
@@ -98,6 +99,7 @@ Tri FrustumCulling::culls_within(const OpView& op, const Motion& m) const {
 }
 
 bool FrustumCulling::culls_region_within(const Box3& box, const Motion& m) const {
+  if (m.zero()) return culls_region(box);
   const Box3 b = frame_.apply(box);
   if (b.empty()) return true;
   return outside_within(frustum_, plane_shift(m, farthest(cam_.eye, b)),
@@ -105,6 +107,7 @@ bool FrustumCulling::culls_region_within(const Box3& box, const Motion& m) const
 }
 
 Tri FrustumCulling::culls_triangle_within(const Triangle3& model, const Motion& m) const {
+  if (m.zero()) return to_tri(culls_triangle(model));
   const Triangle3 v = frame_.apply(model);
   double reach = 0.0;
   for (const Vec3& p : v) reach = std::max(reach, glm::length(p - cam_.eye));
@@ -286,71 +289,18 @@ Tri ScreenSpaceCriterion::region_satisfies_within(const Box3& box, double min_re
 }
 
 // ---- composition ----
-bool Rcf::culled(const OpView& op) const {
-  for (const auto& c : culling_) {
-    if (c->culls(op)) return true;
-  }
-  return false;
-}
-
-bool Rcf::triangle_culled(const Triangle3& v) const {
-  for (const auto& c : culling_) {
-    if (c->culls_triangle(v)) return true;
-  }
-  return false;
-}
-
-// Both tests first ask each similarity component about the op's box at the op's least
-// resolution (conservative: true only if every triangle in the box at that resolution or more
-// satisfies it), which settles most ops far from the requirement without a triangle's test.
-bool Rcf::region_satisfied(const Box3& box, double min_res, const CrmrInfo& info) const {
-  for (const auto& s : similarity_) {
-    if (!s->region_satisfies(box, min_res, info)) return false;
-  }
-  return true;
-}
-
+// The exact tests are the tests over the motion of none: one composition for both.
 bool Rcf::is_finer(const OpView& op, const OpSource& source) const {
-  if (culled(op)) return true;
-  double least = 1.0;
-  for (const FragmentTriangle& t : op.fragment) {
-    if (!is_final_or_void(t)) least = std::min(least, t.death_res);
-  }
-  if (region_satisfied(op.box, least, source.info())) return true;
-  for (const FragmentTriangle& t : op.fragment) {
-    if (is_final_or_void(t)) continue;
-    const Triangle3 v = corners(op, t);
-    for (const auto& s : similarity_) {
-      if (!s->triangle_satisfies(v, t.death_res, source.info())) return false;
-    }
-  }
-  return true;
+  return finer_within(op, source, Motion{}) == Tri::kTrue;
 }
 
 bool Rcf::is_completely_finer(const OpView& op, const OpSource& source) const {
-  if (op.id == kBaseOp) return false;
-  if (culled(op)) return true;
-  if (similarity_.empty()) return true;
-  if (op.pre_tris.size() != op.pre.size())
-    throw_internal("op " + std::to_string(op.id.value) + " has no PreF corners (link_dag not run)");
-  if (region_satisfied(op.box, op.birth_res, source.info())) return true;
-  for (const PreTriangle& t : op.pre_tris) {
-    if (t.is_void()) continue;
-    const Triangle3 v = corners(op, t);
-    if (triangle_culled(v)) continue;
-    for (const auto& s : similarity_) {
-      if (!s->triangle_satisfies(v, op.birth_res, source.info())) return false;
-    }
-  }
-  return true;
+  return completely_finer_within(op, source, Motion{}) == Tri::kTrue;
 }
 
-bool Rcf::region_completely_finer(const Box3& box, const Box3& /*roi*/, double min_birth_res,
+bool Rcf::region_completely_finer(const Box3& box, const Box3& roi, double min_birth_res,
                                   const CrmrInfo& info) const {
-  for (const auto& c : culling_) {
-    if (c->culls_region(box)) return true;
-  }
-  return region_satisfied(box, min_birth_res, info);
+  return region_completely_finer_within(box, roi, min_birth_res, info, Motion{});
 }
 
 Tri Rcf::culled_within(const OpView& op, const Motion& m) const {
@@ -371,8 +321,12 @@ Tri Rcf::triangle_within(const Triangle3& v, double res, const CrmrInfo& info,
   return all;
 }
 
-// is_finer and is_completely_finer with each test replaced by its value over the motion (Kleene's
-// logic): their shortcuts (culling, the region test) only ever settle a verdict they imply.
+// IsFiner and IsCompletelyFiner (rcf.h) with each test replaced by its value over the motion
+// (Kleene's logic); with no motion every value is definite and these are the exact tests. The
+// shortcuts (culling, the region test) only ever settle a verdict they imply. Both tests first ask
+// each similarity component about the op's box at the op's least resolution (conservative: true
+// only if every triangle in the box at that resolution or more satisfies it), which settles most
+// ops far from the requirement without a triangle's test.
 Tri Rcf::finer_within(const OpView& op, const OpSource& source, const Motion& m) const {
   const Tri culled = culled_within(op, m);
   if (culled == Tri::kTrue) return Tri::kTrue;
@@ -402,6 +356,8 @@ Tri Rcf::completely_finer_within(const OpView& op, const OpSource& source, const
   if (op.id == kBaseOp) return Tri::kFalse;
   const Tri culled = culled_within(op, m);
   if (culled == Tri::kTrue || similarity_.empty()) return Tri::kTrue;
+  if (op.pre_tris.size() != op.pre.size())
+    throw_internal("op " + std::to_string(op.id.value) + " has no PreF corners (link_dag not run)");
   bool region = true;
   for (const auto& s : similarity_) {
     region =
@@ -480,6 +436,11 @@ Motion RcfPose::between(const RcfPose& a, const RcfPose& b) {
   const double delta = glm::length(b.eye - a.eye);
   return {delta + 1e-12 * (1.0 + glm::length(a.eye) + glm::length(b.eye)),
           std::sqrt(turn2) + 1e-12};
+}
+
+double RcfPose::needed_to(const RcfPose& to) const {
+  const Motion m = between(*this, to);
+  return std::max(m.delta, m.theta * scale);
 }
 
 std::string Rcf::describe() const {

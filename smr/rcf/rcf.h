@@ -274,6 +274,9 @@ struct RcfPose {
   /// The motion between two poses: the eye's displacement and the angle of the rotation taking
   /// one basis to the other (both rounded up).
   static Motion between(const RcfPose& a, const RcfPose& b);
+  /// The least m such that the motion to `to` is within m of this pose (delta <= m, theta <=
+  /// m / scale): what a margin kept at this pose must reach to still hold at `to`.
+  double needed_to(const RcfPose& to) const;
 };
 
 /// What extraction asks of an RCF (Brown 4.6, Fig. 4.19): IsFiner, IsCompletelyFiner, and the
@@ -335,8 +338,6 @@ class Rcf final : public RcfOracle {
   void add(std::shared_ptr<const CullingComponent> c) { culling_.push_back(std::move(c)); }
   void add(std::shared_ptr<const SimilarityComponent> s) { similarity_.push_back(std::move(s)); }
 
-  bool culled(const OpView& op) const;
-  bool triangle_culled(const Triangle3& v) const;
   /// Every triangle of F(op) that is not final or void satisfies every similarity component at
   /// its death_res, or op is culled.
   bool is_finer(const OpView& op, const OpSource& source) const override;
@@ -365,7 +366,6 @@ class Rcf final : public RcfOracle {
   std::string describe() const;
 
  private:
-  bool region_satisfied(const Box3& box, double min_res, const CrmrInfo& info) const;
   Tri culled_within(const OpView& op, const Motion& m) const;
   Tri triangle_within(const Triangle3& v, double res, const CrmrInfo& info, const Motion& m) const;
 
