@@ -203,16 +203,17 @@ class PagePacker {
 
 // The data pages. The sorted entries are cut into runs whose bounds depend on the entries alone
 // (estimated bytes, kRunPages), and each run is packed into pages by PagePacker, so the pages do
-// not depend on the thread count. Runs are packed on every core a window at a time, and while
-// the helpers start on a window the calling thread appends the previous one's pages, in order,
-// with their locators (to `locators`) and R-tree leaves (to `tree`). Returns the number of ops
-// placed.
+// not depend on the thread count. Runs are packed on every core a window (a run per thread) at a
+// time, and while the helpers start on a window the calling thread appends the previous one's
+// pages, in order, with their locators (to `locators`) and R-tree leaves (to `tree`). Memory holds
+// two windows of runs (entries and pages: ~2 MiB a run on the 4097^2 fBm) and the ops of the
+// pages being cut. Returns the number of ops placed.
 std::uint64_t write_pages(storage::DatabaseWriter& writer, EntrySorter& sorted, const OpsOf& ops_of,
                           const QuantGrid& grid, const index::BuildOptions& bo,
                           const WriteOptions& options, std::uint64_t op_count,
                           index::TreeWriter& tree, LocatorSorter& locators, WriteReport& report) {
   const unsigned threads = thread_count(options.threads);
-  const std::size_t window = 2 * std::size_t(threads);
+  const std::size_t window = std::size_t(threads);
   const PagePacker packer(grid, options, bo.max_leaf_entries);
   std::vector<PackedRun> filling, packed;
   std::vector<index::Entry> leaf_entries;
