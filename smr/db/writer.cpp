@@ -2,10 +2,7 @@
 // order (Maheshwari 4.4's packed R-tree over ROI boxes; one leaf <-> one page), the op locators,
 // the R-tree's upper levels and the meta record, last.
 #include <algorithm>
-#include <atomic>
 #include <chrono>
-#include <cstdio>
-#include <cstdlib>
 #include <deque>
 #include <span>
 
@@ -89,7 +86,7 @@ struct PackedRun {
 // Cuts a run into pages greedily in leaf order: each page takes as many entries as fit in
 // `cap` bytes sealed (WriteOptions::page_bytes) and max_leaf_entries, measured by encoding them.
 // The estimate proposes the first cut (scaled by the real-to-estimated ratio of the run's
-// previous page), then encodes bracket the cut: [lo fits, hi does not] narrowed by interpolating
+// previous pages), then encodes bracket the cut: [lo fits, hi does not] narrowed by interpolating
 // on the sizes (bisecting after a few tries) until hi = lo + 1, so adding the next entry would
 // have passed the cap. An entry that alone passes it gets a page of its own.
 class PagePacker {
