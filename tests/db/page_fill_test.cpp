@@ -26,6 +26,7 @@ namespace {
 struct Fill {
   std::uint64_t pages = 0;
   std::uint64_t over = 0;        // values past the cap holding more than one op
+  std::uint64_t alone = 0;       // values past the cap holding one op
   std::uint64_t loose = 0;       // pages the next op would still have fitted in
   std::uint64_t lmdb_pages = 0;  // overflow pages the values take
   double mean_value = 0;
@@ -60,7 +61,7 @@ Fill check_fill(const Crmr& m, const std::string& path, const WriteReport& w,
   for (std::size_t p = 0; p < pages.size(); ++p) {
     total += sizes[p];
     f.lmdb_pages += (sizes[p] + 16 + 4095) / 4096;
-    if (sizes[p] > o.page_bytes && pages[p].size() > 1) ++f.over;
+    if (sizes[p] > o.page_bytes) ++(pages[p].size() > 1 ? f.over : f.alone);
     if (p + 1 == pages.size() || pages[p].size() >= max_entries) continue;
     std::vector<const Op*> more = pages[p];
     more.push_back(pages[p + 1].front());
@@ -112,6 +113,24 @@ TEST(PageFill, MeshPagesAreCutTightByTheirEncodedSize) {
 
 TEST(PageFill, OneLmdbPagePages) {
   expect_tight(test::dataset("fbm257").crmr, "fbm257", 4096 - 16);
+}
+
+// Pages of 400 bytes: the ops that alone pass them get a page each; the others still share pages
+// cut tight.
+TEST(PageFill, AnOpBiggerThanAPageGetsAPageOfItsOwn) {
+  Crmr m = test::dataset("fbm129").crmr;
+  test::TempDir dir("smrdb-page-fill-test");
+  WriteOptions o;
+  o.page_bytes = 400;
+  const WriteReport w = write_database(m, dir.file("small.smrdb"), o);
+  const Fill f = check_fill(m, dir.file("small.smrdb"), w, o);
+  std::printf("fbm129 at %u bytes: %llu pages, %llu of one op past the cap, %llu loose\n",
+              o.page_bytes, static_cast<unsigned long long>(f.pages),
+              static_cast<unsigned long long>(f.alone), static_cast<unsigned long long>(f.loose));
+  EXPECT_EQ(f.over, 0u);
+  EXPECT_GT(f.alone, 0u);
+  EXPECT_LT(f.alone, f.pages / 2);
+  EXPECT_LE(f.loose, w.page_runs - 1);
 }
 
 }  // namespace
