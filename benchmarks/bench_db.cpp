@@ -24,6 +24,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <optional>
 #include <set>
@@ -190,6 +191,17 @@ PageIndex read_page_index(const smr::Database& db, const std::string& path) {
     index.all_page_bytes += index.page_size[p];
   }
   return index;
+}
+
+// Per record stream: raw and alone-compressed bytes per model vertex.
+json streams_json(const std::map<std::string, std::pair<std::uint64_t, std::uint64_t>>& streams,
+                  std::uint64_t vertices) {
+  json out = json::object();
+  for (const auto& [name, bytes] : streams) {
+    out[name] = {{"raw", double(bytes.first) / double(vertices)},
+                 {"zstd", double(bytes.second) / double(vertices)}};
+  }
+  return out;
 }
 
 json database_json(const smr::Database& db, const std::string& path, const PageIndex& index) {
@@ -504,7 +516,7 @@ json mode_codecs(const CodecArgs& a) {
     std::vector<smr::storage::Bytes> pages;
     std::vector<std::pair<std::size_t, std::size_t>> geo_span;  // offset, size within payload
     std::vector<smr::storage::ByteView> payloads, geos;
-    std::uint64_t geo_bytes = 0, record_bytes = 0, page_bytes = 0;
+    std::uint64_t geo_bytes = 0, record_bytes = 0, page_bytes = 0, page_triangles = 0;
     {
       const smr::storage::Env env = smr::storage::Env::open_read_only(path, smr::kTableNames);
       const smr::storage::ReadTxn txn = env.read();
@@ -512,33 +524,41 @@ json mode_codecs(const CodecArgs& a) {
         pages.emplace_back(v.begin(), v.end());
       });
     }
+    // Each record stream's bytes, raw and compressed alone per page (what a field costs).
+    std::map<std::string, std::pair<std::uint64_t, std::uint64_t>> streams;
     for (std::size_t i = 0; i < pages.size(); ++i) {
       page_bytes += pages[i].size();
       const smr::storage::ByteView payload =
           smr::storage::unseal(pages[i], "pages", std::to_string(i));
       const smr::PageSections parts = smr::page_sections(payload, "pages/" + std::to_string(i));
+      for (const auto& [stream, bytes] :
+           smr::page_record_streams(payload, "pages/" + std::to_string(i))) {
+        streams[stream].first += bytes.size();
+        if (!bytes.empty()) streams[stream].second += smr::storage::zstd_compress(bytes).size();
+      }
       record_bytes += parts.records.size();
+      page_triangles += parts.totals[2];  // fragment triangles (pages keep them in the records)
       const smr::storage::ByteView geo = parts.geometry;
       geo_bytes += geo.size();
       payloads.push_back(payload);
       geos.push_back(geo);
     }
-    std::uint64_t positions = 0, faces = 0;
+    std::uint64_t positions = 0;
+    const std::uint64_t faces = page_triangles;
     for (const auto& g : geos) {
       const smr::storage::GeometryBlob b = smr::storage::decode_geometry(*codec, g, "geometry");
       positions += b.positions.size();
-      faces += b.faces.size();
     }
     std::uint64_t sink = 0;
     const double geo_s = time_passes(a.min_seconds, [&] {
       for (const auto& g : geos)
-        sink += smr::storage::decode_geometry(*codec, g, "geometry").faces.size();
+        sink += smr::storage::decode_geometry(*codec, g, "geometry").positions.size();
     });
     const double page_s = time_passes(a.min_seconds, [&] {
       for (const auto& p : payloads)
         sink += smr::decode_page(p, db->grid(), db->info(), "page")->size();
     });
-    const double raw_geo_bytes = 12.0 * double(positions + faces);  // int32 x 3, uint32 x 3
+    const double raw_geo_bytes = 12.0 * double(positions);  // int32 x 3
     codecs[name] = {{"file_bytes", w.file_bytes},
                     {"pages", pages.size()},
                     {"page_bytes", page_bytes},
@@ -552,6 +572,7 @@ json mode_codecs(const CodecArgs& a) {
                     {"geometry_bytes_per_triangle", double(geo_bytes) / double(faces)},
                     {"geometry_bytes_per_model_vertex", double(geo_bytes) / double(vertices)},
                     {"record_bytes_per_model_vertex", double(record_bytes) / double(vertices)},
+                    {"record_streams_per_model_vertex", streams_json(streams, vertices)},
                     {"page_bytes_per_model_vertex", double(page_bytes) / double(vertices)},
                     {"file_bytes_per_model_vertex", double(w.file_bytes) / double(vertices)},
                     {"geometry_decode",

@@ -184,6 +184,14 @@ GeometryBlob draco_decode(ByteView in, std::string_view context) {
   std::unique_ptr<draco::PointCloud> pc;
   const draco::Mesh* mesh = nullptr;
   if (nf == 0) {
+    // Draco sizes a point cloud's attributes from the int32 point count in its header (after the
+    // version, encoder type and method, and u16 flags) before reading any of them: a damaged
+    // count would allocate gigabytes. It must be the blob's own.
+    std::int32_t header_points = 0;
+    if (payload.size() >= 10) std::memcpy(&header_points, payload.data() + 6, 4);
+    if (payload.size() < 10 || std::uint64_t(header_points) != np || header_points < 0)
+      r.fail("draco geometry: the point cloud's header does not hold its " + std::to_string(np) +
+             " points");
     auto decoded = decoder.DecodePointCloudFromBuffer(&in_buffer);
     if (!decoded.ok()) r.fail("draco geometry: " + decoded.status().error_msg_string());
     pc = std::move(decoded).value();

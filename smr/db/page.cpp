@@ -2,12 +2,14 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <climits>
 #include <cmath>
 #include <limits>
 
 #include <glm/geometric.hpp>
 #include <memory>
+#include <optional>
 #include <type_traits>
 #include <unordered_map>
 
@@ -25,6 +27,7 @@ using storage::GeometryBlob;
 namespace {
 
 constexpr std::size_t kMaxRecordBytes = std::size_t{1} << 31;
+constexpr int kRecordLevel = 3;  // zstd level of the records
 
 }  // namespace
 
@@ -57,160 +60,315 @@ struct Totals {
   }
 };
 
+// The records' streams (page.h): each field of every op in one stream, so that zstd sees like
+// next to like.
+enum Stream : std::size_t {
+  kOpHeads,      // per op: svarint id delta, varint vertices, new vertices, triangles, children,
+                 // parents, PreF triangles
+  kResolutions,  // per op: svarint birth_res as f32 bits, less the previous op's
+  kVertexIds,    // per page vertex, in table order: svarint id delta
+  kLists,        // per vertex-list entry: 0 = the next new table vertex, else (new so far - index)
+  kCorners,      // per fragment triangle: 3 varint corners, as indices into the op's list
+  kChildren,     // per child: varint id delta, increasing from the op
+  kChildRes,     // per child on another page: svarint its birth_res as f32 bits, less the op's
+                 //   (a page's own children give theirs)
+  kKillers,      // per fragment triangle: varint 0 (never replaced) or 1 + its killer's child index
+  kVoids,        // per op: varint count and indices of void fragment, then PreF, triangles
+  kParents,      // per parent: varint id delta, decreasing from the op
+  kPre,          // per PreF triangle: varint parent index, varint triangle index
+  kPreCorners,   // per PreF triangle: 3 varint corners, as indices into the op's list
+  kEdges,        // per boundary edge of F: u8 0 model boundary, 1 its PreF triangle's, 2 stored
+  kLinks,        // per stored link: svarint op delta, varint triangle, u8 edge
+  kRois,         // per op: 6 varint grid steps outside the op's box
+  kCones,        // per op: u8 0 full | 1, then 3 svarint axis, u16 half angle
+  kStreamCount
+};
+constexpr std::array<const char*, kStreamCount> kStreamNames = {
+    "op_heads",  "resolutions", "vertex_ids", "lists",   "corners", "children",
+    "child_res", "killers",     "voids",      "parents", "pre",     "pre_corners",
+    "edges",     "links",       "rois",       "cones"};
+
+enum EdgeCode : std::uint8_t { kModelBoundary = 0, kInside = 1, kStored = 2 };
+enum IdCode : std::uint8_t { kStoredIds = 0, kGridKeys = 1 };
+constexpr std::uint64_t kMaxKeyWidth = std::uint64_t{1} << 32;
+
+// A terrain vertex's id from its grid coordinates (smr/db/quantize.h, number_terrain_vertices).
+std::uint64_t grid_key(const std::array<std::int32_t, 3>& q, std::uint64_t width) {
+  return std::uint64_t(q[1]) * width + std::uint64_t(q[0]);
+}
+
+// The boundary edges of a fragment, in (triangle, edge) order: the directed edges (a, b) whose
+// reverse (b, a) no triangle of the fragment has. Corners are compared as given (the op's local
+// indices when writing, the page's when reading: one op's are the same vertices in both).
+template <class Tri, class Visit>
+void for_each_boundary_edge(std::span<const Tri> tris, std::vector<std::uint64_t>& scratch,
+                            Visit&& visit) {
+  const auto key = [](std::uint32_t a, std::uint32_t b) { return std::uint64_t(a) << 32 | b; };
+  scratch.clear();
+  for (const Tri& t : tris)
+    for (int k = 0; k < 3; ++k) scratch.push_back(key(t.v[k], t.v[(k + 1) % 3]));
+  std::sort(scratch.begin(), scratch.end());
+  for (std::uint32_t i = 0; i < tris.size(); ++i) {
+    for (std::uint8_t k = 0; k < 3; ++k) {
+      const Tri& t = tris[i];
+      if (!std::binary_search(scratch.begin(), scratch.end(), key(t.v[(k + 1) % 3], t.v[k])))
+        visit(i, k);
+    }
+  }
+}
+
+// The link a boundary edge (a, b) of F gets from PreF (Hypermesh, Brown 4.5.1): the first PreF
+// triangle with the same directed edge (it lies on the inside of F's boundary, which is PreF's)
+// and that edge; nullopt when none has it.
+template <class Pre>
+std::optional<EdgeRef> inside_link(std::span<const TriRef> pre, std::span<const Pre> pre_tris,
+                                   std::uint32_t a, std::uint32_t b) {
+  for (std::size_t i = 0; i < pre_tris.size(); ++i) {
+    for (std::uint8_t k = 0; k < 3; ++k) {
+      if (pre_tris[i].v[k] == a && pre_tris[i].v[(k + 1) % 3] == b) return EdgeRef{pre[i], k};
+    }
+  }
+  return std::nullopt;
+}
+
+// A resolution in [0, 1] as its 32-bit float's bits: increasing with it, so that nearby
+// resolutions differ by small numbers.
+std::int64_t res_bits(double res) {
+  return std::bit_cast<std::uint32_t>(float(res));
+}
+constexpr std::int64_t kOneBits = 0x3f800000;  // res_bits(1.0)
+
 void require_float(double v, const char* what, const Op& op) {
   if (double(float(v)) != v)
     throw_internal("page encoding: op " + std::to_string(op.id.value) + " has a " + what +
                    " that is not a 32-bit float (round_for_storage was not applied)");
 }
 
-// The record of one op (page.h's layout), given its vertices' page indices.
-void write_record(ByteWriter& w, const Op& op, std::span<const std::uint32_t> to_page,
-                  std::uint64_t prev_op, const QuantGrid& grid) {
-  const std::uint64_t id = op.id.value;
-  w.svarint(std::int64_t(id - prev_op));
-  require_float(op.birth_res, "birth resolution", op);
-  w.f32(float(op.birth_res));
-  w.varint(op.vertices.size());
-  w.varint(op.new_vertex_count);
-  std::int64_t prev_index = 0;
-  for (std::uint32_t p : to_page) {
-    w.svarint(std::int64_t(p) - prev_index);
-    prev_index = p;
+class PageEncoder {
+ public:
+  PageEncoder(std::span<const Op* const> ops, const QuantGrid& grid) : ops_(ops), grid_(grid) {
+    for (const Op* op : ops) res_of_.emplace_back(op->id.value, op->birth_res);
+    std::sort(res_of_.begin(), res_of_.end());
   }
-  // Children (increasing), with their birth_res: the death_res of the triangles they replace.
-  w.varint(op.children.size());
-  std::uint64_t prev = id;
-  for (OpId c : op.children) {
-    if (c.value <= prev) throw_internal("page encoding: children not increasing");
-    w.varint(c.value - prev);
-    prev = c.value;
-  }
-  std::vector<double> child_res(op.children.size(), -1.0);
-  Bytes killers;
-  ByteWriter kw(killers);
-  std::vector<std::uint32_t> voids;
-  for (std::uint32_t i = 0; i < op.fragment.size(); ++i) {
-    const FragmentTriangle& t = op.fragment[i];
-    if (t.flags & FragmentTriangle::kVoid) voids.push_back(i);
-    if (t.flags & ~FragmentTriangle::kVoid) throw_internal("page encoding: unknown flags");
-    if (!t.killer.valid()) {
-      if (t.death_res != 1.0) throw_internal("page encoding: unreplaced triangle below 1");
-      kw.varint(0);
-      continue;
-    }
-    auto it = std::lower_bound(op.children.begin(), op.children.end(), t.killer);
-    if (it == op.children.end() || *it != t.killer)
-      throw_internal("page encoding: a killer is not a child");
-    const std::size_t c = std::size_t(it - op.children.begin());
-    if (child_res[c] >= 0.0 && child_res[c] != t.death_res)
-      throw_internal("page encoding: one killer, two death resolutions");
-    child_res[c] = t.death_res;
-    kw.varint(c + 1);
-  }
-  for (double r : child_res) {
-    require_float(r, "death resolution", op);
-    w.f32(float(r));
-  }
-  w.varint(op.fragment.size());
-  w.bytes(killers);
-  w.varint(voids.size());
-  for (std::uint32_t v : voids) w.varint(v);
-  // Parents (decreasing from the op) and PreF.
-  w.varint(op.parents.size());
-  prev = id;
-  for (auto p = op.parents.rbegin(); p != op.parents.rend(); ++p) {
-    if (p->value >= prev) throw_internal("page encoding: parents not increasing");
-    w.varint(prev - p->value);
-    prev = p->value;
-  }
-  if (op.pre_tris.size() != op.pre.size()) throw_internal("page encoding: pre_tris missing");
-  w.varint(op.pre.size());
-  std::vector<std::uint32_t> pre_voids;
-  for (std::size_t i = 0; i < op.pre.size(); ++i) {
-    const TriRef& r = op.pre[i];
-    auto it = std::lower_bound(op.parents.begin(), op.parents.end(), r.op);
-    if (it == op.parents.end() || *it != r.op)
-      throw_internal("page encoding: a PreF triangle's op is not a parent");
-    w.varint(std::uint64_t(it - op.parents.begin()));
-    w.varint(r.index);
-    for (std::uint32_t c : op.pre_tris[i].v) w.varint(c);
-    if (op.pre_tris[i].flags & FragmentTriangle::kVoid) pre_voids.push_back(std::uint32_t(i));
-  }
-  w.varint(pre_voids.size());
-  for (std::uint32_t v : pre_voids) w.varint(v);
-  // Hypermesh links.
-  w.varint(op.coarser.size());
-  for (const CoarserLink& l : op.coarser) write_link(w, l, id);
-  // ROI, in grid steps outside the op's own box.
-  const auto blo = grid.quantize(op.box.lo), bhi = grid.quantize(op.box.hi);
-  const auto rlo = grid.quantize(op.roi.lo), rhi = grid.quantize(op.roi.hi);
-  for (int k = 0; k < 3; ++k) w.varint(std::uint64_t(std::int64_t(blo[k]) - rlo[k]));
-  for (int k = 0; k < 3; ++k) w.varint(std::uint64_t(std::int64_t(rhi[k]) - bhi[k]));
-  // Subtree normal cone (canonical: exact in its codes).
-  const ConeCode cone = cone_code(op.subtree_cone);
-  w.u8(cone.full ? 0 : 1);
-  if (!cone.full) {
-    for (std::int16_t a : cone.axis) w.svarint(a);
-    w.u16(cone.half);
-  }
-}
 
-}  // namespace
-
-Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid, storage::CodecId codec) {
-  // The page's vertices, in order of first use, and each op's local -> page index.
-  std::unordered_map<std::uint64_t, std::uint32_t> page_index;
-  std::vector<std::uint64_t> ids;
-  GeometryBlob geometry;
-  std::vector<std::vector<std::uint32_t>> to_page(ops.size());
-  Totals totals;
-  for (std::size_t o = 0; o < ops.size(); ++o) {
-    const Op& op = *ops[o];
-    for (const Vertex& v : op.vertices) {
-      auto [it, fresh] = page_index.emplace(v.id.value, std::uint32_t(ids.size()));
-      if (fresh) {
-        ids.push_back(v.id.value);
-        const auto q = grid.quantize(v.p);
-        if (grid.dequantize(q) != v.p) {
+  // The records (streams) and the geometry's positions.
+  Bytes run(GeometryBlob& geometry, Totals& totals) {
+    std::unordered_map<std::uint64_t, std::uint32_t> page_index;
+    std::uint64_t prev_op = 0;
+    std::int64_t prev_res = 0;
+    for (const Op* op : ops_) {
+      const auto id = op->id.value;
+      w(kOpHeads).svarint(std::int64_t(id - prev_op));
+      prev_op = id;
+      for (std::uint64_t n :
+           {op->vertices.size(), std::size_t(op->new_vertex_count), op->fragment.size(),
+            op->children.size(), op->parents.size(), op->pre.size()})
+        w(kOpHeads).varint(n);
+      require_float(op->birth_res, "birth resolution", *op);
+      w(kResolutions).svarint(res_bits(op->birth_res) - prev_res);
+      prev_res = res_bits(op->birth_res);
+      for (const Vertex& v : op->vertices) {
+        const auto [it, fresh] = page_index.emplace(v.id.value, std::uint32_t(page_index.size()));
+        if (!fresh) {
+          w(kLists).varint(page_index.size() - it->second);
+          continue;
+        }
+        w(kLists).varint(0);
+        fresh_ids_.push_back(v.id.value);
+        const auto q = grid_.quantize(v.p);
+        if (grid_.dequantize(q) != v.p) {
           throw_internal("page encoding: vertex " + std::to_string(v.id.value) +
                          " is not on the quantization grid");
         }
         geometry.positions.push_back(q);
       }
-      to_page[o].push_back(it->second);
+      for (const FragmentTriangle& t : op->fragment)
+        for (std::uint32_t c : t.v) w(kCorners).varint(c);
+      write_children_and_killers(*op);
+      write_parents_and_pre(*op);
+      write_links(*op);
+      write_roi_and_cone(*op);
+      totals.list += op->vertices.size();
+      totals.triangles += op->fragment.size();
+      totals.pre += op->pre.size();
+      totals.links += op->coarser.size();
+      totals.parents += op->parents.size();
+      totals.children += op->children.size();
     }
-    for (const FragmentTriangle& t : op.fragment) {
-      geometry.faces.push_back({to_page[o][t.v[0]], to_page[o][t.v[1]], to_page[o][t.v[2]]});
-    }
-    totals.list += op.vertices.size();
-    totals.pre += op.pre.size();
-    totals.links += op.coarser.size();
-    totals.parents += op.parents.size();
-    totals.children += op.children.size();
-  }
-  totals.vertices = ids.size();
-  totals.triangles = geometry.faces.size();
-
-  Bytes records;
-  ByteWriter w(records);
-  std::uint64_t prev = 0;
-  for (std::uint64_t id : ids) {
-    w.svarint(std::int64_t(id - prev));
-    prev = id;
-  }
-  std::uint64_t prev_op = 0;
-  for (std::size_t o = 0; o < ops.size(); ++o) {
-    write_record(w, *ops[o], to_page[o], prev_op, grid);
-    prev_op = ops[o]->id.value;
+    totals.vertices = geometry.positions.size();
+    write_vertex_ids(geometry);
+    Bytes records;
+    ByteWriter out(records);
+    for (const Bytes& s : streams_) out.varint(s.size());
+    for (const Bytes& s : streams_) out.bytes(s);
+    return records;
   }
 
+ private:
+  ByteWriter w(Stream s) { return ByteWriter(streams_[s]); }
+
+  // The page's vertex ids: a terrain's are its DEM sample indices, row * width + col
+  // (number_terrain_vertices), from the positions given the width; others are stored.
+  void write_vertex_ids(const GeometryBlob& geometry) {
+    const auto& q = geometry.positions;
+    std::uint64_t width = 0;  // from the first vertex off row 0
+    for (std::size_t i = 0; i < q.size() && width == 0; ++i) {
+      if (q[i][1] > 0 && q[i][0] >= 0 && fresh_ids_[i] >= std::uint64_t(q[i][0]))
+        width = (fresh_ids_[i] - std::uint64_t(q[i][0])) / std::uint64_t(q[i][1]);
+    }
+    bool keys = width <= kMaxKeyWidth;
+    for (std::size_t i = 0; i < q.size() && keys; ++i) {
+      keys = q[i][0] >= 0 && q[i][1] >= 0 &&
+             (width == 0 ? q[i][1] == 0 : std::uint64_t(q[i][0]) < width) &&
+             fresh_ids_[i] == grid_key(q[i], width);
+    }
+    if (keys) {
+      w(kVertexIds).u8(kGridKeys);
+      w(kVertexIds).varint(width);
+      return;
+    }
+    w(kVertexIds).u8(kStoredIds);
+    std::uint64_t prev = 0;
+    for (std::uint64_t id : fresh_ids_) {
+      w(kVertexIds).svarint(std::int64_t(id - prev));
+      prev = id;
+    }
+  }
+
+  void write_children_and_killers(const Op& op) {
+    const std::uint64_t id = op.id.value;
+    std::uint64_t prev = id;
+    for (OpId c : op.children) {
+      if (c.value <= prev) throw_internal("page encoding: children not increasing");
+      w(kChildren).varint(c.value - prev);
+      prev = c.value;
+    }
+    child_res_.assign(op.children.size(), -1.0);
+    std::vector<std::uint32_t> voids;
+    for (std::uint32_t i = 0; i < op.fragment.size(); ++i) {
+      const FragmentTriangle& t = op.fragment[i];
+      if (t.flags & FragmentTriangle::kVoid) voids.push_back(i);
+      if (t.flags & ~FragmentTriangle::kVoid) throw_internal("page encoding: unknown flags");
+      if (!t.killer.valid()) {
+        if (t.death_res != 1.0) throw_internal("page encoding: unreplaced triangle below 1");
+        w(kKillers).varint(0);
+        continue;
+      }
+      auto it = std::lower_bound(op.children.begin(), op.children.end(), t.killer);
+      if (it == op.children.end() || *it != t.killer)
+        throw_internal("page encoding: a killer is not a child");
+      const std::size_t c = std::size_t(it - op.children.begin());
+      if (child_res_[c] >= 0.0 && child_res_[c] != t.death_res)
+        throw_internal("page encoding: one killer, two death resolutions");
+      child_res_[c] = t.death_res;
+      w(kKillers).varint(c + 1);
+    }
+    for (std::size_t c = 0; c < op.children.size(); ++c) {
+      const auto on_page =
+          std::lower_bound(res_of_.begin(), res_of_.end(), std::pair{op.children[c].value, -1.0});
+      if (on_page != res_of_.end() && on_page->first == op.children[c].value) {
+        if (child_res_[c] >= 0.0 && child_res_[c] != on_page->second)
+          throw_internal("page encoding: a triangle's death_res is not its killer's birth_res");
+        continue;
+      }
+      if (child_res_[c] < 0.0) child_res_[c] = 1.0;  // kills nothing here: never read
+      require_float(child_res_[c], "death resolution", op);
+      w(kChildRes).svarint(res_bits(child_res_[c]) - res_bits(op.birth_res));
+    }
+    w(kVoids).varint(voids.size());
+    for (std::uint32_t v : voids) w(kVoids).varint(v);
+  }
+
+  void write_parents_and_pre(const Op& op) {
+    std::uint64_t prev = op.id.value;
+    for (auto p = op.parents.rbegin(); p != op.parents.rend(); ++p) {
+      if (p->value >= prev) throw_internal("page encoding: parents not increasing");
+      w(kParents).varint(prev - p->value);
+      prev = p->value;
+    }
+    if (op.pre_tris.size() != op.pre.size()) throw_internal("page encoding: pre_tris missing");
+    std::vector<std::uint32_t> pre_voids;
+    for (std::size_t i = 0; i < op.pre.size(); ++i) {
+      const TriRef& r = op.pre[i];
+      auto it = std::lower_bound(op.parents.begin(), op.parents.end(), r.op);
+      if (it == op.parents.end() || *it != r.op)
+        throw_internal("page encoding: a PreF triangle's op is not a parent");
+      w(kPre).varint(std::uint64_t(it - op.parents.begin()));
+      w(kPre).varint(r.index);
+      for (std::uint32_t c : op.pre_tris[i].v) w(kPreCorners).varint(c);
+      if (op.pre_tris[i].flags & FragmentTriangle::kVoid) pre_voids.push_back(std::uint32_t(i));
+    }
+    w(kVoids).varint(pre_voids.size());
+    for (std::uint32_t v : pre_voids) w(kVoids).varint(v);
+  }
+
+  // Hypermesh links: one code per boundary edge of F; a link the PreF triangle inside the edge
+  // gives is not stored.
+  void write_links(const Op& op) {
+    std::size_t next = 0;
+    for_each_boundary_edge(std::span<const FragmentTriangle>(op.fragment), scratch_,
+                           [&](std::uint32_t tri, std::uint8_t edge) {
+                             if (next == op.coarser.size() || op.coarser[next].tri != tri ||
+                                 op.coarser[next].edge != edge) {
+                               w(kEdges).u8(kModelBoundary);
+                               return;
+                             }
+                             const CoarserLink& l = op.coarser[next++];
+                             const auto& t = op.fragment[tri];
+                             const auto in = inside_link(std::span<const TriRef>(op.pre),
+                                                         std::span<const PreTriangle>(op.pre_tris),
+                                                         t.v[edge], t.v[(edge + 1) % 3]);
+                             if (in && *in == l.coarser) {
+                               w(kEdges).u8(kInside);
+                               return;
+                             }
+                             w(kEdges).u8(kStored);
+                             w(kLinks).svarint(std::int64_t(op.id.value - l.coarser.tri.op.value));
+                             w(kLinks).varint(l.coarser.tri.index);
+                             w(kLinks).u8(l.coarser.edge);
+                           });
+    if (next != op.coarser.size())
+      throw_internal("page encoding: op " + std::to_string(op.id.value) +
+                     " has a coarser link off its fragment's boundary, or links out of order");
+  }
+
+  // ROI, in grid steps outside the op's own box; subtree normal cone (canonical: exact in its
+  // codes).
+  void write_roi_and_cone(const Op& op) {
+    const auto blo = grid_.quantize(op.box.lo), bhi = grid_.quantize(op.box.hi);
+    const auto rlo = grid_.quantize(op.roi.lo), rhi = grid_.quantize(op.roi.hi);
+    for (int k = 0; k < 3; ++k) w(kRois).varint(std::uint64_t(std::int64_t(blo[k]) - rlo[k]));
+    for (int k = 0; k < 3; ++k) w(kRois).varint(std::uint64_t(std::int64_t(rhi[k]) - bhi[k]));
+    const ConeCode cone = cone_code(op.subtree_cone);
+    w(kCones).u8(cone.full ? 0 : 1);
+    if (!cone.full) {
+      for (std::int16_t a : cone.axis) w(kCones).svarint(a);
+      w(kCones).u16(cone.half);
+    }
+  }
+
+  std::span<const Op* const> ops_;
+  const QuantGrid& grid_;
+  std::array<Bytes, kStreamCount> streams_;
+  std::vector<std::pair<std::uint64_t, double>> res_of_;  // the page's ops: id, birth_res
+  std::vector<double> child_res_;
+  std::vector<std::uint64_t> scratch_;
+  std::vector<std::uint64_t> fresh_ids_;  // the page's vertex ids, in table order
+};
+
+}  // namespace
+
+Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid, storage::CodecId codec) {
+  GeometryBlob geometry;
+  Totals totals;
+  const Bytes records = PageEncoder(ops, grid).run(geometry, totals);
   Bytes out;
   ByteWriter pw(out);
   pw.u8(kPageFormat);
   pw.u8(static_cast<std::uint8_t>(codec));
   pw.varint(ops.size());
   for (std::uint64_t* n : totals.fields()) pw.varint(*n);
-  pw.blob(storage::zstd_compress(records));
+  pw.blob(storage::zstd_compress(records, kRecordLevel));
   Bytes geo;
   storage::encode_geometry(codec, geometry, geo);
   pw.blob(geo);
@@ -257,45 +415,72 @@ class PageDecoder {
   std::shared_ptr<const DecodedPage> run() {
     records_ = storage::zstd_decompress(packed_, kMaxRecordBytes, context_);
     geometry_ = storage::decode_geometry(codec_, geo_bytes_, context_);
-    ByteReader r(records_, context_ + " records");
-    check_totals(r);
+    open_streams();
+    check_totals();
     auto page = std::shared_ptr<DecodedPage>(new DecodedPage());
     allocate(*page);
-    read_vertices(r);
-    std::uint64_t prev_op = 0;
-    for (std::size_t o = 0; o < op_count_; ++o) {
-      OpView& op = ops_[o];
-      read_op(r, op, prev_op);
-      prev_op = op.id.value;
+    read_vertices();
+    read_heads();
+    for (std::size_t o = 0; o < op_count_; ++o) read_op(ops_[o], heads_[o]);
+    for (std::size_t i = 0; i < kStreamCount; ++i) {
+      if (!in_[i].at_end()) in_[i].fail("bytes no op reads");
     }
-    r.expect_end();
-    if (face_ != geometry_.faces.size()) r.fail("geometry has triangles no op claims");
+    if (fresh_ != totals_.vertices) fail("vertices no op lists");
     for (const auto& [n, used] : {std::pair{totals_.list, list_used_},
+                                  {totals_.triangles, face_},
                                   {totals_.pre, pre_used_},
                                   {totals_.links, links_used_},
                                   {totals_.parents + totals_.children, ids_used_}}) {
-      if (n != used) r.fail("the page's totals disagree with its records");
+      if (n != used) fail("the page's totals disagree with its records");
     }
     return page;
   }
 
- private:
-  void check_totals(const ByteReader& r) {
-    // Every op and every list entry, PreF triangle, link, parent and child takes a byte of the
-    // records at least; vertices and triangles are the geometry's.
-    const std::uint64_t bytes = records_.size();
-    if (op_count_ == 0) r.fail("a page without ops");
-    if (op_count_ > bytes) r.fail("implausible op count");
-    if (totals_.vertices != geometry_.positions.size())
-      r.fail("vertex count disagrees with the geometry");
-    if (totals_.triangles != geometry_.faces.size())
-      r.fail("triangle count disagrees with the geometry");
-    for (std::uint64_t n :
-         {totals_.list, totals_.pre, totals_.links, totals_.parents, totals_.children}) {
-      if (n > bytes) r.fail("implausible count in the page header");
+  std::vector<std::pair<std::string, Bytes>> streams() {
+    records_ = storage::zstd_decompress(packed_, kMaxRecordBytes, context_);
+    open_streams();
+    std::vector<std::pair<std::string, Bytes>> out;
+    for (std::size_t i = 0; i < kStreamCount; ++i) {
+      const ByteView b = in_[i].bytes(in_[i].remaining());
+      out.emplace_back(kStreamNames[i], Bytes(b.begin(), b.end()));
     }
+    return out;
   }
 
+ private:
+  [[noreturn]] void fail(const std::string& what) const {
+    ByteReader(ByteView{}, context_).fail(what);
+  }
+
+  void open_streams() {
+    ByteReader r(records_, context_ + " records");
+    std::array<std::uint64_t, kStreamCount> sizes{};
+    for (std::uint64_t& n : sizes) n = r.varint();
+    for (std::size_t i = 0; i < kStreamCount; ++i) {
+      if (sizes[i] > r.remaining()) r.fail(std::string("stream ") + kStreamNames[i] + " cut short");
+      in_.emplace_back(r.bytes(std::size_t(sizes[i])),
+                       context_ + " records (" + kStreamNames[i] + ")");
+    }
+    r.expect_end();
+  }
+
+  void check_totals() const {
+    // Every op, list entry, triangle, PreF triangle, parent and child takes a byte of its stream
+    // at least, every link a byte of the edges'; vertices are the geometry's.
+    if (op_count_ == 0) fail("a page without ops");
+    if (op_count_ > in_[kOpHeads].remaining()) fail("implausible op count");
+    if (totals_.vertices != geometry_.positions.size())
+      fail("vertex count disagrees with the geometry");
+    if (!geometry_.faces.empty()) fail("geometry with faces (pages keep them in the records)");
+    for (const auto& [n, s] : {std::pair{totals_.list, kLists},
+                               {totals_.triangles, kKillers},
+                               {totals_.pre, kPre},
+                               {totals_.links, kEdges},
+                               {totals_.parents, kParents},
+                               {totals_.children, kChildren}}) {
+      if (n > in_[s].remaining()) fail("implausible count in the page header");
+    }
+  }
   template <class T>
   T* carve(std::size_t& at, std::uint64_t n) {
     static_assert(std::is_trivially_destructible_v<T> && alignof(T) <= 16);
@@ -337,63 +522,211 @@ class PageDecoder {
     stamp_.assign(totals_.vertices, 0);
   }
 
-  void read_vertices(ByteReader& r) {
+  // The counts of one op, read before any op so that a child on the page gives its birth_res.
+  struct Head {
+    std::uint64_t id = 0, vertices = 0, fresh = 0, triangles = 0, children = 0, parents = 0,
+                  pre = 0;
+    double res = 0.0;
+  };
+
+  void read_heads() {
+    heads_.resize(op_count_);  // op_count_ <= the heads' bytes (check_totals)
+    ByteReader& r = in_[kOpHeads];
+    std::uint64_t prev = 0;
+    std::int64_t prev_res = 0;
+    for (Head& h : heads_) {
+      h.id = prev + std::uint64_t(r.svarint());
+      if (h.id == OpId::kInvalidValue) r.fail("op id out of range");
+      prev = h.id;
+      for (std::uint64_t* n :
+           {&h.vertices, &h.fresh, &h.triangles, &h.children, &h.parents, &h.pre})
+        *n = r.varint();
+      if (h.fresh > h.vertices) r.fail("implausible new vertex count");
+      h.res = read_res(in_[kResolutions], prev_res);
+      prev_res = res_bits(h.res);
+      res_of_.emplace_back(h.id, h.res);
+    }
+    std::sort(res_of_.begin(), res_of_.end());
+  }
+
+  // A resolution stored as the difference of its bits from `base`'s (res_bits).
+  static double read_res(ByteReader& r, std::int64_t base) {
+    const std::int64_t d = r.svarint();
+    if (d < -kOneBits || d > kOneBits || base + d < 0 || base + d > kOneBits)
+      r.fail("resolution out of range");
+    return double(std::bit_cast<float>(std::uint32_t(base + d)));
+  }
+
+  void read_vertices() {
+    ByteReader& r = in_[kVertexIds];
+    const std::uint8_t mode = r.u8();
+    if (mode > kGridKeys) r.fail("unknown vertex id code");
+    const std::uint64_t width = mode == kGridKeys ? r.varint() : 0;
+    if (width > kMaxKeyWidth) r.fail("implausible grid width");
     std::uint64_t prev = 0;
     for (std::size_t i = 0; i < totals_.vertices; ++i) {
-      prev += std::uint64_t(r.svarint());
-      for (std::int32_t c : geometry_.positions[i])  // the writer's grid is +-INT32_MAX
+      const auto& q = geometry_.positions[i];
+      for (std::int32_t c : q)  // the writer's grid is +-INT32_MAX
         if (c == std::numeric_limits<std::int32_t>::min()) r.fail("vertex outside the grid");
-      vertices_[i] = {VertexId(prev), grid_.dequantize(geometry_.positions[i])};
+      if (mode == kGridKeys) {
+        if (q[0] < 0 || q[1] < 0 || (width != 0 && std::uint64_t(q[0]) >= width) ||
+            (width == 0 && q[1] != 0))
+          r.fail("a terrain vertex off its grid");
+        prev = grid_key(q, width);
+      } else {
+        prev += std::uint64_t(r.svarint());
+      }
+      vertices_[i] = {VertexId(prev), grid_.dequantize(q)};
     }
   }
 
   // n more entries of an array holding `total`, `used` so far.
-  static std::size_t take(ByteReader& r, std::uint64_t n, std::size_t& used, std::uint64_t total,
-                          const char* what) {
-    if (n > total - used) r.fail(std::string("more ") + what + " than the page's total");
+  std::size_t take(std::uint64_t n, std::size_t& used, std::uint64_t total,
+                   const char* what) const {
+    if (n > total - used) fail(std::string("more ") + what + " than the page's total");
     const std::size_t at = used;
     used += std::size_t(n);
     return at;
   }
 
-  void read_op(ByteReader& r, OpView& op, std::uint64_t prev_op) {
-    const std::uint64_t id = prev_op + std::uint64_t(r.svarint());
-    if (id == OpId::kInvalidValue) r.fail("op id out of range");
-    op.id = OpId(id);
-    op.birth_res = r.f32();
-    if (!(op.birth_res >= 0.0 && op.birth_res <= 1.0)) r.fail("resolution out of range");
+  void read_op(OpView& op, const Head& h) {
+    op.id = OpId(h.id);
+    op.birth_res = h.res;
     op.error = stored_op_error(info_, op.birth_res);
     const std::uint32_t stamp = ++op_stamp_;
-    const std::uint64_t nv = r.varint();
-    const std::uint64_t nnew = r.varint();
-    if (nnew > nv) r.fail("implausible new vertex count");
-    const std::size_t list_at = take(r, nv, list_used_, totals_.list, "vertex-list entries");
-    std::int64_t prev_index = 0;
-    for (std::size_t i = 0; i < nv; ++i) {
-      prev_index += r.svarint();
-      if (prev_index < 0 || std::uint64_t(prev_index) >= totals_.vertices)
-        r.fail("vertex index out of range");
-      const auto p = std::uint32_t(prev_index);
+    const std::size_t list_at = take(h.vertices, list_used_, totals_.list, "vertex-list entries");
+    ByteReader& r = in_[kLists];
+    for (std::size_t i = 0; i < h.vertices; ++i) {
+      const std::uint64_t code = r.varint();
+      if (code == 0 && fresh_ == totals_.vertices) r.fail("more vertices than the page's total");
+      if (code > fresh_) r.fail("vertex index out of range");
+      const auto p = std::uint32_t(code == 0 ? fresh_++ : fresh_ - code);
       if (stamp_[p] == stamp) r.fail("an op lists a vertex twice");
       stamp_[p] = stamp;
       list_[list_at + i] = p;
     }
     op.vertices = {vertices_, std::size_t(totals_.vertices)};
-    op.vertex_list = {list_ + list_at, std::size_t(nv)};
-    op.new_vertex_count = std::uint32_t(nnew);
-    read_children_and_fragment(r, op, stamp);
-    read_parents_and_pre(r, op);
-    const std::uint64_t nl = r.varint();
-    CoarserLink* links = links_ + take(r, nl, links_used_, totals_.links, "coarser links");
-    for (std::size_t i = 0; i < nl; ++i) {
-      links[i] = read_link(r, id);
-      if (links[i].tri >= op.fragment.size() || links[i].edge > 2 || links[i].coarser.edge > 2)
-        r.fail("coarser link out of range");
+    op.vertex_list = {list_ + list_at, std::size_t(h.vertices)};
+    op.new_vertex_count = std::uint32_t(h.fresh);
+    read_children_and_fragment(op, h);
+    read_parents_and_pre(op, h);
+    read_links(op);
+    if (op.fragment.empty() && op.pre.empty()) fail("an op without triangles");
+    if (op.vertex_list.empty()) fail("an op without vertices");
+    read_roi_and_cone(op, set_box_and_sphere(op));
+  }
+
+  // A corner: an index into the op's list, as a page index.
+  static std::uint32_t corner(ByteReader& r, const OpView& op) {
+    const std::uint64_t c = r.varint();
+    if (c >= op.vertex_list.size()) r.fail("a corner out of its op's vertex list");
+    return op.vertex_list[c];
+  }
+
+  // The birth_res of child `id` of an op of resolution `res`: the page's op's, or the next
+  // stored one.
+  double child_res(std::uint64_t id, double res) {
+    const auto on_page = std::lower_bound(res_of_.begin(), res_of_.end(), std::pair{id, -1.0});
+    if (on_page != res_of_.end() && on_page->first == id) return on_page->second;
+    return read_res(in_[kChildRes], res_bits(res));
+  }
+
+  void read_children_and_fragment(OpView& op, const Head& h) {
+    OpId* children =
+        ids_ + take(h.children, ids_used_, totals_.parents + totals_.children, "DAG links");
+    ByteReader& cr = in_[kChildren];
+    std::uint64_t prev = h.id;
+    for (std::size_t i = 0; i < h.children; ++i) {
+      const std::uint64_t d = cr.varint();
+      if (d == 0 || d >= ~prev) cr.fail("child id out of range");  // the sum stays below ~0
+      prev += d;
+      children[i] = OpId(prev);
     }
-    op.coarser = {links, std::size_t(nl)};
-    if (op.fragment.empty() && op.pre.empty()) r.fail("an op without triangles");
-    if (op.vertex_list.empty()) r.fail("an op without vertices");
-    read_roi_and_cone(r, op, set_box_and_sphere(op));
+    op.children = {children, std::size_t(h.children)};
+    child_res_.resize(h.children);
+    for (std::size_t i = 0; i < h.children; ++i)
+      child_res_[i] = child_res(children[i].value, h.res);
+    FragmentTriangle* tris = triangles_ + take(h.triangles, face_, totals_.triangles, "triangles");
+    ByteReader& kr = in_[kKillers];
+    for (std::size_t i = 0; i < h.triangles; ++i) {
+      FragmentTriangle& t = tris[i];
+      for (auto& c : t.v) c = corner(in_[kCorners], op);
+      const std::uint64_t killer = kr.varint();
+      if (killer > h.children) kr.fail("killer out of range");
+      if (killer != 0) {
+        t.killer = children[killer - 1];
+        t.death_res = child_res_[killer - 1];
+      }
+    }
+    op.fragment = {tris, std::size_t(h.triangles)};  // neighbours are derived on demand
+    read_voids(std::span<FragmentTriangle>(tris, std::size_t(h.triangles)));
+  }
+
+  template <class Tri>
+  void read_voids(std::span<Tri> tris) {
+    ByteReader& r = in_[kVoids];
+    const std::uint64_t n = r.varint();
+    if (n > tris.size()) r.fail("implausible void triangle count");
+    for (std::uint64_t i = 0; i < n; ++i) {
+      const std::uint64_t v = r.varint();
+      if (v >= tris.size()) r.fail("void triangle out of range");
+      tris[v].flags |= FragmentTriangle::kVoid;
+    }
+  }
+
+  void read_parents_and_pre(OpView& op, const Head& h) {
+    OpId* parents =
+        ids_ + take(h.parents, ids_used_, totals_.parents + totals_.children, "DAG links");
+    ByteReader& r = in_[kParents];
+    std::uint64_t prev = h.id;
+    for (std::size_t i = h.parents; i-- > 0;) {  // stored decreasing
+      const std::uint64_t d = r.varint();
+      if (d == 0 || d > prev) r.fail("parent id out of range");
+      prev -= d;
+      parents[i] = OpId(prev);
+    }
+    op.parents = {parents, std::size_t(h.parents)};
+    const std::size_t at = take(h.pre, pre_used_, totals_.pre, "PreF triangles");
+    TriRef* pre = pre_ + at;
+    PreTriangle* pre_tris = pre_tris_ + at;
+    ByteReader& pr = in_[kPre];
+    for (std::size_t i = 0; i < h.pre; ++i) {
+      const std::uint64_t pi = pr.varint();
+      if (pi >= h.parents) pr.fail("PreF parent out of range");
+      pre[i] = {parents[pi], std::uint32_t(pr.varint())};
+      for (auto& c : pre_tris[i].v) c = corner(in_[kPreCorners], op);
+    }
+    op.pre = {pre, std::size_t(h.pre)};
+    op.pre_tris = {pre_tris, std::size_t(h.pre)};
+    read_voids(std::span<PreTriangle>(pre_tris, std::size_t(h.pre)));
+  }
+
+  // Hypermesh links, one code per boundary edge of F (page.h).
+  void read_links(OpView& op) {
+    CoarserLink* links = links_ + links_used_;
+    ByteReader& er = in_[kEdges];
+    ByteReader& lr = in_[kLinks];
+    for_each_boundary_edge(op.fragment, scratch_, [&](std::uint32_t tri, std::uint8_t edge) {
+      const std::uint8_t code = er.u8();
+      if (code == kModelBoundary) return;
+      if (links_used_ == totals_.links) er.fail("more coarser links than the page's total");
+      CoarserLink& l = links_[links_used_++];
+      l.tri = tri;
+      l.edge = edge;
+      if (code == kInside) {
+        const auto& t = op.fragment[tri];
+        const auto in = inside_link(op.pre, op.pre_tris, t.v[edge], t.v[(edge + 1) % 3]);
+        if (!in) er.fail("a boundary edge without a PreF triangle inside it");
+        l.coarser = *in;
+        return;
+      }
+      if (code != kStored) er.fail("unknown boundary edge code");
+      l.coarser.tri.op = OpId(op.id.value - std::uint64_t(lr.svarint()));
+      l.coarser.tri.index = std::uint32_t(lr.varint());
+      l.coarser.edge = lr.u8();
+      if (l.coarser.edge > 2) lr.fail("coarser link out of range");
+    });
+    op.coarser = {links, std::size_t(links_ + links_used_ - links)};
   }
 
   // op_bounds' box and sphere, from the op's own vertices: they are exactly the corners of F
@@ -417,92 +750,9 @@ class PageDecoder {
     return {lo, hi};
   }
 
-  void read_children_and_fragment(ByteReader& r, OpView& op, std::uint32_t stamp) {
-    const std::uint64_t id = op.id.value;
-    const std::uint64_t nc = r.varint();
-    OpId* children = ids_ + take(r, nc, ids_used_, totals_.parents + totals_.children, "DAG links");
-    std::uint64_t prev = id;
-    for (std::size_t i = 0; i < nc; ++i) {
-      const std::uint64_t d = r.varint();
-      if (d == 0 || d >= ~prev) r.fail("child id out of range");  // the sum stays below ~0
-      prev += d;
-      children[i] = OpId(prev);
-    }
-    op.children = {children, std::size_t(nc)};
-    child_res_.resize(nc);
-    for (double& c : child_res_) {
-      c = r.f32();
-      if (!(c >= 0.0 && c <= 1.0)) r.fail("resolution out of range");
-    }
-    const std::uint64_t nf = r.varint();
-    if (nf > geometry_.faces.size() - face_) r.fail("more triangles than the geometry holds");
-    FragmentTriangle* tris = triangles_ + face_;
-    for (std::size_t i = 0; i < nf; ++i) {
-      FragmentTriangle& t = tris[i];
-      const auto& f = geometry_.faces[face_ + i];
-      for (int k = 0; k < 3; ++k) {
-        if (f[k] >= totals_.vertices || stamp_[f[k]] != stamp)
-          r.fail("a triangle uses a vertex its op does not list");
-        t.v[k] = f[k];
-      }
-      const std::uint64_t killer = r.varint();
-      if (killer > nc) r.fail("killer out of range");
-      if (killer != 0) {
-        t.killer = children[killer - 1];
-        t.death_res = child_res_[killer - 1];
-      }
-    }
-    face_ += std::size_t(nf);
-    const std::uint64_t nvoid = r.varint();
-    if (nvoid > nf) r.fail("implausible void triangle count");
-    for (std::uint64_t i = 0; i < nvoid; ++i) {
-      const std::uint64_t v = r.varint();
-      if (v >= nf) r.fail("void triangle out of range");
-      tris[v].flags |= FragmentTriangle::kVoid;
-    }
-    op.fragment = {tris, std::size_t(nf)};  // neighbours are derived on demand
-  }
-
-  void read_parents_and_pre(ByteReader& r, OpView& op) {
-    const std::uint64_t id = op.id.value;
-    const std::uint64_t np = r.varint();
-    OpId* parents = ids_ + take(r, np, ids_used_, totals_.parents + totals_.children, "DAG links");
-    std::uint64_t prev = id;
-    for (std::size_t i = np; i-- > 0;) {  // stored decreasing
-      const std::uint64_t d = r.varint();
-      if (d == 0 || d > prev) r.fail("parent id out of range");
-      prev -= d;
-      parents[i] = OpId(prev);
-    }
-    op.parents = {parents, std::size_t(np)};
-    const std::uint64_t npre = r.varint();
-    const std::size_t at = take(r, npre, pre_used_, totals_.pre, "PreF triangles");
-    TriRef* pre = pre_ + at;
-    PreTriangle* pre_tris = pre_tris_ + at;
-    for (std::size_t i = 0; i < npre; ++i) {
-      const std::uint64_t pi = r.varint();
-      if (pi >= np) r.fail("PreF parent out of range");
-      pre[i] = {parents[pi], std::uint32_t(r.varint())};
-      for (auto& c : pre_tris[i].v) {
-        const std::uint64_t v = r.varint();
-        if (v >= op.vertex_list.size()) r.fail("PreF corner out of range");
-        c = op.vertex_list[v];
-      }
-    }
-    const std::uint64_t npv = r.varint();
-    if (npv > npre) r.fail("implausible void PreF count");
-    for (std::uint64_t i = 0; i < npv; ++i) {
-      const std::uint64_t v = r.varint();
-      if (v >= npre) r.fail("void PreF triangle out of range");
-      pre_tris[v].flags |= FragmentTriangle::kVoid;
-    }
-    op.pre = {pre, std::size_t(npre)};
-    op.pre_tris = {pre_tris, std::size_t(npre)};
-  }
-
-  void read_roi_and_cone(ByteReader& r, OpView& op,
-                         std::array<std::array<std::int32_t, 3>, 2> box) {
+  void read_roi_and_cone(OpView& op, std::array<std::array<std::int32_t, 3>, 2> box) {
     auto [lo, hi] = box;
+    ByteReader& r = in_[kRois];
     constexpr std::int64_t kMax = std::numeric_limits<std::int32_t>::max();
     for (int k = 0; k < 3; ++k) {
       const std::uint64_t d = r.varint();
@@ -518,18 +768,19 @@ class PageDecoder {
     }
     op.roi = Box3{grid_.dequantize(lo), grid_.dequantize(hi)};
     ConeCode cone;
-    const std::uint8_t cone_flag = r.u8();
-    if (cone_flag > 1) r.fail("bad subtree cone flag");
+    ByteReader& c = in_[kCones];
+    const std::uint8_t cone_flag = c.u8();
+    if (cone_flag > 1) c.fail("bad subtree cone flag");
     cone.full = cone_flag == 0;
     if (!cone.full) {
       for (std::int16_t& a : cone.axis) {
-        const std::int64_t v = r.svarint();
-        if (v < -32767 || v > 32767) r.fail("subtree cone axis out of range");
+        const std::int64_t v = c.svarint();
+        if (v < -32767 || v > 32767) c.fail("subtree cone axis out of range");
         a = static_cast<std::int16_t>(v);
       }
-      if (cone.axis == std::array<std::int16_t, 3>{}) r.fail("subtree cone without an axis");
-      cone.half = r.u16();
-      if (cone.half == 0xffff) r.fail("subtree cone angle out of range");
+      if (cone.axis == std::array<std::int16_t, 3>{}) c.fail("subtree cone without an axis");
+      cone.half = c.u16();
+      if (cone.half == 0xffff) c.fail("subtree cone angle out of range");
     }
     op.subtree_cone = decode_cone(cone);
   }
@@ -553,14 +804,26 @@ class PageDecoder {
   PreTriangle* pre_tris_ = nullptr;
   std::uint32_t* list_ = nullptr;
   std::size_t face_ = 0, list_used_ = 0, pre_used_ = 0, links_used_ = 0, ids_used_ = 0;
+  std::size_t fresh_ = 0;             // page vertices listed so far
   std::vector<std::uint32_t> stamp_;  // per page vertex: the last op (its stamp) listing it
   std::uint32_t op_stamp_ = 0;
+  std::vector<ByteReader> in_;  // the streams, by Stream
+  std::vector<Head> heads_;
+  std::vector<std::pair<std::uint64_t, double>> res_of_;  // the page's ops: id, birth_res
   std::vector<double> child_res_;
+  std::vector<std::uint64_t> scratch_;
 };
 
 std::shared_ptr<const DecodedPage> decode_page(ByteView page, const QuantGrid& grid,
                                                const CrmrInfo& info, const std::string& context) {
   return PageDecoder(page, grid, info, context).run();
+}
+
+std::vector<std::pair<std::string, Bytes>> page_record_streams(ByteView page,
+                                                               const std::string& context) {
+  const QuantGrid grid;
+  const CrmrInfo info;
+  return PageDecoder(page, grid, info, context).streams();
 }
 
 DecodedPage::~DecodedPage() = default;

@@ -10,11 +10,17 @@
 // op's error is the one its resolution stands for (smr/db/quantize.h: round_for_storage,
 // stored_op_error).
 //
-// Layout of the (unsealed) value, format 3: u8 format, u8 codec, varint op count, seven varint
+// Layout of the (unsealed) value, format 4: u8 format, u8 codec, varint op count, seven varint
 // totals (page vertices, op vertex-list entries, fragment triangles, PreF triangles, links,
 // parents, children: the decoder sizes its one block from them), blob records (zstd), blob
-// geometry (codec).
-//
+// geometry (codec: the page's vertex positions, in the order ops first list them; no faces).
+// The records are streams, one per field of every op (page.cpp, Stream), each preceded in a table
+// by its length, so that zstd sees like next to like. What format 4 no longer stores:
+// - a fragment triangle's corners index its op's vertex list (a few values, not page indices);
+// - a vertex-list entry is "the next new page vertex" or how far back in the page's table;
+// - a Hypermesh link is one code per boundary edge of F (model boundary, or the link the PreF
+//   triangle inside the edge gives: 77 % of terrain links), the rest stored;
+// - a child on the same page gives its birth_res (the death_res of what it kills).
 // A decoded page (DecodedPage) is one allocation: every op's arrays lie in it, each op is an
 // OpView over them, and fragment and PreF corners index the page's vertex table directly.
 #pragma once
@@ -24,6 +30,8 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "smr/core/op.h"
 #include "smr/db/quantize.h"
@@ -32,7 +40,7 @@
 
 namespace smr {
 
-inline constexpr std::uint8_t kPageFormat = 3;  // 3: float resolutions, one-block decoding
+inline constexpr std::uint8_t kPageFormat = 4;  // 4: streams, derived links (3: one-block decoding)
 
 /// The ops of one data page, decoded into one block. Immutable once made.
 class DecodedPage {
@@ -77,6 +85,11 @@ struct PageSections {
   storage::ByteView records, geometry;    // zstd records, codec geometry
 };
 PageSections page_sections(storage::ByteView page, const std::string& context);
+
+/// The streams of a page's records (page.cpp, Stream), decompressed, by name: for tools that
+/// measure what each field costs. Throws kCorrupt naming `context`.
+std::vector<std::pair<std::string, storage::Bytes>> page_record_streams(storage::ByteView page,
+                                                                        const std::string& context);
 
 /// One Hypermesh link of op `id` as pages store it (the stream writer's spool too): its triangle
 /// and edge, the coarser triangle's op as a difference from `id`, its index and edge.

@@ -84,6 +84,15 @@ double snap_vertices(Op& op, const QuantGrid& grid) {
   return shift;
 }
 
+void number_terrain_vertices(Op& op, const QuantGrid& grid, int grid_width) {
+  for (Vertex& v : op.vertices) {
+    const auto q = grid.quantize(v.p);
+    if (q[0] < 0 || q[0] >= grid_width || q[1] < 0)
+      throw_internal("terrain vertex " + std::to_string(v.id.value) + " is off the DEM's grid");
+    v.id = VertexId(std::uint64_t(q[1]) * std::uint64_t(grid_width) + std::uint64_t(q[0]));
+  }
+}
+
 double stored_resolution(double res) {
   float f = static_cast<float>(res);
   if (double(f) > res) f = std::nextafter(f, -std::numeric_limits<float>::infinity());
@@ -102,6 +111,9 @@ void round_for_storage(Op& op) {
 double quantize(Crmr& crmr, const QuantGrid& grid) {
   double shift = 0.0;
   for (Op& op : crmr.ops) shift = std::max(shift, snap_vertices(op, grid));
+  if (crmr.header.kind == ModelKind::kTerrain) {
+    for (Op& op : crmr.ops) number_terrain_vertices(op, grid, crmr.header.grid_width);
+  }
   crmr.header.bounds = Box3{};
   for (Op& op : crmr.ops) {
     for (const Vertex& v : op.vertices) crmr.header.bounds.add(v.p);

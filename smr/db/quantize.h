@@ -39,7 +39,14 @@ QuantGrid choose_grid(const CrmrInfo& info, double z_quantum);
 /// caller.
 double snap_vertices(Op& op, const QuantGrid& grid);
 
-/// Snaps every vertex of `crmr` to `grid`, recomputes bounds and ROIs, raises err0 and err_final
+/// Terrain vertices are named by their DEM sample: id = row * grid_width + col, the vertex's grid
+/// coordinates on a terrain grid (choose_grid). The ids are then the same whichever builder made
+/// the model, and pages derive them instead of storing them (page.h). `op` must be snapped; a
+/// vertex off the DEM's columns and rows throws kInternal.
+void number_terrain_vertices(Op& op, const QuantGrid& grid, int grid_width);
+
+/// Snaps every vertex of `crmr` to `grid` (and numbers a terrain's: number_terrain_vertices),
+/// recomputes bounds and ROIs, raises err0 and err_final
 /// by the largest vertex shift, which it returns, rounds the ops' resolutions for storage
 /// (round_for_storage) and sets their errors to stored_op_error.
 double quantize(Crmr& crmr, const QuantGrid& grid);

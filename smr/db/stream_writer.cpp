@@ -169,9 +169,11 @@ struct EncodedHead {
 
 // Snaps the op and encodes it (quantize()'s snap and bounds). The bounds are recomputed unless
 // `bounds_set` says the builder computed them and nothing moved.
-void encode_op(Op& op, ModelKind kind, const QuantGrid& grid, bool bounds_set, Bytes& out) {
+void encode_op(Op& op, const CrmrInfo& header, const QuantGrid& grid, bool bounds_set, Bytes& out) {
+  const ModelKind kind = header.kind;
   EncodedHead h;
   h.moved = snap_vertices(op, grid);
+  if (kind == ModelKind::kTerrain) number_terrain_vertices(op, grid, header.grid_width);
   round_for_storage(op);  // before the index entry: its resolutions are the stored ones
   for (const Vertex& v : op.vertices) h.vertices.add(v.p);
   if (h.moved != 0.0 || !bounds_set) compute_op_bounds(op);
@@ -240,7 +242,7 @@ struct DatabaseStreamWriter::State {
 
   void spool_one(Op& op) {
     spooled.clear();
-    encode_op(op, header.kind, grid, true, spooled);
+    encode_op(op, header, grid, true, spooled);
     append(spooled);
   }
   // The ordered half: an encoded op (encode_op) into the spool, its record and its parents.
@@ -411,7 +413,7 @@ void DatabaseStreamWriter::begin(const CrmrInfo& header, std::uint64_t /*op_coun
 void DatabaseStreamWriter::encode(Op& op, std::vector<std::uint8_t>& out) const {
   const State& s = *s_;
   if (!s.begun || s.finished) throw_internal("database writer: encode() outside begin/finish");
-  encode_op(op, s.header.kind, s.grid, false, out);
+  encode_op(op, s.header, s.grid, false, out);
 }
 
 void DatabaseStreamWriter::add_encoded(std::span<const std::uint8_t> op) {

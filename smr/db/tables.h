@@ -16,7 +16,7 @@
 
 namespace smr {
 
-inline constexpr int kDatabaseFormat = 3;  // 3: page format 3 (page.h), table "locators"
+inline constexpr int kDatabaseFormat = 4;  // 4: page format 4 (page.h); 3: table "locators"
 inline constexpr std::uint64_t kOpsPerLocatorBlock = 256;
 inline constexpr std::uint64_t kRtreeHeaderKey = std::numeric_limits<std::uint64_t>::max();
 

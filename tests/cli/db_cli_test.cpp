@@ -531,7 +531,7 @@ TEST_F(DbCli, ExtractionStaysWithinCacheMb) {
                     "page_cache_test";
   }
   const std::string dem = path("big.npy");
-  ASSERT_EQ(smrdb("synth --size 681 -q -o " + dem).code, 0);  // 641 until pages were cut full
+  ASSERT_EQ(smrdb("synth --size 897 -q -o " + dem).code, 0);
   const std::string big = path("big.smrdb");
   ASSERT_EQ(smrdb("ingest " + dem + " --max-error 0 --codec raw -q -o " + big).code, 0);
   ASSERT_GE(fs::file_size(big), 20u * (4u << 20)) << "the database must be at least 20x the budget";
@@ -592,9 +592,10 @@ TEST_F(DbCli, SameInputAndParametersGiveByteIdenticalFilesWhateverTheCommandLine
 
   const CliRun info = smrdb("info " + path("a.db"));
   ASSERT_EQ(info.code, 0) << info.out;
-  for (const char* want :
-       {"format 3", "zstd pages", "source          dem.npy (65x65 samples)", "DAG depth",
-        "bytes/vertex", "quantization", "max-error=0.05 ", "page-kb=2"}) {
+  for (const std::string& want :
+       std::vector<std::string>{"format " + std::to_string(smr::kDatabaseFormat), "zstd pages",
+                                "source          dem.npy (65x65 samples)", "DAG depth",
+                                "bytes/vertex", "quantization", "max-error=0.05 ", "page-kb=2"}) {
     EXPECT_NE(info.out.find(want), std::string::npos) << want << "\n" << info.out;
   }
   const CliRun js = smrdb("info --json " + path("a.db"));

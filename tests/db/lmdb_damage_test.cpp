@@ -85,7 +85,7 @@ using test::extract_all;
 using test::Result;
 using test::same;
 
-// A 57 x 57 fBm terrain (2179 ops) in data pages of about 2.5 KiB: 600 KB, 147 LMDB pages. The
+// A 65 x 65 fBm terrain in data pages of about 3 KB: 500 KB, 122 LMDB pages (page format 4). The
 // data pages are overflow values; the locators, R-tree nodes and meta are values inside leaf
 // pages; the locators, pages and rtree tables each have a branch page over two or more leaves.
 struct SmallDb {
@@ -97,9 +97,9 @@ struct SmallDb {
   SmallDb() {
     GreedyTinOptions build;
     build.max_error = 1.6;
-    Crmr crmr = build_greedy_tin(make_fbm(57, 57, 7, 1600.0, 0, 0.5, 10.0), build);
+    Crmr crmr = build_greedy_tin(make_fbm(65, 65, 7, 1600.0, 0, 0.5, 10.0), build);
     WriteOptions o;
-    o.page_bytes = 2500;
+    o.page_bytes = 3000;
     write_database(crmr, path, o);
     bytes = read_file(path);
     verified = verify_database(path, nullptr);

@@ -8,9 +8,14 @@
 #include <random>
 #include <vector>
 
+#include "smr/builders/terrain/block_tin.h"
 #include "smr/db/database.h"
+#include "smr/db/page.h"
 #include "smr/db/quantize.h"
+#include "smr/db/tables.h"
 #include "smr/db/writer.h"
+#include "storage/checksum.h"
+#include "storage/lmdb_env.h"
 #include "tests/support/datasets.h"
 #include "tests/support/files.h"
 
@@ -72,6 +77,57 @@ TEST(StoredResolution, DatabasesOnlyGrowErrors) {
       }
     }
     EXPECT_GT(rounded, exact.ops.size() / 2) << name << ": the rounding is exercised";
+  }
+}
+
+// Terrain vertices are named by their DEM sample (number_terrain_vertices): whichever builder
+// made the model (the greedy TIN, the block builder), every vertex of every stored op of a real
+// DEM's database is row * width + col of its grid position and lies at that sample's height, and
+// the pages derive the ids instead of storing them (each page's vertex id stream is the code and
+// the width: a couple of bytes).
+TEST(TerrainVertexIds, AreTheDemSampleIndices) {
+  for (const char* name : {"jacksboro", "elev"}) {
+    const test::Dataset& d = test::dataset(name);
+    BlockTinOptions bo;
+    bo.block_cells = 32;
+    bo.max_error = d.max_error;
+    const HeightfieldWindows windows(d.dem);
+    for (const auto& [builder, model] :
+         {std::pair{"greedy", d.crmr}, {"blocks", build_block_tin(windows, bo)}}) {
+      test::TempDir dir("smrdb-quantize-test");
+      const std::string path = dir.file("x.smrdb");
+      Crmr m = model;
+      write_database(m, path, {});
+      const auto db = Database::open(path, {});
+      const QuantGrid& grid = db->grid();
+      const auto width = std::uint64_t(d.dem.width);
+      std::size_t checked = 0;
+      for (std::uint64_t p = 0; p < db->page_count(); ++p) {
+        for (const OpView& op : db->page(p)->ops()) {
+          for (std::size_t i = 0; i < op.own_vertex_count(); ++i) {
+            const Vertex& v = op.own_vertex(i);
+            const auto q = grid.quantize(v.p);
+            ASSERT_EQ(v.id.value, std::uint64_t(q[1]) * width + std::uint64_t(q[0]))
+                << name << " " << builder << " op " << op.id.value;
+            if (!d.dem.has_data(q[0], q[1])) continue;
+            const Vec3 sample = d.dem.world(q[0], q[1]);
+            ASSERT_EQ(v.p.z, grid.dequantize(grid.quantize(sample))[2]) << name << " " << builder;
+            ++checked;
+          }
+        }
+      }
+      EXPECT_GT(checked, db->op_count()) << name << " " << builder;
+      const storage::Env env = storage::Env::open_read_only(path, kTableNames);
+      const storage::ReadTxn txn = env.read();
+      txn.for_each(Table::kPages, [&](storage::ByteView, storage::ByteView value) {
+        for (const auto& [stream, bytes] :
+             page_record_streams(storage::unseal(value, "pages", "page"), "page")) {
+          if (stream == "vertex_ids") {
+            EXPECT_LE(bytes.size(), 6u) << name;
+          }
+        }
+      });
+    }
   }
 }
 

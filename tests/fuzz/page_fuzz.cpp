@@ -742,15 +742,20 @@ void regressions(const Seed& seed, Tallies& t) {
     for (const Op& o : ops) page.push_back(&o);
     return encode_page(page, model.grid, codec);
   };
-  // 1. A death_res of 2: the records' child resolutions were read without a range check.
-  const auto killed = std::find_if(ops.begin(), ops.end(), [](const Op& o) {
+  // 1. A death_res of 2: the records' child resolutions were read without a range check. (Only
+  // a killer on another page has its birth_res stored with the triangle's op.)
+  const auto off_page = [&](OpId killer) {
+    return killer.valid() &&
+           std::none_of(ops.begin(), ops.end(), [&](const Op& o) { return o.id == killer; });
+  };
+  const auto killed = std::find_if(ops.begin(), ops.end(), [&](const Op& o) {
     return std::any_of(o.fragment.begin(), o.fragment.end(),
-                       [](const FragmentTriangle& f) { return f.killer.valid(); });
+                       [&](const FragmentTriangle& f) { return off_page(f.killer); });
   });
-  if (killed == ops.end()) fail("R^0's page has no replaced triangle");
+  if (killed == ops.end()) fail("R^0's page has no triangle replaced by another page's op");
   const Op saved = *killed;
   for (FragmentTriangle& f : killed->fragment) {
-    if (f.killer.valid()) f.death_res = 2.0;
+    if (off_page(f.killer)) f.death_res = 2.0;
   }
   run_case(encoded(), model, "regression", 1, 0, t);
   *killed = saved;
