@@ -81,10 +81,11 @@ void expect_tight(const Crmr& built, const std::string& name, std::uint32_t page
   const Fill f = check_fill(m, dir.file("one.smrdb"), w, o);
   std::printf(
       "%s: %llu pages in %llu runs, %llu loose, mean value %.0f bytes (cap %u), %.3f LMDB "
-      "pages each\n",
+      "pages each, %.2f encodes a page\n",
       name.c_str(), static_cast<unsigned long long>(f.pages),
       static_cast<unsigned long long>(w.page_runs), static_cast<unsigned long long>(f.loose),
-      f.mean_value, page_bytes, double(f.lmdb_pages) / double(f.pages));
+      f.mean_value, page_bytes, double(f.lmdb_pages) / double(f.pages),
+      double(w.page_encodes) / double(f.pages));
   EXPECT_EQ(f.pages, w.pages);
   EXPECT_EQ(f.over, 0u);
   // Only each run's last page may be loose, and runs are long (64 estimated pages).
