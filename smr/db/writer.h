@@ -51,7 +51,7 @@ struct WriteReport {
   // Runs of entries packed into pages on their own (only each run's last page may have room for
   // the next op), cut where the estimated bytes reach 64 pages.
   std::uint64_t page_runs = 0;
-  std::uint64_t page_encodes = 0;  // encode_page calls that cut the pages (~2.6 a page)
+  std::uint64_t page_encodes = 0;  // encode_page calls that cut the pages (2.5-3.1 a page)
   // Value bytes per table (tables.h).
   std::uint64_t page_bytes = 0, locator_bytes = 0, rtree_bytes = 0;
   std::uint64_t file_bytes = 0;
