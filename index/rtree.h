@@ -29,10 +29,12 @@
 //      classes and backward in odd ones (serpentine), so a leaf that straddles two classes
 //      holds the end of one and the start of the next at the same place;
 //   3. ties broken by id, so the plan is a function of the set of entries.
-// Leaves are then filled greedily in that order up to `leaf_weight` bytes (the page payload)
-// and `max_leaf_entries`; a small class shares a leaf with the next one (the whole coarse top
-// of the hierarchy lands in the first few leaves). Internal levels group `fanout` consecutive
-// nodes of the level below, so a subtree is a run of consecutive leaves.
+// Leaves are then filled greedily in that order up to `leaf_weight` bytes (the page payload) and
+// `max_leaf_entries`; a small class shares a leaf with the next one (the whole coarse top of the
+// hierarchy lands in the first few leaves). plan() and LeafPacker weigh entries by their `weight`;
+// the database writer cuts the same order by each page's encoded size (smr/db/writer.cpp,
+// PagePacker) and hands its leaves to TreeWriter. Internal levels group `fanout` consecutive nodes
+// of the level below, so a subtree is a run of consecutive leaves.
 //
 // Node format (all nodes sealed with storage::seal; errors name "<table>/<node id>", the table
 // the caller gives RTree):

@@ -64,11 +64,11 @@ OpEntry entry_of(const Op& op, ModelKind kind, const Box3& roi, const NormalCone
 storage::DatabaseWriter open_writer(const std::string& path, const WriteOptions& options);
 
 // Writes pages (in R-tree leaf order, with the R-tree's leaves), locators, the R-tree's upper
-// levels and the meta record (last), then commits. `sorted` holds every op's entry; `ops_of(page,
-// held)` returns a page's ops, in the order of its entries, as the page must hold them (snapped,
-// ROI, subtree cone, error shifted): ops that outlive the call or ones it appends to `held` (one
-// per page, with room reserved for the page's ops, so earlier pointers stay valid). It is called
-// from several threads at once.
+// levels and the meta record (last), then commits. `sorted` holds every op's entry; `ops_of(run,
+// held)` returns the ops of consecutive entries (about a page's worth, in leaf order), in their
+// order, as a page must hold them (snapped, ROI, subtree cone, error shifted): ops that outlive
+// the call or ones it appends to `held` (a fresh vector a call, with room reserved for the ops, so
+// earlier pointers stay valid). It is called from several threads at once.
 struct TableCounts {
   std::uint64_t ops = 0, triangles = 0, dag_depth = 0;
 };

@@ -3,6 +3,7 @@
 // the R-tree's upper levels and the meta record, last.
 #include <algorithm>
 #include <chrono>
+#include <deque>
 #include <span>
 
 #include <nlohmann/json.hpp>
@@ -27,7 +28,8 @@ using storage::ByteWriter;
 
 namespace {
 
-// Rough encoded size of an op, for packing leaves into pages of about WriteOptions::page_bytes.
+// Rough encoded size of an op: it cuts the sorted entries into runs (write_pages) and proposes
+// each page's first cut, which real encodes then correct (PagePacker).
 // A vertex costs most in 3-D: three coordinates on a grid of 2^-28 of the extent, which differ
 // in their low bits from one vertex to the next, where a terrain vertex has two on the DEM's
 // lattice. Measured on 16 KiB pages: 2 bytes a vertex fill terrain pages to 0.87 of the target
@@ -67,65 +69,192 @@ void progress_to(const WriteOptions& options, double f) {
   if (options.progress) options.progress(f);
 }
 
-// The data pages, leaves cut from the sorted entries a window at a time: their pages are encoded
-// on every core, and while the helpers start on a window the calling thread appends the previous
-// one's pages, in order, with their locators (to `locators`) and R-tree leaves (to `tree`).
-// Returns the number of ops placed.
+// Runs of sorted entries packed on their own (see write_pages): a run ends before the entry that
+// would take its estimated bytes past this many pages' worth. Each run's last page may be partly
+// filled (half a page in 60 on average); longer runs waste less but leave fewer to share out
+// among the threads.
+constexpr std::uint64_t kRunPages = 64;
+
+// A run of entries in leaf order, cut into leaves (= data pages) by real encodes.
+struct PackedRun {
+  std::vector<OpEntry> entries;
+  std::vector<std::size_t> ends;  // leaf j holds entries [ends[j - 1], ends[j])
+  std::vector<Bytes> pages;       // leaf j's page, sealed
+  std::uint64_t encodes = 0;      // encode_page calls it took
+};
+
+// Cuts a run into pages greedily in leaf order: each page takes as many entries as fit in
+// `cap` bytes sealed (WriteOptions::page_bytes) and max_leaf_entries, measured by encoding them.
+// The estimate proposes the first cut (scaled by the real-to-estimated ratio of the run's
+// previous pages), then encodes bracket the cut: [lo fits, hi does not] narrowed by interpolating
+// on the sizes (bisecting after a few tries) until hi = lo + 1, so adding the next entry would
+// have passed the cap. An entry that alone passes it gets a page of its own.
+class PagePacker {
+ public:
+  PagePacker(const QuantGrid& grid, const WriteOptions& options, std::uint32_t max_entries)
+      : grid_(grid),
+        codec_(options.codec),
+        cap_(options.page_bytes),
+        max_entries_(max_entries),
+        seal_bytes_(storage::seal({}).size()) {}
+
+  // Packs `run`, reading its ops a page's worth at a time (those of the pages cut are let go).
+  void pack(PackedRun& run, const OpsOf& ops_of) const {
+    const std::span<const OpEntry> entries = run.entries;
+    std::deque<std::vector<Op>> batches;  // held by ops_of, for the entries not yet placed
+    std::vector<std::size_t> batch_ends;
+    std::vector<const Op*> ops;  // of entries [0, ops.size())
+    auto fetch_to = [&](std::size_t end) {
+      while (ops.size() < end) {
+        std::size_t stop = ops.size();
+        for (std::uint64_t w = 0; stop < entries.size() && w < cap_; ++stop) {
+          w += entries[stop].weight;
+        }
+        stop = std::max(stop, end);
+        std::vector<Op>& held = batches.emplace_back();
+        held.reserve(stop - ops.size());
+        const std::vector<const Op*> got =
+            ops_of(entries.subspan(ops.size(), stop - ops.size()), held);
+        ops.insert(ops.end(), got.begin(), got.end());
+        batch_ends.push_back(stop);
+      }
+    };
+    // Sealed bytes per estimated byte, averaged over the run's previous pages (1/4 the last page's,
+    // 3/4 those before: it took the fewest encodes on the fBm and the bunny).
+    double ratio = 1.0;
+    for (std::size_t at = 0, batch = 0; at < entries.size();) {
+      Bytes page;
+      const std::size_t taken = cut(
+          entries.subspan(at),
+          [&](std::size_t n) {
+            fetch_to(at + n);
+            return std::span<const Op* const>(ops).subspan(at, n);
+          },
+          ratio, page, run.encodes);
+      std::uint64_t estimated = 0;
+      for (std::size_t i = at; i < at + taken; ++i) estimated += entries[i].weight;
+      const double r =
+          double(page.size() + seal_bytes_) / double(std::max<std::uint64_t>(1, estimated));
+      ratio = at == 0 ? r : 0.25 * r + 0.75 * ratio;
+      run.pages.push_back(storage::seal(page));
+      at += taken;
+      run.ends.push_back(at);
+      for (; batch < batch_ends.size() && batch_ends[batch] <= at; ++batch) batches.pop_front();
+    }
+  }
+
+ private:
+  // The entries of the next page (a prefix of `entries`, whose first n ops ops_for(n) returns);
+  // their encoding to `page`, unsealed.
+  template <class OpsFor>
+  std::size_t cut(std::span<const OpEntry> entries, const OpsFor& ops_for, double ratio,
+                  Bytes& page, std::uint64_t& encodes) const {
+    const std::size_t limit = std::min<std::size_t>(entries.size(), max_entries_);
+    const double cap = cap_;
+    // Estimated bytes of each prefix; sizes are predicted as a line in them, which follows an
+    // op's size better than a line in the count of ops.
+    std::vector<double> weight(limit + 1, 0.0);
+    for (std::size_t i = 0; i < limit; ++i) weight[i + 1] = weight[i] + entries[i].weight;
+    auto prefix_within = [&](double w) {  // the longest prefix estimated at most w
+      return std::size_t(std::upper_bound(weight.begin(), weight.end(), w) - weight.begin()) - 1;
+    };
+    std::size_t guess = prefix_within(cap / ratio);
+    std::size_t lo = 0, hi = limit + 1;  // prefix lo fits (0 trivially); hi does not (or is past)
+    double lo_bytes = 0, hi_bytes = 0;
+    Bytes probe;
+    for (int probes = 1;; ++probes) {
+      guess = std::clamp<std::size_t>(guess, lo + 1, std::min(hi - 1, limit));
+      probe = encode_page(ops_for(guess), grid_, codec_);
+      ++encodes;
+      const double bytes = double(probe.size() + seal_bytes_);
+      if (bytes <= cap) {
+        lo = guess;
+        lo_bytes = bytes;
+        std::swap(page, probe);
+      } else {
+        hi = guess;
+        hi_bytes = bytes;
+      }
+      if (lo == limit || hi == lo + 1) break;
+      if (probes >= 4) {
+        guess = lo + (hi - lo) / 2;
+      } else if (hi > limit) {  // a line through 0 and lo
+        guess = prefix_within(cap * weight[lo] / lo_bytes);
+      } else {  // a line through lo (0 takes 0 bytes) and hi
+        guess = prefix_within(weight[lo] +
+                              (cap - lo_bytes) / (hi_bytes - lo_bytes) * (weight[hi] - weight[lo]));
+      }
+    }
+    if (lo == 0) {  // one entry past the cap: a page of its own
+      std::swap(page, probe);
+      return 1;
+    }
+    return lo;
+  }
+
+  const QuantGrid& grid_;
+  storage::CodecId codec_;
+  std::uint32_t cap_, max_entries_;
+  std::size_t seal_bytes_;
+};
+
+// The data pages. The sorted entries are cut into runs whose bounds depend on the entries alone
+// (estimated bytes, kRunPages), and each run is packed into pages by PagePacker, so the pages do
+// not depend on the thread count. Runs are packed on every core a window (a run per thread) at a
+// time, and while the helpers start on a window the calling thread appends the previous one's
+// pages, in order, with their locators (to `locators`) and R-tree leaves (to `tree`). Memory holds
+// two windows of runs (entries and pages: ~2 MiB a run on the 4097^2 fBm) and the ops of the
+// pages being cut. Returns the number of ops placed.
 std::uint64_t write_pages(storage::DatabaseWriter& writer, EntrySorter& sorted, const OpsOf& ops_of,
                           const QuantGrid& grid, const index::BuildOptions& bo,
                           const WriteOptions& options, std::uint64_t op_count,
                           index::TreeWriter& tree, LocatorSorter& locators, WriteReport& report) {
   const unsigned threads = thread_count(options.threads);
-  const std::size_t window = 8 * std::size_t(threads);
-  struct Window {
-    std::vector<std::vector<OpEntry>> leaves;
-    std::vector<Bytes> pages;
-  };
-  Window filling, encoded;
+  const std::size_t window = std::size_t(threads);
+  const PagePacker packer(grid, options, bo.max_leaf_entries);
+  std::vector<PackedRun> filling, packed;
   std::vector<index::Entry> leaf_entries;
   std::uint64_t placed = 0;
   WorkerPool pool(threads);  // its threads keep their codec contexts from window to window
-  auto append_encoded = [&] {
-    for (std::size_t j = 0; j < encoded.leaves.size(); ++j) {
-      const std::vector<OpEntry>& leaf = encoded.leaves[j];
-      const std::uint64_t page = report.pages++;
-      report.page_bytes += encoded.pages[j].size();
-      writer.append(Table::kPages, page, encoded.pages[j]);
-      leaf_entries.clear();
-      for (std::uint32_t slot = 0; slot < leaf.size(); ++slot) {
-        locators.add({leaf[slot].id, page, slot});
-        leaf_entries.push_back(leaf[slot].index_entry());
+  auto append_packed = [&] {
+    for (const PackedRun& run : packed) {
+      for (std::size_t j = 0, begin = 0; j < run.pages.size(); begin = run.ends[j++]) {
+        const std::uint64_t page = report.pages++;
+        report.page_bytes += run.pages[j].size();
+        writer.append(Table::kPages, page, run.pages[j]);
+        leaf_entries.clear();
+        for (std::size_t i = begin; i < run.ends[j]; ++i) {
+          locators.add({run.entries[i].id, page, std::uint32_t(i - begin)});
+          leaf_entries.push_back(run.entries[i].index_entry());
+        }
+        tree.add_leaf(leaf_entries);
       }
-      tree.add_leaf(leaf_entries);
-      placed += leaf.size();
+      placed += run.entries.size();
+      ++report.page_runs;
+      report.page_encodes += run.encodes;
     }
-    encoded.leaves.clear();
+    packed.clear();
     progress_to(options, 0.9 * double(placed) / double(std::max<std::uint64_t>(1, op_count)));
   };
   auto write_window = [&] {
-    filling.pages.resize(filling.leaves.size());
     pool.for_each(
-        filling.leaves.size(),
-        [&](std::size_t j) {
-          std::vector<Op> held;
-          held.reserve(filling.leaves[j].size());
-          filling.pages[j] =
-              storage::seal(encode_page(ops_of(filling.leaves[j], held), grid, options.codec));
-        },
-        append_encoded);
-    std::swap(filling, encoded);
+        filling.size(), [&](std::size_t j) { packer.pack(filling[j], ops_of); }, append_packed);
+    std::swap(filling, packed);
   };
-  index::LeafPacker packer(bo);
+  const std::uint64_t run_weight = kRunPages * options.page_bytes;
+  std::uint64_t weight = 0;
   SortedEntry s;
   while (sorted.next(s)) {
-    if (packer.starts_leaf(s.entry.weight)) {
-      if (filling.leaves.size() == window) write_window();
-      filling.leaves.emplace_back();
+    if (filling.empty() || weight + s.entry.weight > run_weight) {
+      if (filling.size() == window) write_window();
+      filling.emplace_back();
+      weight = 0;
     }
-    filling.leaves.back().push_back(s.entry);
+    weight += s.entry.weight;
+    filling.back().entries.push_back(s.entry);
   }
   write_window();
-  append_encoded();
+  append_packed();
   return placed;
 }
 

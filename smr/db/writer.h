@@ -24,7 +24,10 @@ struct WriteOptions {
   storage::CodecId codec = storage::CodecId::kZstd;
   bool force = false;      // replace an existing database at the path
   double z_quantum = 0.0;  // quantization step of heights (grid.step.z); 0 = automatic (quantize.h)
-  std::uint32_t page_bytes = 16 * 1024 - 16;  // target payload of a data page
+  // Most bytes of a data page's value, sealed (a page of one op may pass it). LMDB keeps a value
+  // of S bytes in ceil((S + 16) / 4096) 4-KiB overflow pages, so k * 4096 - 16 fills k of them:
+  // pages are filled to it by encoding their ops, not by an estimate (write_pages in writer.cpp).
+  std::uint32_t page_bytes = 16 * 1024 - 16;
   // Children per internal R-tree node. A view enters internal nodes that each contribute one or
   // two leaves, so small nodes read fewer unused bytes: 16 read 8 % fewer index bytes than 64 on
   // a 4097^2 fBm view (benchmarks/README.md), with little more than 8 gives.
@@ -45,6 +48,10 @@ struct WriteReport {
   QuantGrid grid;
   double z_shift = 0.0;  // largest vertex move made by the quantization (added to every error)
   std::uint64_t ops = 0, pages = 0, rtree_nodes = 0;
+  // Runs of entries packed into pages on their own (only each run's last page may have room for
+  // the next op), cut where the estimated bytes reach 64 pages.
+  std::uint64_t page_runs = 0;
+  std::uint64_t page_encodes = 0;  // encode_page calls that cut the pages (~2.6 a page)
   // Value bytes per table (tables.h).
   std::uint64_t page_bytes = 0, locator_bytes = 0, rtree_bytes = 0;
   std::uint64_t file_bytes = 0;

@@ -33,8 +33,8 @@ TEST_P(MeshDb, ExtractionFromDiskEqualsExtractionInMemory) {
   EXPECT_GT(w.pages, 1u);
   EXPECT_LE(w.z_shift, 0.87 * w.grid.step.x);  // at most half a step on each axis
   // Pages are filled greedily in leaf order up to their target payload (WriteOptions::
-  // page_bytes, on an estimate of the encoded size): on average at least half of it, though the
-  // last page of each resolution band is partial.
+  // page_bytes, by their encoded size): on average at least half of it, though the last page of
+  // each packing run is partial (tests/db/page_fill_test.cpp asks much more).
   const double mean_page = double(w.page_bytes) / double(w.pages);
   std::printf("%s: %llu pages, mean payload %.0f bytes (target %u)\n", GetParam().c_str(),
               static_cast<unsigned long long>(w.pages), mean_page, WriteOptions{}.page_bytes);
