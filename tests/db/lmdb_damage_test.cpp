@@ -85,7 +85,7 @@ using test::extract_all;
 using test::Result;
 using test::same;
 
-// A 65 x 65 fBm terrain in data pages of about 3 KB: 500 KB, 122 LMDB pages (page format 4). The
+// A 65 x 65 fBm terrain in data pages of about 3 KB: 460 KB, 113 LMDB pages (page format 4). The
 // data pages are overflow values; the locators, R-tree nodes and meta are values inside leaf
 // pages; the locators, pages and rtree tables each have a branch page over two or more leaves.
 struct SmallDb {
