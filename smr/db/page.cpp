@@ -98,11 +98,24 @@ std::uint64_t grid_key(const std::array<std::int32_t, 3>& q, std::uint64_t width
 }
 
 // The boundary edges of a fragment, in (triangle, edge) order: the directed edges (a, b) whose
-// reverse (b, a) no triangle of the fragment has. Corners are compared as given (the op's local
-// indices when writing, the page's when reading: one op's are the same vertices in both).
+// reverse (b, a) no triangle of the fragment has. Corners are the op's local indices (below
+// `vertex_count`); with at most 64 of them the directed edges are bits of one word per vertex
+// (a few nanoseconds an edge), else they are sorted and searched.
 template <class Tri, class Visit>
-void for_each_boundary_edge(std::span<const Tri> tris, std::vector<std::uint64_t>& scratch,
-                            Visit&& visit) {
+void for_each_boundary_edge(std::span<const Tri> tris, std::size_t vertex_count,
+                            std::vector<std::uint64_t>& scratch, Visit&& visit) {
+  if (vertex_count <= 64) {
+    std::array<std::uint64_t, 64> out{};  // out[a] bit b: the directed edge (a, b)
+    for (const Tri& t : tris)
+      for (int k = 0; k < 3; ++k) out[t.v[k]] |= std::uint64_t{1} << t.v[(k + 1) % 3];
+    for (std::uint32_t i = 0; i < tris.size(); ++i) {
+      for (std::uint8_t k = 0; k < 3; ++k) {
+        const Tri& t = tris[i];
+        if (((out[t.v[(k + 1) % 3]] >> t.v[k]) & 1) == 0) visit(i, k);
+      }
+    }
+    return;
+  }
   const auto key = [](std::uint32_t a, std::uint32_t b) { return std::uint64_t(a) << 32 | b; };
   scratch.clear();
   for (const Tri& t : tris)
@@ -116,6 +129,11 @@ void for_each_boundary_edge(std::span<const Tri> tris, std::vector<std::uint64_t
     }
   }
 }
+
+// A fragment triangle's corners as indices into its op's vertex list.
+struct LocalTri {
+  std::array<std::uint32_t, 3> v;
+};
 
 // The link a boundary edge (a, b) of F gets from PreF (Hypermesh, Brown 4.5.1): the first PreF
 // triangle with the same directed edge (it lies on the inside of F's boundary, which is PreF's)
@@ -306,8 +324,8 @@ class PageEncoder {
   // gives is not stored.
   void write_links(const Op& op) {
     std::size_t next = 0;
-    for_each_boundary_edge(std::span<const FragmentTriangle>(op.fragment), scratch_,
-                           [&](std::uint32_t tri, std::uint8_t edge) {
+    for_each_boundary_edge(std::span<const FragmentTriangle>(op.fragment), op.vertices.size(),
+                           scratch_, [&](std::uint32_t tri, std::uint8_t edge) {
                              if (next == op.coarser.size() || op.coarser[next].tri != tri ||
                                  op.coarser[next].edge != edge) {
                                w(kEdges).u8(kModelBoundary);
@@ -648,9 +666,16 @@ class PageDecoder {
       child_res_[i] = child_res(children[i].value, h.res);
     FragmentTriangle* tris = triangles_ + take(h.triangles, face_, totals_.triangles, "triangles");
     ByteReader& kr = in_[kKillers];
+    local_tris_.resize(h.triangles);
+    ByteReader& vr = in_[kCorners];
     for (std::size_t i = 0; i < h.triangles; ++i) {
       FragmentTriangle& t = tris[i];
-      for (auto& c : t.v) c = corner(in_[kCorners], op);
+      for (int k = 0; k < 3; ++k) {
+        const std::uint64_t c = vr.varint();
+        if (c >= op.vertex_list.size()) vr.fail("a corner out of its op's vertex list");
+        local_tris_[i].v[k] = std::uint32_t(c);
+        t.v[k] = op.vertex_list[c];
+      }
       const std::uint64_t killer = kr.varint();
       if (killer > h.children) kr.fail("killer out of range");
       if (killer != 0) {
@@ -706,26 +731,30 @@ class PageDecoder {
     CoarserLink* links = links_ + links_used_;
     ByteReader& er = in_[kEdges];
     ByteReader& lr = in_[kLinks];
-    for_each_boundary_edge(op.fragment, scratch_, [&](std::uint32_t tri, std::uint8_t edge) {
-      const std::uint8_t code = er.u8();
-      if (code == kModelBoundary) return;
-      if (links_used_ == totals_.links) er.fail("more coarser links than the page's total");
-      CoarserLink& l = links_[links_used_++];
-      l.tri = tri;
-      l.edge = edge;
-      if (code == kInside) {
-        const auto& t = op.fragment[tri];
-        const auto in = inside_link(op.pre, op.pre_tris, t.v[edge], t.v[(edge + 1) % 3]);
-        if (!in) er.fail("a boundary edge without a PreF triangle inside it");
-        l.coarser = *in;
-        return;
-      }
-      if (code != kStored) er.fail("unknown boundary edge code");
-      l.coarser.tri.op = OpId(op.id.value - std::uint64_t(lr.svarint()));
-      l.coarser.tri.index = std::uint32_t(lr.varint());
-      l.coarser.edge = lr.u8();
-      if (l.coarser.edge > 2) lr.fail("coarser link out of range");
-    });
+    for_each_boundary_edge(std::span<const LocalTri>(local_tris_), op.vertex_list.size(), scratch_,
+                           [&](std::uint32_t tri, std::uint8_t edge) {
+                             const std::uint8_t code = er.u8();
+                             if (code == kModelBoundary) return;
+                             if (links_used_ == totals_.links)
+                               er.fail("more coarser links than the page's total");
+                             CoarserLink& l = links_[links_used_++];
+                             l.tri = tri;
+                             l.edge = edge;
+                             if (code == kInside) {
+                               const auto& t = op.fragment[tri];
+                               const auto in =
+                                   inside_link(op.pre, op.pre_tris, t.v[edge], t.v[(edge + 1) % 3]);
+                               if (!in)
+                                 er.fail("a boundary edge without a PreF triangle inside it");
+                               l.coarser = *in;
+                               return;
+                             }
+                             if (code != kStored) er.fail("unknown boundary edge code");
+                             l.coarser.tri.op = OpId(op.id.value - std::uint64_t(lr.svarint()));
+                             l.coarser.tri.index = std::uint32_t(lr.varint());
+                             l.coarser.edge = lr.u8();
+                             if (l.coarser.edge > 2) lr.fail("coarser link out of range");
+                           });
     op.coarser = {links, std::size_t(links_ + links_used_ - links)};
   }
 
@@ -809,6 +838,7 @@ class PageDecoder {
   std::uint32_t op_stamp_ = 0;
   std::vector<ByteReader> in_;  // the streams, by Stream
   std::vector<Head> heads_;
+  std::vector<LocalTri> local_tris_;  // the current op's fragment, in its list's indices
   std::vector<std::pair<std::uint64_t, double>> res_of_;  // the page's ops: id, birth_res
   std::vector<double> child_res_;
   std::vector<std::uint64_t> scratch_;
