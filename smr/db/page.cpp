@@ -105,7 +105,8 @@ template <class Tri, class Visit>
 void for_each_boundary_edge(std::span<const Tri> tris, std::size_t vertex_count,
                             std::vector<std::uint64_t>& scratch, Visit&& visit) {
   if (vertex_count <= 64) {
-    std::array<std::uint64_t, 64> out{};  // out[a] bit b: the directed edge (a, b)
+    std::array<std::uint64_t, 64> out;  // out[a] bit b: the directed edge (a, b)
+    std::fill_n(out.begin(), vertex_count, 0);
     for (const Tri& t : tris)
       for (int k = 0; k < 3; ++k) out[t.v[k]] |= std::uint64_t{1} << t.v[(k + 1) % 3];
     for (std::uint32_t i = 0; i < tris.size(); ++i) {
