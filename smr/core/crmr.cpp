@@ -6,6 +6,7 @@
 #include <unordered_map>
 
 #include "base/error.h"
+#include "smr/core/fragment_edges.h"
 
 namespace smr {
 
@@ -122,51 +123,9 @@ void derive_fragment_neighbours(Op& op) {
   derive_fragment_neighbours(std::span<FragmentTriangle>(op.fragment));
 }
 
-namespace {
-
-// set(i, k, j): across edge k of triangle i lies triangle j (kNoNeighbour if none).
-template <class Set>
-void for_each_neighbour(std::span<const FragmentTriangle> fragment, Set&& set) {
-  const std::size_t n = fragment.size();
-  if (n > 64) {
-    std::unordered_map<std::uint64_t, std::int32_t> by_edge;
-    by_edge.reserve(n * 3);
-    for (std::size_t i = 0; i < n; ++i) {
-      const auto& v = fragment[i].v;
-      for (int k = 0; k < 3; ++k)
-        by_edge[(std::uint64_t(v[k]) << 32) | v[(k + 1) % 3]] = std::int32_t(i);
-    }
-    for (std::size_t i = 0; i < n; ++i) {
-      const auto& v = fragment[i].v;
-      for (int k = 0; k < 3; ++k) {
-        auto it = by_edge.find((std::uint64_t(v[(k + 1) % 3]) << 32) | v[k]);
-        set(i, k, it == by_edge.end() ? FragmentTriangle::kNoNeighbour : it->second);
-      }
-    }
-    return;
-  }
-  for (std::size_t i = 0; i < n; ++i) {
-    const auto& v = fragment[i].v;
-    for (int k = 0; k < 3; ++k) {
-      const std::uint32_t a = v[(k + 1) % 3], b = v[k];  // the reversed edge a -> b
-      std::int32_t found = FragmentTriangle::kNoNeighbour;
-      for (std::size_t j = 0; j < n; ++j) {
-        const auto& u = fragment[j].v;
-        if ((u[0] == a && u[1] == b) || (u[1] == a && u[2] == b) || (u[2] == a && u[0] == b)) {
-          found = std::int32_t(j);
-          break;
-        }
-      }
-      set(i, k, found);
-    }
-  }
-}
-
-}  // namespace
-
 void derive_fragment_neighbours(std::span<FragmentTriangle> fragment) {
   // Only corners are read and only nbr written: filling in place is safe.
-  for_each_neighbour(fragment,
+  for_each_neighbour(std::span<const FragmentTriangle>(fragment),
                      [&](std::size_t i, int k, std::int32_t j) { fragment[i].nbr[k] = j; });
 }
 

@@ -15,6 +15,7 @@
 
 #include "base/error.h"
 #include "smr/core/crmr.h"
+#include "smr/core/fragment_edges.h"
 
 namespace smr {
 
@@ -92,43 +93,9 @@ enum EdgeCode : std::uint8_t { kModelBoundary = 0, kInside = 1, kStored = 2 };
 enum IdCode : std::uint8_t { kStoredIds = 0, kGridKeys = 1 };
 constexpr std::uint64_t kMaxKeyWidth = std::uint64_t{1} << 32;
 
-// A terrain vertex's id from its grid coordinates (smr/db/quantize.h, number_terrain_vertices).
+// A terrain vertex's id from its grid coordinates (smr/db/quantize.h, snap_vertices).
 std::uint64_t grid_key(const std::array<std::int32_t, 3>& q, std::uint64_t width) {
   return std::uint64_t(q[1]) * width + std::uint64_t(q[0]);
-}
-
-// The boundary edges of a fragment, in (triangle, edge) order: the directed edges (a, b) whose
-// reverse (b, a) no triangle of the fragment has. Corners are the op's local indices (below
-// `vertex_count`); with at most 64 of them the directed edges are bits of one word per vertex
-// (a few nanoseconds an edge), else they are sorted and searched.
-template <class Tri, class Visit>
-void for_each_boundary_edge(std::span<const Tri> tris, std::size_t vertex_count,
-                            std::vector<std::uint64_t>& scratch, Visit&& visit) {
-  if (vertex_count <= 64) {
-    std::array<std::uint64_t, 64> out;  // out[a] bit b: the directed edge (a, b)
-    std::fill_n(out.begin(), vertex_count, 0);
-    for (const Tri& t : tris)
-      for (int k = 0; k < 3; ++k) out[t.v[k]] |= std::uint64_t{1} << t.v[(k + 1) % 3];
-    for (std::uint32_t i = 0; i < tris.size(); ++i) {
-      for (std::uint8_t k = 0; k < 3; ++k) {
-        const Tri& t = tris[i];
-        if (((out[t.v[(k + 1) % 3]] >> t.v[k]) & 1) == 0) visit(i, k);
-      }
-    }
-    return;
-  }
-  const auto key = [](std::uint32_t a, std::uint32_t b) { return std::uint64_t(a) << 32 | b; };
-  scratch.clear();
-  for (const Tri& t : tris)
-    for (int k = 0; k < 3; ++k) scratch.push_back(key(t.v[k], t.v[(k + 1) % 3]));
-  std::sort(scratch.begin(), scratch.end());
-  for (std::uint32_t i = 0; i < tris.size(); ++i) {
-    for (std::uint8_t k = 0; k < 3; ++k) {
-      const Tri& t = tris[i];
-      if (!std::binary_search(scratch.begin(), scratch.end(), key(t.v[(k + 1) % 3], t.v[k])))
-        visit(i, k);
-    }
-  }
 }
 
 // A fragment triangle's corners as indices into its op's vertex list.
@@ -227,7 +194,7 @@ class PageEncoder {
   ByteWriter w(Stream s) { return ByteWriter(streams_[s]); }
 
   // The page's vertex ids: a terrain's are its DEM sample indices, row * width + col
-  // (number_terrain_vertices), from the positions given the width; others are stored.
+  // (snap_vertices), from the positions given the width; others are stored.
   void write_vertex_ids(const GeometryBlob& geometry) {
     const auto& q = geometry.positions;
     std::uint64_t width = 0;  // from the first vertex off row 0
@@ -326,7 +293,7 @@ class PageEncoder {
   void write_links(const Op& op) {
     std::size_t next = 0;
     for_each_boundary_edge(std::span<const FragmentTriangle>(op.fragment), op.vertices.size(),
-                           scratch_, [&](std::uint32_t tri, std::uint8_t edge) {
+                           [&](std::uint32_t tri, std::uint8_t edge) {
                              if (next == op.coarser.size() || op.coarser[next].tri != tri ||
                                  op.coarser[next].edge != edge) {
                                w(kEdges).u8(kModelBoundary);
@@ -371,7 +338,6 @@ class PageEncoder {
   std::array<Bytes, kStreamCount> streams_;
   std::vector<std::pair<std::uint64_t, double>> res_of_;  // the page's ops: id, birth_res
   std::vector<double> child_res_;
-  std::vector<std::uint64_t> scratch_;
   std::vector<std::uint64_t> fresh_ids_;  // the page's vertex ids, in table order
 };
 
@@ -635,11 +601,11 @@ class PageDecoder {
     read_roi_and_cone(op, set_box_and_sphere(op));
   }
 
-  // A corner: an index into the op's list, as a page index.
-  static std::uint32_t corner(ByteReader& r, const OpView& op) {
+  // A corner as stored: an index into the op's vertex list (op.vertex_list[it] is the page's).
+  static std::uint32_t local_corner(ByteReader& r, const OpView& op) {
     const std::uint64_t c = r.varint();
     if (c >= op.vertex_list.size()) r.fail("a corner out of its op's vertex list");
-    return op.vertex_list[c];
+    return std::uint32_t(c);
   }
 
   // The birth_res of child `id` of an op of resolution `res`: the page's op's, or the next
@@ -668,14 +634,11 @@ class PageDecoder {
     FragmentTriangle* tris = triangles_ + take(h.triangles, face_, totals_.triangles, "triangles");
     ByteReader& kr = in_[kKillers];
     local_tris_.resize(h.triangles);
-    ByteReader& vr = in_[kCorners];
     for (std::size_t i = 0; i < h.triangles; ++i) {
       FragmentTriangle& t = tris[i];
       for (int k = 0; k < 3; ++k) {
-        const std::uint64_t c = vr.varint();
-        if (c >= op.vertex_list.size()) vr.fail("a corner out of its op's vertex list");
-        local_tris_[i].v[k] = std::uint32_t(c);
-        t.v[k] = op.vertex_list[c];
+        local_tris_[i].v[k] = local_corner(in_[kCorners], op);
+        t.v[k] = op.vertex_list[local_tris_[i].v[k]];
       }
       const std::uint64_t killer = kr.varint();
       if (killer > h.children) kr.fail("killer out of range");
@@ -720,7 +683,7 @@ class PageDecoder {
       const std::uint64_t pi = pr.varint();
       if (pi >= h.parents) pr.fail("PreF parent out of range");
       pre[i] = {parents[pi], std::uint32_t(pr.varint())};
-      for (auto& c : pre_tris[i].v) c = corner(in_[kPreCorners], op);
+      for (auto& c : pre_tris[i].v) c = op.vertex_list[local_corner(in_[kPreCorners], op)];
     }
     op.pre = {pre, std::size_t(h.pre)};
     op.pre_tris = {pre_tris, std::size_t(h.pre)};
@@ -732,7 +695,7 @@ class PageDecoder {
     CoarserLink* links = links_ + links_used_;
     ByteReader& er = in_[kEdges];
     ByteReader& lr = in_[kLinks];
-    for_each_boundary_edge(std::span<const LocalTri>(local_tris_), op.vertex_list.size(), scratch_,
+    for_each_boundary_edge(std::span<const LocalTri>(local_tris_), op.vertex_list.size(),
                            [&](std::uint32_t tri, std::uint8_t edge) {
                              const std::uint8_t code = er.u8();
                              if (code == kModelBoundary) return;
@@ -842,7 +805,6 @@ class PageDecoder {
   std::vector<LocalTri> local_tris_;  // the current op's fragment, in its list's indices
   std::vector<std::pair<std::uint64_t, double>> res_of_;  // the page's ops: id, birth_res
   std::vector<double> child_res_;
-  std::vector<std::uint64_t> scratch_;
 };
 
 std::shared_ptr<const DecodedPage> decode_page(ByteView page, const QuantGrid& grid,

@@ -74,23 +74,19 @@ QuantGrid choose_grid(const CrmrInfo& info, double z_quantum) {
   return g;
 }
 
-double snap_vertices(Op& op, const QuantGrid& grid) {
+double snap_vertices(Op& op, const QuantGrid& grid, const CrmrInfo& model) {
   double shift = 0.0;
   for (Vertex& v : op.vertices) {
-    const Vec3 q = grid.dequantize(grid.quantize(v.p));
-    shift = std::max(shift, glm::length(q - v.p));
-    v.p = q;
+    const auto q = grid.quantize(v.p);
+    const Vec3 p = grid.dequantize(q);
+    shift = std::max(shift, glm::length(p - v.p));
+    v.p = p;
+    if (model.kind != ModelKind::kTerrain) continue;
+    if (q[0] < 0 || q[0] >= model.grid_width || q[1] < 0)
+      throw_internal("terrain vertex " + std::to_string(v.id.value) + " is off the DEM's grid");
+    v.id = VertexId(std::uint64_t(q[1]) * std::uint64_t(model.grid_width) + std::uint64_t(q[0]));
   }
   return shift;
-}
-
-void number_terrain_vertices(Op& op, const QuantGrid& grid, int grid_width) {
-  for (Vertex& v : op.vertices) {
-    const auto q = grid.quantize(v.p);
-    if (q[0] < 0 || q[0] >= grid_width || q[1] < 0)
-      throw_internal("terrain vertex " + std::to_string(v.id.value) + " is off the DEM's grid");
-    v.id = VertexId(std::uint64_t(q[1]) * std::uint64_t(grid_width) + std::uint64_t(q[0]));
-  }
 }
 
 double stored_resolution(double res) {
@@ -110,10 +106,7 @@ void round_for_storage(Op& op) {
 
 double quantize(Crmr& crmr, const QuantGrid& grid) {
   double shift = 0.0;
-  for (Op& op : crmr.ops) shift = std::max(shift, snap_vertices(op, grid));
-  if (crmr.header.kind == ModelKind::kTerrain) {
-    for (Op& op : crmr.ops) number_terrain_vertices(op, grid, crmr.header.grid_width);
-  }
+  for (Op& op : crmr.ops) shift = std::max(shift, snap_vertices(op, grid, crmr.header));
   crmr.header.bounds = Box3{};
   for (Op& op : crmr.ops) {
     for (const Vertex& v : op.vertices) crmr.header.bounds.add(v.p);

@@ -35,20 +35,16 @@ struct QuantGrid {
 /// 3-D mesh, the step of every axis).
 QuantGrid choose_grid(const CrmrInfo& info, double z_quantum);
 
-/// Snaps the vertices of `op` to `grid` and returns the largest move; bounds are left to the
-/// caller.
-double snap_vertices(Op& op, const QuantGrid& grid);
+/// Snaps the vertices of `op` (of the model `model`) to `grid` and returns the largest move;
+/// bounds are left to the caller. A terrain's vertices are then named by their DEM sample: id =
+/// row * grid_width + col, the vertex's grid coordinates on a terrain grid (choose_grid), so the
+/// ids are the same whichever builder made the model and pages derive them instead of storing
+/// them (page.h); a vertex off the DEM's columns and rows throws kInternal.
+double snap_vertices(Op& op, const QuantGrid& grid, const CrmrInfo& model);
 
-/// Terrain vertices are named by their DEM sample: id = row * grid_width + col, the vertex's grid
-/// coordinates on a terrain grid (choose_grid). The ids are then the same whichever builder made
-/// the model, and pages derive them instead of storing them (page.h). `op` must be snapped; a
-/// vertex off the DEM's columns and rows throws kInternal.
-void number_terrain_vertices(Op& op, const QuantGrid& grid, int grid_width);
-
-/// Snaps every vertex of `crmr` to `grid` (and numbers a terrain's: number_terrain_vertices),
-/// recomputes bounds and ROIs, raises err0 and err_final
-/// by the largest vertex shift, which it returns, rounds the ops' resolutions for storage
-/// (round_for_storage) and sets their errors to stored_op_error.
+/// Snaps every vertex of `crmr` to `grid` (snap_vertices), recomputes bounds and ROIs, raises err0
+/// and err_final by the largest vertex shift, which it returns, rounds the ops' resolutions for
+/// storage (round_for_storage) and sets their errors to stored_op_error.
 double quantize(Crmr& crmr, const QuantGrid& grid);
 
 /// Pages store resolutions as 32-bit floats (page.h), rounded so that every bound stays true: to

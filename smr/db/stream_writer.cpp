@@ -172,8 +172,7 @@ struct EncodedHead {
 void encode_op(Op& op, const CrmrInfo& header, const QuantGrid& grid, bool bounds_set, Bytes& out) {
   const ModelKind kind = header.kind;
   EncodedHead h;
-  h.moved = snap_vertices(op, grid);
-  if (kind == ModelKind::kTerrain) number_terrain_vertices(op, grid, header.grid_width);
+  h.moved = snap_vertices(op, grid, header);
   round_for_storage(op);  // before the index entry: its resolutions are the stored ones
   for (const Vertex& v : op.vertices) h.vertices.add(v.p);
   if (h.moved != 0.0 || !bounds_set) compute_op_bounds(op);

@@ -80,7 +80,7 @@ TEST(StoredResolution, DatabasesOnlyGrowErrors) {
   }
 }
 
-// Terrain vertices are named by their DEM sample (number_terrain_vertices): whichever builder
+// Terrain vertices are named by their DEM sample (snap_vertices): whichever builder
 // made the model (the greedy TIN, the block builder), every vertex of every stored op of a real
 // DEM's database is row * width + col of its grid position and lies at that sample's height, and
 // the pages derive the ids instead of storing them (each page's vertex id stream is the code and
