@@ -14,8 +14,8 @@
 # A summary table goes to stderr and benchmarks/results/flythrough.json.
 #
 # Environment: BUILD_DIR (default build/release), FBM_DB, FRAMES (jacksboro, default 300),
-# FBM_FRAMES (default 240), WALK_FRAMES (default 120), BIG_DB, RUNS (default "jacksboro fbm
-# fbm_walk big_walk"; big_walk is skipped when BIG_DB does not exist);
+# FBM_FRAMES (default 240), WALK_FRAMES (default 120), BIG_WALK_FRAMES (default 600), BIG_DB,
+# RUNS (default "jacksboro fbm fbm_walk big_walk"; big_walk is skipped when BIG_DB does not exist);
 # PLOT_ONLY=1 only redraws the PNGs of the JSON already in results/.
 set -euo pipefail
 
@@ -27,6 +27,7 @@ FBM_DB="${FBM_DB:-/work/main/build/release/bench-martini/fbm4097_seed1_e1.6.smrd
 FRAMES="${FRAMES:-300}"
 FBM_FRAMES="${FBM_FRAMES:-240}"
 WALK_FRAMES="${WALK_FRAMES:-120}"
+BIG_WALK_FRAMES="${BIG_WALK_FRAMES:-600}"
 BIG_DB="${BIG_DB:-$root/build/release/bench-query/fbm32769.smrdb}"
 RUNS="${RUNS:-jacksboro fbm fbm_walk big_walk}"
 RES="$here/results"
@@ -110,14 +111,7 @@ if [[ "${PLOT_ONLY:-0}" == 1 ]]; then  # redraw the PNGs and the table of the re
   for f in "$RES"/flythrough_*.json; do
     plot "$f" "${f%.json}.png" "smrdb flythrough $(basename "${f%.json}" | sed 's/^flythrough_//') ($(jq -r .database "$f" | xargs basename))"
   done
-  if has_run big_walk && [[ -f "$BIG_DB" ]]; then
-  # Warm: the database file is read once first, so the flight starts with it in the OS cache.
-  cat "$BIG_DB" >/dev/null
-  fly "fbm32769_walk" "$BIG_DB" --line "$(forward_line "$BIG_DB")" --frames "$WALK_FRAMES" \
-    --fps 60 --viewport 1920x1080
-fi
-
-summarize "$RES"/flythrough_*.json
+  summarize "$RES"/flythrough_*.json
   exit 0
 fi
 
@@ -130,6 +124,12 @@ forward_line() {  # DB -> X1,Y1,Z1:X2,Y2,Z2 from the bounds
     ($b.hi[1] - $b.lo[1]) as $h | ($b.hi[2] - $b.lo[2]) as $r |
     "\($b.lo[0] + 0.05 * $w),\($b.lo[1] + 0.05 * $h),\($b.hi[2] + 0.1 * ([$w, $h] | max)):" +
     "\($b.lo[0] + 0.6 * $w),\($b.lo[1] + 0.6 * $h),\($b.hi[2] + 0.02 * ([$w, $h] | max))"'
+}
+
+# Walking speed: 1 % of the model's horizontal extent per second (--frames alone would instead
+# spread the frames over the whole line).
+walking_speed() {  # DB -> model units per second
+  "$smrdb" info "$1" --json | jq '.meta.model.bounds | [.hi[0] - .lo[0], .hi[1] - .lo[1]] | max * 0.01'
 }
 
 if has_run jacksboro; then
@@ -152,17 +152,16 @@ if has_run fbm || has_run fbm_walk; then
     done
   fi
   if has_run fbm_walk; then
-    walk="$("$smrdb" info "$FBM_DB" --json |
-      jq '.meta.model.bounds | [.hi[0] - .lo[0], .hi[1] - .lo[1]] | max * 0.01')"
-    fly "fbm4097_walk" "$FBM_DB" --line "$line" --frames "$WALK_FRAMES" --fps 60 --speed "$walk"
+    fly "fbm4097_walk" "$FBM_DB" --line "$line" --frames "$WALK_FRAMES" --fps 60 \
+      --speed "$(walking_speed "$FBM_DB")"
   fi
 fi
 
 if has_run big_walk && [[ -f "$BIG_DB" ]]; then
   # Warm: the database file is read once first, so the flight starts with it in the OS cache.
   cat "$BIG_DB" >/dev/null
-  fly "fbm32769_walk" "$BIG_DB" --line "$(forward_line "$BIG_DB")" --frames "$WALK_FRAMES" \
-    --fps 60 --viewport 1920x1080
+  fly "fbm32769_walk" "$BIG_DB" --line "$(forward_line "$BIG_DB")" --frames "$BIG_WALK_FRAMES" \
+    --fps 60 --speed "$(walking_speed "$BIG_DB")" --viewport 1920x1080
 fi
 
 summarize "$RES"/flythrough_*.json

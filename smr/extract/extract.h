@@ -64,6 +64,9 @@ class RcfIndexedSource {
   /// A superset of not_completely_finer() found without reading ops (a conservative test on
   /// index entries), so that AddToList can rule out children without fetching them.
   virtual std::vector<OpId> maybe_not_completely_finer(const RcfOracle& rcf) const = 0;
+  /// Whether maybe_not_completely_finer may run on another thread while the source is read (a
+  /// session then looks ahead on a second core).
+  virtual bool concurrent_queries() const { return false; }
 };
 
 /// Brown 5.1.1 (Fig. 5.2): the smallest X containing R^0, the children of its non-finer members

@@ -104,16 +104,25 @@ bool OpMemo::verdict(const OpSource& source, std::uint32_t e, int which) {
   // alone (no margin) on 7 updates of 8 (which ones varies by op, so no update pays for all), so
   // ops near the RCF's edge cost one test an update.
   // Nor is a margin sought in the first update of a run of poses (a cold start): with no motion
-  // seen yet, a guess would be wasted more often than not.
-  const bool restless =
-      previous() == nullptr || (at + 1 == update_ && (update_ + ids_[e].value) % 8 != 0);
-  const double m = restless ? 0.0 : margin_of(*op, source, which, value, scale > 0.0 ? scale : 1.0);
+  // seen yet, a guess would be wasted more often than not. Those verdicts all lapse in the next
+  // update, which seeks their margins at once (staggered, the restless rule would keep most of X
+  // judged again for eight updates).
+  const std::uint8_t cold = std::uint8_t(4u << which);
+  const bool cold_start = previous() == nullptr;
+  const bool restless = cold_start || (at + 1 == update_ && (entry.verdicts & cold) == 0 &&
+                                       (update_ + ids_[e].value) % 8 != 0);
+  double m = restless ? 0.0 : margin_of(*op, source, which, value, scale > 0.0 ? scale : 1.0);
+  // Margins come in powers of two of one guess, so verdicts judged in one update would lapse
+  // together in a later one (a spike): each is cut by a factor in (3/4, 1] of its own.
+  m *= 1.0 -
+       0.25 * double(mix64(ids_[e].value * 2 + std::uint64_t(which) + update_) >> 11) * 0x1p-53;
   // Stored as a float no larger than the margin found.
   float f = static_cast<float>(m);
   if (double(f) > m) f = std::nextafter(f, 0.0f);
   entry.margin[which] = f;
   entry.epoch[which] = update_;
   entry.verdicts = std::uint8_t(value ? (entry.verdicts | bit) : (entry.verdicts & ~bit));
+  entry.verdicts = std::uint8_t(cold_start ? (entry.verdicts | cold) : (entry.verdicts & ~cold));
   return value;
 }
 

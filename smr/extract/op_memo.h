@@ -34,8 +34,8 @@ class OpMemo {
     std::uint32_t marked = 0;  // update `marks` belong to (and the last that met the entry)
     std::array<std::uint32_t, 2> epoch{0, 0};  // update that judged each verdict (0: never)
     std::array<float, 2> margin{0.0f, 0.0f};   // motion each verdict holds for (rounded down)
-    std::uint8_t verdicts = 0;                 // bit kFiner, bit kCompletelyFiner
-    std::uint8_t marks = 0;                    // the current traversal's (Session)
+    std::uint8_t verdicts = 0;  // bit kFiner, bit kCompletelyFiner; 4 << which: judged cold
+    std::uint8_t marks = 0;     // the current traversal's (Session)
   };
 
   /// Starts update number `update` (increasing from 1) for `rcf`: verdicts judged under another

@@ -36,6 +36,7 @@
 #pragma once
 
 #include <cstdint>
+#include <future>
 #include <memory>
 #include <span>
 #include <vector>
@@ -135,6 +136,7 @@ class Session {
               FrameStats& stats);
   void refine_kept(const RcfOracle& rcf, Changes& changes, FrameStats& stats);
   void refresh_candidates(const RcfOracle& rcf);
+  double candidate_margin() const;
 
   const OpSource& source_;
   SessionOptions options_;
@@ -149,13 +151,21 @@ class Session {
   std::uint32_t updates_ = 0;                     // updates so far
   // The index's candidates (RcfIndexedSource::maybe_not_completely_finer) for every camera within
   // `margin` of `pose`: a child the memo lacks is read only if it is one.
-  struct IndexCandidates {
-    bool valid = false;
-    std::uint32_t tag = 0;  // which set: OpMemo::rule_out_child marks
+  struct CandidateSet {
     RcfPose pose;
     double margin = 0.0;
     IdMap<std::uint8_t> ids;
+    bool covers(const RcfPose& now) const {
+      return pose.signature == now.signature && pose.needed_to(now) <= margin;
+    }
+  };
+  struct IndexCandidates : CandidateSet {
+    bool valid = false;
+    std::uint32_t tag = 0;  // which set: OpMemo::rule_out_child marks
   } candidates_;
+  // The next set, found on another thread from the pose where the camera had used half of the
+  // current set's margin (refresh_candidates).
+  std::future<CandidateSet> next_candidates_;
   const RcfIndexedSource* indexed_ = nullptr;  // source_, if it has an index
   // The memo entries refine_kept reached in update `reached_update_` (then X, exactly).
   std::vector<std::uint32_t> reached_;

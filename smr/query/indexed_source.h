@@ -38,6 +38,8 @@ class IndexedSource final : public OpSource, public RcfIndexedSource {
   std::vector<OpId> not_completely_finer(const RcfOracle& rcf) const override;
   /// The entries the R-tree query accepts (a superset of not_completely_finer), reading no page.
   std::vector<OpId> maybe_not_completely_finer(const RcfOracle& rcf) const override;
+  /// The database is safe to read from several threads.
+  bool concurrent_queries() const override { return true; }
   /// The R-tree query behind both: accepted entries, grouped by leaf (= data page).
   std::vector<index::Hit> rcf_hits(const RcfOracle& rcf) const;
 
