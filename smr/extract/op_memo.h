@@ -36,6 +36,8 @@ class OpMemo {
     std::array<float, 2> margin{0.0f, 0.0f};   // motion each verdict holds for (rounded down)
     std::uint8_t verdicts = 0;  // bit kFiner, bit kCompletelyFiner; 4 << which: judged cold
     std::uint8_t marks = 0;     // the current traversal's (Session)
+    std::array<std::int8_t, 2> rung{0, 0};  // each margin's rung (OpMemo::judge)
+    bool in_x = false;  // the op is in the session's X (kept by Session::refine_kept)
   };
 
   /// Starts update number `update` (increasing from 1) for `rcf`: verdicts judged under another
@@ -83,6 +85,11 @@ class OpMemo {
   /// A verdict of entry e's op for the current RCF: kept, or judged again (counted).
   bool verdict(const OpSource& source, std::uint32_t e, int which);
 
+  /// f(e) for every live entry e.
+  template <class F>
+  void for_each_entry(F&& f) {
+    index_.for_each([&](std::uint64_t, std::uint32_t slot) { f(slot - 1); });
+  }
   /// Forgets entries no update met in the last `idle` updates.
   void forget_idle(std::uint32_t idle);
   std::uint64_t judged() const { return judged_; }
@@ -101,8 +108,13 @@ class OpMemo {
     }
     return links_[at];
   }
-  double margin_of(const OpView& op, const OpSource& source, int which, bool value,
-                   double scale) const;
+  struct Judged {
+    bool value = false;
+    double margin = 0.0;
+    int rung = 0;  // where the next search starts
+  };
+  Judged judge(const OpView& op, const OpSource& source, int which, bool seek, int hint,
+               double scale) const;
 
   static constexpr std::uint32_t kRing = 256;  // poses kept: older verdicts lapse
   struct Epoch {

@@ -376,7 +376,8 @@ void Session::refine_kept(const RcfOracle& rcf, Changes& changes, FrameStats& st
     return entry.marks;
   };
   if (indexed_ != nullptr) refresh_candidates(rcf);
-  std::vector<std::uint32_t> stack, group, up, reached;
+  std::vector<std::uint32_t> stack, group, reached;
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> up;  // (entry, next parent)
   reached.reserve(x_.size() + 64);
   const auto reach = [&](std::uint32_t e) {
     marks(e) |= kReached;
@@ -403,24 +404,32 @@ void Session::refine_kept(const RcfOracle& rcf, Changes& changes, FrameStats& st
       stack.push_back(child);
     }
   };
-  // `c` and its ancestors not reached yet, each once, into `group`.
+  // `c` and its ancestors not reached yet, each once, into `group`, parents before children (a
+  // depth-first post-order over the parent links: no sort).
   const auto collect = [&](std::uint32_t c) {
-    group.assign(1, c);
-    up.assign(1, c);
+    group.clear();
+    up.assign(1, {c, 0});
     while (!up.empty()) {
-      const std::uint32_t e = up.back();
-      up.pop_back();
-      const std::uint32_t n = memo[e].parents;
-      for (std::uint32_t i = 0; i < n; ++i) {
-        const std::uint32_t parent = memo.parent(source_, e, i);
-        std::uint8_t& m = marks(parent);
-        if (m & (kReached | kSeen)) continue;
-        m |= kSeen;
-        group.push_back(parent);
-        up.push_back(parent);
+      auto& [e, next] = up.back();
+      if (next == memo[e].parents) {
+        group.push_back(e);
+        up.pop_back();
+        continue;
       }
+      const std::uint32_t parent = memo.parent(source_, e, next++);
+      std::uint8_t& m = marks(parent);
+      if (m & (kReached | kSeen)) continue;
+      m |= kSeen;
+      up.push_back({parent, 0});
     }
   };
+  if (reached_update_ == 0 || reached_update_ + 1 != now) {
+    // X came from another kind of update (or this is the first): each op of X gets its entry and
+    // its mark; from here on add_op and remove_op below keep them.
+    memo.for_each_entry([&](std::uint32_t e) { memo[e].in_x = false; });
+    x_.for_each(
+        [&](std::uint64_t id, const XEntry&) { memo[memo.get(source_, OpId{id})].in_x = true; });
+  }
   reach(memo.get(source_, kBaseOp));
   while (!stack.empty()) {
     const std::uint32_t c = stack.back();
@@ -432,30 +441,36 @@ void Session::refine_kept(const RcfOracle& rcf, Changes& changes, FrameStats& st
     }
     marks(c) |= kSeen;
     collect(c);
-    std::sort(group.begin(), group.end(),
-              [&](std::uint32_t a, std::uint32_t b) { return memo.id(a) < memo.id(b); });
     for (std::uint32_t a : group) {
-      if (!x_.contains(memo.id(a).value)) add_op(*source_.op(memo.id(a)), changes);
+      if (!memo[a].in_x) {
+        add_op(*source_.op(memo.id(a)), changes);
+        memo[a].in_x = true;
+      }
       reach(a);
     }
   }
-  // X now holds every op reached; the others are those of the X before it that it did not reach.
-  std::vector<OpId> extra;
-  if (reached.size() != x_.size() && reached_update_ + 1 == now) {
-    for (std::uint32_t e : reached_) {
-      if (memo[e].marked != now || !(memo[e].marks & kReached)) extra.push_back(memo.id(e));
+  // X now holds every op reached; the others are those of the X before it that it did not reach
+  // (all have entries: the last update reached them, or the resync above made them).
+  std::vector<std::uint32_t> extra;
+  if (reached.size() != x_.size()) {
+    const auto unreached = [&](std::uint32_t e) {
+      if (memo[e].in_x && (memo[e].marked != now || !(memo[e].marks & kReached)))
+        extra.push_back(e);
+    };
+    if (reached_update_ + 1 == now) {
+      for (std::uint32_t e : reached_) unreached(e);
+    } else {
+      memo.for_each_entry(unreached);
     }
-  } else if (reached.size() != x_.size()) {  // X came from another kind of update
-    x_.for_each([&](std::uint64_t id, const XEntry&) {
-      const std::uint32_t e = memo.find(OpId{id});
-      if (e == OpMemo::kNone || memo[e].marked != now || !(memo[e].marks & kReached))
-        extra.push_back(OpId{id});
-    });
   }
   reached_.swap(reached);
   reached_update_ = now;
-  std::sort(extra.begin(), extra.end(), std::greater<>());
-  for (OpId id : extra) remove_op(*source_.op(id), changes);
+  std::sort(extra.begin(), extra.end(),
+            [&](std::uint32_t a, std::uint32_t b) { return memo.id(a) > memo.id(b); });
+  for (std::uint32_t e : extra) {
+    remove_op(*source_.op(memo.id(e)), changes);
+    memo[e].in_x = false;
+  }
   stats.unreached_coarsenings = extra.size();
   stats.ops_tested = memo.judged() - judged;
   stats.verdicts_kept = memo.kept() - kept;
