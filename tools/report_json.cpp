@@ -178,6 +178,7 @@ void to_json(json& j, const FrameStats& s) {
        {"x", s.x},
        {"ops_tested", s.ops_tested},
        {"verdicts_kept", s.verdicts_kept},
+       {"traversed", s.traversed},
        {"update_ms", 1000.0 * s.seconds},
        {"coarsen_ms", 1000.0 * s.coarsen_seconds},
        {"refine_ms", 1000.0 * s.refine_seconds},

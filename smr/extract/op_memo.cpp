@@ -12,16 +12,30 @@ bool OpMemo::begin(const RcfOracle& rcf, std::uint32_t update) {
   std::optional<RcfPose> pose = rcf.pose();
   if (!pose) {
     valid_from_ = update + 1;  // nothing judged before survives a gap
+    held_ = 0;
     return false;
   }
   if (pose->signature != signature_) {
     signature_ = pose->signature;
     valid_from_ = update;
+    held_ = 0;
   }
   for (Epoch& e : ring_) {
     if (e.update == 0 || e.update < valid_from_) continue;
     e.needed = e.pose.needed_to(*pose);
   }
+  // The verdicts judged kRing updates ago lapse now, their bucket making room for this update's.
+  expired_.clear();
+  auto& bucket = lapses_[update % kRing];
+  const std::uint32_t old = ring_[update % kRing].update;
+  for (std::size_t i = cursor_[update % kRing]; i < bucket.size(); ++i) {
+    if (old != 0 && entries_.size() > bucket[i].entry &&
+        entries_[bucket[i].entry].epoch[bucket[i].which] == old)
+      expired_.push_back(bucket[i]);
+  }
+  bucket.clear();
+  cursor_[update % kRing] = 0;
+  sorted_[update % kRing] = false;
   Epoch& now = ring_[update % kRing];
   now.update = update;
   now.pose = std::move(*pose);
@@ -136,8 +150,10 @@ bool OpMemo::verdict(const OpSource& source, std::uint32_t e, int which) {
   // Stored as a float no larger than the margin found.
   float f = static_cast<float>(m);
   if (double(f) > m) f = std::nextafter(f, 0.0f);
+  if (at == 0 || at < valid_from_ || update_ - at >= kRing) ++held_;
   entry.margin[which] = f;
   entry.epoch[which] = update_;
+  lapses_[update_ % kRing].push_back({f, e, std::uint8_t(which)});
   entry.verdicts = std::uint8_t(value ? (entry.verdicts | bit) : (entry.verdicts & ~bit));
   entry.verdicts = std::uint8_t(cold_start ? (entry.verdicts | cold) : (entry.verdicts & ~cold));
   return value;
@@ -151,6 +167,9 @@ void OpMemo::forget_idle(std::uint32_t idle) {
   if (gone.empty()) return;
   for (std::uint64_t id : gone) {
     const std::uint32_t e = *index_.find(id) - 1;
+    for (std::uint32_t at : entries_[e].epoch) {
+      if (at != 0 && at >= valid_from_ && update_ - at < kRing) --held_;
+    }
     entries_[e] = Entry{};
     free_.push_back(e);
     index_.erase(id);
@@ -171,6 +190,26 @@ void OpMemo::forget_idle(std::uint32_t idle) {
   link_ids_.swap(ids);
 }
 
+void OpMemo::collect_lapsed(std::vector<Lapse>& out) {
+  for (std::uint32_t k = 0; k < kRing; ++k) {
+    const Epoch& ep = ring_[k];
+    if (ep.update == 0 || ep.update < valid_from_ || ep.update == update_) continue;
+    auto& bucket = lapses_[k];
+    std::uint32_t& at = cursor_[k];
+    if (!sorted_[k]) {  // the bucket is complete once its update is over
+      std::sort(bucket.begin() + at, bucket.end(),
+                [](const Lapse& a, const Lapse& b) { return a.margin < b.margin; });
+      sorted_[k] = true;
+    }
+    for (; at < bucket.size() && double(bucket[at].margin) < ep.needed; ++at) {
+      const Lapse& l = bucket[at];
+      if (entries_[l.entry].epoch[l.which] == ep.update) out.push_back(l);
+    }
+  }
+  out.insert(out.end(), expired_.begin(), expired_.end());
+  expired_.clear();
+}
+
 const OpMemo::Epoch* OpMemo::previous() const {
   const Epoch& before = ring_[(update_ - 1) % kRing];
   return before.update + 1 == update_ && before.update >= valid_from_ ? &before : nullptr;
@@ -184,7 +223,14 @@ double OpMemo::last_motion() const {
 std::uint64_t OpMemo::memory_bytes() const {
   return index_.memory_bytes() + entries_.capacity() * sizeof(Entry) +
          ids_.capacity() * sizeof(OpId) + free_.capacity() * sizeof(std::uint32_t) +
-         links_.capacity() * sizeof(std::uint32_t) + link_ids_.capacity() * sizeof(OpId);
+         links_.capacity() * sizeof(std::uint32_t) + link_ids_.capacity() * sizeof(OpId) +
+         lapse_bytes();
+}
+
+std::uint64_t OpMemo::lapse_bytes() const {
+  std::uint64_t n = expired_.capacity();
+  for (const auto& bucket : lapses_) n += bucket.capacity();
+  return n * sizeof(Lapse);
 }
 
 }  // namespace smr

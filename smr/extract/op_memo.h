@@ -37,7 +37,9 @@ class OpMemo {
     std::uint8_t verdicts = 0;  // bit kFiner, bit kCompletelyFiner; 4 << which: judged cold
     std::uint8_t marks = 0;     // the current traversal's (Session)
     std::array<std::int8_t, 2> rung{0, 0};  // each margin's rung (OpMemo::judge)
-    bool in_x = false;  // the op is in the session's X (kept by Session::refine_kept)
+    bool in_x = false;
+    /// A witness's: some predecessor in the reachability graph of X (Session) has a lower one.
+    std::uint32_t level = 0;  // the op is in the session's X (kept by Session::refine_kept)
   };
 
   /// Starts update number `update` (increasing from 1) for `rcf`: verdicts judged under another
@@ -84,6 +86,25 @@ class OpMemo {
   }
   /// A verdict of entry e's op for the current RCF: kept, or judged again (counted).
   bool verdict(const OpSource& source, std::uint32_t e, int which);
+  /// The verdict last judged, lapsed or not.
+  bool stored(std::uint32_t e, int which) const {
+    return (entries_[e].verdicts & (1u << which)) != 0;
+  }
+  /// A verdict judged in an update, kept for `margin`.
+  struct Lapse {
+    float margin = 0.0f;
+    std::uint32_t entry = 0;
+    std::uint8_t which = 0;
+  };
+  /// Appends every verdict that lapses in this update and was not judged since (each judged
+  /// verdict waits in its update's bucket, sorted by margin; the motion from that update's pose
+  /// only grows the prefix that lapsed), without looking at the others: an update that needs no
+  /// traversal of X (Session) learns what may have changed. Each lapse is reported once.
+  void collect_lapsed(std::vector<Lapse>& out);
+  /// Verdicts held (judged for this signature, within the ring), lapsed or not.
+  std::uint64_t held() const { return held_; }
+  /// Whether the previous update was the one before this, for the same signature.
+  bool continuous() const { return previous() != nullptr; }
 
   /// f(e) for every live entry e.
   template <class F>
@@ -122,7 +143,8 @@ class OpMemo {
     RcfPose pose;
     double needed = 0.0;  // the motion from this pose to the current one, in its scale
   };
-  const Epoch* previous() const;  // the previous update's, if it was the one before this
+  const Epoch* previous() const;
+  std::uint64_t lapse_bytes() const;  // the previous update's, if it was the one before this
 
   const RcfOracle* rcf_ = nullptr;
   std::uint32_t update_ = 0;
@@ -135,7 +157,11 @@ class OpMemo {
   std::vector<std::uint32_t> free_;   // entries forgotten
   std::vector<std::uint32_t> links_;  // entry numbers; kNone: not looked up; kRuledOut | tag
   std::vector<OpId> link_ids_;        // parallel to links_
-  std::uint64_t judged_ = 0, kept_ = 0;
+  std::uint64_t judged_ = 0, kept_ = 0, held_ = 0;
+  std::array<std::vector<Lapse>, kRing> lapses_;  // by update: the verdicts it judged
+  std::array<std::uint32_t, kRing> cursor_{};     // in each: those before it lapsed already
+  std::array<bool, kRing> sorted_{};
+  std::vector<Lapse> expired_;  // judged kRing updates ago (begin)
 };
 
 }  // namespace smr

@@ -313,24 +313,25 @@ void Session::refine(const RcfOracle& rcf, const SessionBudget& budget, double s
 double Session::candidate_margin() const {
   const RcfPose& now = memo_.pose();
   const double scale = now.scale > 0.0 ? now.scale : 1.0;
-  return std::clamp(2.0 * memo_.last_motion(), std::ldexp(scale, -10), std::ldexp(scale, -4));
+  return std::clamp(2.0 * memo_.last_motion(), std::ldexp(scale, -8), std::ldexp(scale, -4));
 }
 
 namespace {
 
-IdMap<std::uint8_t> candidate_ids(const RcfIndexedSource& indexed, const RcfOracle& rcf,
-                                  const RcfPose& pose, double margin) {
+std::shared_ptr<const IdMap<std::uint8_t>> candidate_ids(const RcfIndexedSource& indexed,
+                                                         const RcfOracle& rcf, const RcfPose& pose,
+                                                         double margin) {
   const double scale = pose.scale > 0.0 ? pose.scale : 1.0;
-  IdMap<std::uint8_t> ids;
+  auto ids = std::make_shared<IdMap<std::uint8_t>>();
   for (OpId o :
        indexed.maybe_not_completely_finer(MovedIndexRcf(rcf, Motion{margin, margin / scale})))
-    ids.insert(o.value);
+    ids->insert(o.value);
   return ids;
 }
 
 }  // namespace
 
-void Session::refresh_candidates(const RcfOracle& rcf) {
+Session::Refresh Session::refresh_candidates(const RcfOracle& rcf) {
   IndexCandidates& c = candidates_;
   const RcfPose& now = memo_.pose();
   const auto install = [&](CandidateSet&& set) {
@@ -343,25 +344,48 @@ void Session::refresh_candidates(const RcfOracle& rcf) {
     if (!next_candidates_.valid() && copyable != nullptr && indexed_->concurrent_queries() &&
         c.pose.needed_to(now) > 0.5 * c.margin) {
       next_candidates_ = std::async(std::launch::async, [indexed = indexed_, rcf_copy = *copyable,
-                                                         pose = now, margin = candidate_margin()] {
-        return CandidateSet{pose, margin, candidate_ids(*indexed, rcf_copy, pose, margin)};
+                                                         pose = now, margin = candidate_margin(),
+                                                         current = c.ids] {
+        CandidateSet next{pose, margin, candidate_ids(*indexed, rcf_copy, pose, margin), true, {}};
+        next.ids->for_each([&](std::uint64_t id, std::uint8_t) {
+          if (!current->contains(id)) next.entering.insert(id);
+        });
+        return next;
       });
     }
-    return;
+    return Refresh::kSame;
   }
   if (next_candidates_.valid()) {
     CandidateSet next = next_candidates_.get();  // waits if it is still running
-    if (next.covers(now)) return install(std::move(next));
+    if (next.covers(now)) {
+      install(std::move(next));
+      return Refresh::kNext;
+    }
   }
   const double margin = candidate_margin();
-  install(CandidateSet{now, margin, candidate_ids(*indexed_, rcf, now, margin)});
+  install(CandidateSet{now, margin, candidate_ids(*indexed_, rcf, now, margin), false, {}});
+  return Refresh::kNew;
+}
+
+// Child i of entry e as the refining meets it: its entry, or kNone when the index rules it out
+// (completely finer for every camera the candidates hold for); a child not met before is read
+// only if the index cannot rule it out (as Refiner does).
+std::uint32_t Session::child_entry(std::uint32_t e, std::uint32_t i) {
+  if (indexed_ != nullptr && memo_.child_ruled_out(e, i, candidates_.tag)) return OpMemo::kNone;
+  const std::uint32_t child = memo_.child_if_known(e, i);
+  if (child != OpMemo::kNone) return child;
+  if (indexed_ != nullptr && !candidates_.ids->contains(memo_.child_id(e, i).value)) {
+    memo_.rule_out_child(e, i, candidates_.tag);
+    return OpMemo::kNone;
+  }
+  return memo_.child(source_, e, i);
 }
 
 // The refining of an unbudgeted update over the memo (op_memo.h): the closure Refiner reaches
 // (AddToList from R^0: an op of X that is not finer offers its children that are not completely
 // finer, with their ancestors), found on the kept DAG links and verdicts, in any order (the
 // closure does not depend on it); then the ops of X it did not reach are removed, finest first.
-void Session::refine_kept(const RcfOracle& rcf, Changes& changes, FrameStats& stats) {
+void Session::refine_kept(Changes& changes, FrameStats& stats) {
   const auto t0 = Clock::now();
   const std::uint64_t judged = memo_.judged(), kept = memo_.kept();
   const std::uint32_t now = updates_;
@@ -375,7 +399,6 @@ void Session::refine_kept(const RcfOracle& rcf, Changes& changes, FrameStats& st
     }
     return entry.marks;
   };
-  if (indexed_ != nullptr) refresh_candidates(rcf);
   std::vector<std::uint32_t> stack, group, reached;
   std::vector<std::pair<std::uint32_t, std::uint32_t>> up;  // (entry, next parent)
   reached.reserve(x_.size() + 64);
@@ -385,22 +408,14 @@ void Session::refine_kept(const RcfOracle& rcf, Changes& changes, FrameStats& st
     if (memo.verdict(source_, e, OpMemo::kFiner)) return;
     const std::uint32_t n = memo[e].children;
     for (std::uint32_t i = 0; i < n; ++i) {
-      // Ruled out by the index (completely finer for every camera the candidates hold for).
-      if (indexed_ != nullptr && memo.child_ruled_out(e, i, candidates_.tag)) continue;
-      std::uint32_t child = memo.child_if_known(e, i);
-      if (child == OpMemo::kNone) {
-        // Not met before: read only if the index cannot rule it out (as Refiner does).
-        if (indexed_ != nullptr) {
-          if (!candidates_.ids.contains(memo.child_id(e, i).value)) {
-            memo.rule_out_child(e, i, candidates_.tag);
-            continue;
-          }
-        }
-        child = memo.child(source_, e, i);
-      }
+      const std::uint32_t child = child_entry(e, i);
+      if (child == OpMemo::kNone) continue;
       std::uint8_t& m = marks(child);
-      if (m & (kReached | kQueued)) continue;
+      // (A child gathered as an ancestor, kSeen, keeps that level: its CompletelyFiner verdict
+      // is not judged, so e's offer is no witness.)
+      if (m & (kReached | kQueued | kSeen)) continue;
       m |= kQueued;
+      memo[child].level = memo[e].level + 1;  // its witness: e offers it
       stack.push_back(child);
     }
   };
@@ -416,21 +431,26 @@ void Session::refine_kept(const RcfOracle& rcf, Changes& changes, FrameStats& st
         up.pop_back();
         continue;
       }
+      const std::uint32_t level = memo[e].level + 1;  // the parent's witness: e, in X
       const std::uint32_t parent = memo.parent(source_, e, next++);
       std::uint8_t& m = marks(parent);
       if (m & (kReached | kSeen)) continue;
       m |= kSeen;
+      memo[parent].level = level;
       up.push_back({parent, 0});
     }
   };
-  if (reached_update_ == 0 || reached_update_ + 1 != now) {
+  if (!memo_synced_) {
     // X came from another kind of update (or this is the first): each op of X gets its entry and
-    // its mark; from here on add_op and remove_op below keep them.
+    // its mark; from here on the kept updates keep them.
     memo.for_each_entry([&](std::uint32_t e) { memo[e].in_x = false; });
     x_.for_each(
         [&](std::uint64_t id, const XEntry&) { memo[memo.get(source_, OpId{id})].in_x = true; });
+    memo_synced_ = true;
   }
-  reach(memo.get(source_, kBaseOp));
+  const std::uint32_t base = memo.get(source_, kBaseOp);
+  memo[base].level = 0;
+  reach(base);
   while (!stack.empty()) {
     const std::uint32_t c = stack.back();
     stack.pop_back();
@@ -474,9 +494,231 @@ void Session::refine_kept(const RcfOracle& rcf, Changes& changes, FrameStats& st
   stats.unreached_coarsenings = extra.size();
   stats.ops_tested = memo.judged() - judged;
   stats.verdicts_kept = memo.kept() - kept;
-  constexpr std::uint32_t kIdle = 16;  // updates an op may go unmet before it is forgotten
-  if (now % kIdle == 0) memo.forget_idle(kIdle);
+  if (now >= forgotten_at_ + kIdle) {
+    memo.forget_idle(kIdle);
+    forgotten_at_ = now;
+  }
   stats.refine_seconds = seconds_since(t0);
+}
+
+// An unbudgeted update without a traversal of X (after a traversal, refine_kept, or another of
+// these, for the same signature and candidate set). X is the set of ops reachable from R^0 in a
+// graph whose edges are the offers (an op of X that is not finer offers each child that is not
+// completely finer) and the ancestor links (an op of X brings in its parents), so X changes only
+// where a verdict did, and the verdicts that lapse are known without looking at the others
+// (OpMemo::collect_lapsed). Each op of X keeps a level with a witness: a predecessor in X whose
+// level is lower (walking witnesses down reaches R^0). The update then
+//   1. judges again the lapsed verdicts that matter (IsFiner of an op of X; IsCompletelyFiner of
+//      an op of X or of a child some op of X offers to) and notes the ones that changed;
+//   2. shrinks (delete and rederive): an op that lost an edge from a lower level, and then
+//      anything whose every witness is gone, is held out (U); the ops of U still reachable from
+//      outside it get levels again, shortest first; the rest leave X, finest first;
+//   3. grows from the new edges as the traversal would: children newly offered, with their
+//      missing ancestors, and what they offer in turn.
+// The result is the reachable set, the X a traversal finds (Session tests compare each update
+// with a fresh extraction). Returns false, having changed nothing, when so many verdicts lapsed
+// that a traversal costs no more.
+bool Session::refine_incremental(Changes& changes, FrameStats& stats,
+                                 const IdMap<std::uint8_t>* entering) {
+  const auto t0 = Clock::now();
+  OpMemo& memo = memo_;
+  const std::uint64_t judged = memo.judged();
+  std::vector<OpMemo::Lapse> lapsed;
+  memo.collect_lapsed(lapsed);
+  if (lapsed.size() > x_.size() / 4 + 64) return false;  // the lapsed ones are judged there
+  const std::uint32_t now = updates_;
+  constexpr std::uint8_t kInU = 1, kSeen = 2;
+  const auto marks = [&memo, now](std::uint32_t e) -> std::uint8_t& {
+    OpMemo::Entry& entry = memo[e];
+    if (entry.marked != now) {
+      entry.marked = now;
+      entry.marks = 0;
+    }
+    return entry.marks;
+  };
+  const auto finer = [&](std::uint32_t e) { return memo.verdict(source_, e, OpMemo::kFiner); };
+  const auto completely_finer = [&](std::uint32_t e) {
+    return memo.verdict(source_, e, OpMemo::kCompletelyFiner);
+  };
+  // 1. IsFiner first: a child's IsCompletelyFiner matters if an op of X offers to it.
+  std::vector<std::uint32_t> suspects, offering, offered;
+  std::stable_partition(lapsed.begin(), lapsed.end(),
+                        [](const OpMemo::Lapse& l) { return l.which == OpMemo::kFiner; });
+  for (const OpMemo::Lapse& l : lapsed) {
+    const std::uint32_t e = l.entry;
+    if (l.which == OpMemo::kFiner) {
+      if (!memo[e].in_x) continue;  // judged when it joins X
+      const bool before = memo.stored(e, OpMemo::kFiner);
+      if (finer(e) == before) continue;
+      if (before) {
+        offering.push_back(e);  // now offers its children
+      } else {
+        for (std::uint32_t i = 0; i < memo[e].children; ++i) {  // its offers are gone
+          const std::uint32_t c = memo.child_if_known(e, i);
+          if (c != OpMemo::kNone && memo[c].in_x && memo[c].level > memo[e].level)
+            suspects.push_back(c);
+        }
+      }
+      continue;
+    }
+    bool matters = memo[e].in_x;
+    for (std::uint32_t i = 0; !matters && i < memo[e].parents; ++i) {
+      const std::uint32_t p = memo.parent(source_, e, i);
+      matters = memo[p].in_x && !finer(p);
+    }
+    if (!matters) continue;
+    const bool before = memo.stored(e, OpMemo::kCompletelyFiner);
+    if (completely_finer(e) == before) continue;
+    if (!before) {
+      if (memo[e].in_x) suspects.push_back(e);  // no op offers it any more
+    } else if (!memo[e].in_x) {
+      offered.push_back(e);
+    }
+  }
+
+  // 2. Delete and rederive.
+  // Whether v (in X) has a predecessor in X outside U, of a level below `below` (offers need v
+  // not completely finer and a parent that is not finer; every child of v in X brings v in).
+  const auto predecessor = [&](std::uint32_t v, std::uint32_t below) {
+    std::uint32_t best = ~std::uint32_t{0};
+    for (std::uint32_t i = 0; i < memo[v].children; ++i) {
+      const std::uint32_t c = memo.child_if_known(v, i);
+      if (c != OpMemo::kNone && memo[c].in_x && !(marks(c) & kInU) && memo[c].level < below)
+        best = std::min(best, memo[c].level);
+    }
+    if (best == ~std::uint32_t{0} && !completely_finer(v)) {
+      for (std::uint32_t i = 0; i < memo[v].parents; ++i) {
+        const std::uint32_t p = memo.parent(source_, v, i);
+        if (!(marks(p) & kInU) && memo[p].level < below && memo[p].level < best && !finer(p))
+          best = memo[p].level;
+      }
+    }
+    return best;  // ~0: none
+  };
+  const std::uint32_t base = memo.find(kBaseOp);
+  std::vector<std::uint32_t> held_out;  // U
+  while (!suspects.empty()) {
+    const std::uint32_t v = suspects.back();
+    suspects.pop_back();
+    if (v == base || !memo[v].in_x || (marks(v) & kInU)) continue;
+    if (predecessor(v, memo[v].level) != ~std::uint32_t{0}) continue;
+    marks(v) |= kInU;
+    held_out.push_back(v);
+    // Its successors may have had it as their only witness.
+    for (std::uint32_t i = 0; i < memo[v].children; ++i) {
+      const std::uint32_t c = memo.child_if_known(v, i);
+      if (c != OpMemo::kNone && memo[c].in_x && memo[c].level > memo[v].level)
+        suspects.push_back(c);
+    }
+    for (std::uint32_t i = 0; i < memo[v].parents; ++i) {
+      const std::uint32_t p = memo.parent(source_, v, i);
+      if (memo[p].level > memo[v].level) suspects.push_back(p);
+    }
+  }
+  if (!held_out.empty()) {
+    using Item = std::pair<std::uint32_t, std::uint32_t>;  // (level, entry)
+    std::priority_queue<Item, std::vector<Item>, std::greater<>> ready;
+    for (std::uint32_t v : held_out) {
+      const std::uint32_t p = predecessor(v, ~std::uint32_t{0});
+      if (p != ~std::uint32_t{0}) ready.push({p + 1, v});
+    }
+    while (!ready.empty()) {
+      const auto [level, v] = ready.top();
+      ready.pop();
+      if (!(marks(v) & kInU)) continue;
+      marks(v) &= std::uint8_t(~kInU);
+      memo[v].level = level;
+      const bool offers = !finer(v);
+      for (std::uint32_t i = 0; i < memo[v].children; ++i) {
+        const std::uint32_t c = memo.child_if_known(v, i);
+        if (c != OpMemo::kNone && (marks(c) & kInU) && offers && !completely_finer(c))
+          ready.push({level + 1, c});
+      }
+      for (std::uint32_t i = 0; i < memo[v].parents; ++i) {
+        const std::uint32_t p = memo.parent(source_, v, i);
+        if (marks(p) & kInU) ready.push({level + 1, p});
+      }
+    }
+    std::vector<std::uint32_t> gone;
+    for (std::uint32_t v : held_out) {
+      if (marks(v) & kInU) gone.push_back(v);
+    }
+    std::sort(gone.begin(), gone.end(),
+              [&](std::uint32_t a, std::uint32_t b) { return memo.id(a) > memo.id(b); });
+    for (std::uint32_t v : gone) {
+      remove_op(*source_.op(memo.id(v)), changes);
+      memo[v].in_x = false;
+    }
+    stats.unreached_coarsenings = gone.size();
+  }
+
+  // 3. Grow: what the traversal would add from the new edges.
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> up;  // (entry, next parent)
+  std::vector<std::uint32_t> group;
+  const auto join = [&](std::uint32_t c, std::uint32_t level) {  // c and its missing ancestors
+    group.clear();
+    memo[c].level = level;
+    marks(c) |= kSeen;
+    up.assign(1, {c, 0});
+    while (!up.empty()) {
+      auto& [e, next] = up.back();
+      if (next == memo[e].parents) {
+        group.push_back(e);
+        up.pop_back();
+        continue;
+      }
+      const std::uint32_t below = memo[e].level + 1;
+      const std::uint32_t parent = memo.parent(source_, e, next++);
+      std::uint8_t& m = marks(parent);
+      if (memo[parent].in_x || (m & kSeen)) continue;
+      m |= kSeen;
+      memo[parent].level = below;
+      up.push_back({parent, 0});
+    }
+    for (std::uint32_t a : group) {  // parents first
+      add_op(*source_.op(memo.id(a)), changes);
+      memo[a].in_x = true;
+      offering.push_back(a);
+    }
+  };
+  for (std::uint32_t c : offered) {
+    if (memo[c].in_x) continue;
+    for (std::uint32_t i = 0; i < memo[c].parents; ++i) {
+      const std::uint32_t p = memo.parent(source_, c, i);
+      if (memo[p].in_x && !finer(p)) {
+        join(c, memo[p].level + 1);
+        break;
+      }
+    }
+  }
+  if (entering != nullptr && !entering->empty()) {
+    // A new set of the index's candidates: an op of X may now offer a child the last set ruled
+    // out.
+    memo.for_each_entry([&](std::uint32_t e) {
+      if (!memo[e].in_x || memo.stored(e, OpMemo::kFiner)) return;
+      for (std::uint32_t i = 0; i < memo[e].children; ++i) {
+        if (entering->contains(memo.child_id(e, i).value)) {
+          offering.push_back(e);
+          return;
+        }
+      }
+    });
+  }
+  while (!offering.empty()) {
+    const std::uint32_t e = offering.back();
+    offering.pop_back();
+    if (!memo[e].in_x || finer(e)) continue;
+    for (std::uint32_t i = 0; i < memo[e].children; ++i) {
+      const std::uint32_t c = child_entry(e, i);
+      if (c == OpMemo::kNone || memo[c].in_x || completely_finer(c)) continue;
+      join(c, memo[e].level + 1);
+    }
+  }
+  stats.traversed = false;
+  stats.ops_tested = memo.judged() - judged;
+  stats.verdicts_kept = memo.held() > stats.ops_tested ? memo.held() - stats.ops_tested : 0;
+  stats.refine_seconds = seconds_since(t0);
+  return true;
 }
 
 Frame Session::update(const RcfOracle& rcf, const SessionBudget& budget) {
@@ -494,10 +736,24 @@ Frame Session::update(const RcfOracle& rcf, const SessionBudget& budget) {
   // Unbudgeted updates run over the memo (it reads through the index what it lacks, so a cold
   // start decodes only the pages it needs).
   const bool kept = !budgeted && memo_.begin(rcf, updates_);
-  if (budgeted) coarsen(rcf, budget.max_period_ms, changes, frame.stats);
+  if (budgeted) {
+    coarsen(rcf, budget.max_period_ms, changes, frame.stats);
+    memo_synced_ = false;
+  }
   if (kept) {
-    refine_kept(rcf, changes, frame.stats);
+    // The index's candidates hold for a region of poses. A set found ahead comes with the ids it
+    // no longer rules out (the children to look at again); after any other new set the update
+    // checks every child again (a traversal).
+    const Refresh refresh = indexed_ != nullptr ? refresh_candidates(rcf) : Refresh::kSame;
+    const IdMap<std::uint8_t>* entering =
+        refresh == Refresh::kNext && candidates_.has_entering ? &candidates_.entering : nullptr;
+    if (refresh == Refresh::kNew || (refresh == Refresh::kNext && entering == nullptr) ||
+        !memo_synced_ || !memo_.continuous() || updates_ % kTraverseEvery == 0 ||
+        !refine_incremental(changes, frame.stats, entering)) {
+      refine_kept(changes, frame.stats);
+    }
   } else if (!budget.coarsen_only) {
+    memo_synced_ = false;  // X changes without the memo's marks
     refine(rcf, budget, ms_since(t0), changes, frame.stats);
   }
   const auto t1 = Clock::now();

@@ -18,6 +18,9 @@
 //   first update it runs over what the session kept of the ops it met (op_memo.h): their DAG
 //   links, and their verdicts for as long as the camera stays within each verdict's motion
 //   margin, so an update reads and judges only ops whose verdicts lapsed or that are new to it.
+//   Most such updates do not even walk X: they start from the verdicts that lapsed and change X
+//   only where one of them changed (refine_incremental in session.cpp: delete and rederive over
+//   witness levels, then growth); a traversal runs when that would cost as much, and at times.
 // The update returns a Frame: what changed (ops and triangles, net) and the morph of the changed
 // region from the old mesh (t = 0) to the new one (t = 1), smr/extract/morph.h.
 //
@@ -87,6 +90,8 @@ struct FrameStats {
   std::uint64_t ops_tested = 0;  // ops read and judged by the RCF in this update
   /// Verdicts of earlier updates reused (op_memo.h: the camera stayed within their margins).
   std::uint64_t verdicts_kept = 0;
+  /// The refining walked all of X (false: it started from the verdicts that lapsed, only).
+  bool traversed = true;
   std::uint64_t morph_triangles = 0, morph_vertices = 0, morph_groups = 0;
   double coarsen_seconds = 0.0, refine_seconds = 0.0, morph_seconds = 0.0, seconds = 0.0;
 };
@@ -134,8 +139,11 @@ class Session {
   void coarsen(const RcfOracle& rcf, double deadline_ms, Changes& changes, FrameStats& stats);
   void refine(const RcfOracle& rcf, const SessionBudget& budget, double start_ms, Changes& changes,
               FrameStats& stats);
-  void refine_kept(const RcfOracle& rcf, Changes& changes, FrameStats& stats);
-  void refresh_candidates(const RcfOracle& rcf);
+  void refine_kept(Changes& changes, FrameStats& stats);
+  bool refine_incremental(Changes& changes, FrameStats& stats, const IdMap<std::uint8_t>* entering);
+  std::uint32_t child_entry(std::uint32_t e, std::uint32_t i);
+  enum class Refresh { kSame, kNext, kNew };  // kNext: a set found ahead, with its entering ids
+  Refresh refresh_candidates(const RcfOracle& rcf);
   double candidate_margin() const;
 
   const OpSource& source_;
@@ -154,7 +162,10 @@ class Session {
   struct CandidateSet {
     RcfPose pose;
     double margin = 0.0;
-    IdMap<std::uint8_t> ids;
+    std::shared_ptr<const IdMap<std::uint8_t>> ids;
+    /// Found on another thread: the ids not in the set it replaces (`entering`, filled then).
+    bool has_entering = false;
+    IdMap<std::uint8_t> entering;
     bool covers(const RcfPose& now) const {
       return pose.signature == now.signature && pose.needed_to(now) <= margin;
     }
@@ -170,6 +181,12 @@ class Session {
   // The memo entries refine_kept reached in update `reached_update_` (then X, exactly).
   std::vector<std::uint32_t> reached_;
   std::uint32_t reached_update_ = 0;
+  // The memo's in_x marks and levels describe X (a kept update made it, refine_incremental).
+  bool memo_synced_ = false;
+  static constexpr std::uint32_t kIdle = 16;  // updates an op may go unmet before it is forgotten
+  // A traversal at least this often (the memo's ring of poses: OpMemo::kRing).
+  static constexpr std::uint32_t kTraverseEvery = 256;
+  std::uint32_t forgotten_at_ = 0;  // the last update that forgot idle memo entries
 };
 
 /// One-shot minimal-surface extraction within a budget (smrdb extract --max-triangles,

@@ -267,13 +267,14 @@ double xy_area(const Vec3& a, const Vec3& b, const Vec3& c) {
 // A flight of many small camera steps with morphs on: every frame's morph covers exactly the
 // changed region (its pieces' areas sum to the triangles out's and in's, each counter-clockwise),
 // every vertex of the morph at t = 1 sits where the new mesh has it (no drift: positions come
-// from the stored ops, not from the previous frame), and the mesh stays a fresh extraction's.
+// from the stored ops, not from the previous frame), and the mesh stays a fresh extraction's (X
+// checked every frame: most of these updates run without a traversal of X).
 TEST(Session, MorphsOfAFlightCoverTheChangedRegionAndEndOnTheStoredMesh) {
   const test::Dataset& d = test::dataset("fbm129");
   const Box3 b = d.crmr.header.bounds;
   const Vec3 c = b.center(), size = b.hi - b.lo;
   Session session(d.crmr);
-  std::uint64_t morph_frames = 0;
+  std::uint64_t morph_frames = 0, untraversed = 0;
   constexpr int kFrames = 300;
   for (int f = 0; f < kFrames; ++f) {
     SCOPED_TRACE("frame " + std::to_string(f));
@@ -288,6 +289,8 @@ TEST(Session, MorphsOfAFlightCoverTheChangedRegionAndEndOnTheStoredMesh) {
     spec.pixel_error = 0.5;
     const Rcf rcf = make_rcf(spec, ModelKind::kTerrain, &d.dem);
     const Frame fr = session.update(rcf);
+    untraversed += fr.stats.traversed ? 0 : 1;
+    ASSERT_EQ(session.x(), add_to_list(d.crmr, rcf));
     ASSERT_EQ(fr.triangles_in.empty(), fr.morph.triangles.empty());
     if (fr.triangles_in.empty()) continue;
     ++morph_frames;
@@ -324,6 +327,7 @@ TEST(Session, MorphsOfAFlightCoverTheChangedRegionAndEndOnTheStoredMesh) {
     }
   }
   EXPECT_GT(morph_frames, kFrames / 10);
+  EXPECT_GT(untraversed, std::uint64_t(kFrames / 4));  // updates without a traversal of X
 }
 
 // A flight through a database (read through its R-tree, as smrdb flythrough and serve read it):
@@ -337,7 +341,7 @@ void fly_kept(const Crmr& crmr, ModelKind kind, const Heightfield* dem, double p
   const Vec3 c = b.center();
   const double r = glm::length(b.hi - b.lo);
   Session session(source, {.morph = false});
-  std::uint64_t kept = 0, judged = 0;
+  std::uint64_t kept = 0, judged = 0, untraversed = 0;
   const int kFrames = test::kSanitized ? 20 : 40;
   for (int f = 0; f < kFrames; ++f) {
     SCOPED_TRACE("frame " + std::to_string(f));
@@ -349,6 +353,7 @@ void fly_kept(const Crmr& crmr, ModelKind kind, const Heightfield* dem, double p
     const Rcf rcf = make_rcf(spec, kind, dem);
     const Frame fr = session.update(rcf);
     ASSERT_TRUE(fr.stats.complete);
+    untraversed += fr.stats.traversed ? 0 : 1;
     // Counted once verdicts with margins exist: not the first two updates (the first seeks no
     // margins) nor the jump and the update after it.
     if (f > 2 && f != kFrames / 2 && f != kFrames / 2 + 1) {
@@ -362,6 +367,9 @@ void fly_kept(const Crmr& crmr, ModelKind kind, const Heightfield* dem, double p
     }
   }
   EXPECT_GT(kept, judged) << "verdicts kept " << kept << ", judged again " << judged;
+  // Most smooth steps start from the verdicts that lapsed (Session::refine_incremental), not a
+  // walk over all of X; each was checked against add_to_list above.
+  EXPECT_GE(untraversed, std::uint64_t(kFrames / 8));
 }
 
 TEST(Session, FlightsOverADatabaseKeepVerdictsAndReachEachFreshExtraction) {
