@@ -461,10 +461,15 @@ void RTree::visit(std::uint64_t node_id, std::uint64_t level, std::uint64_t expe
     }
     return;
   }
+  std::vector<std::uint64_t> entered;
   for (std::size_t c = 0; c < node.items.size(); ++c) {
     const detail::NodeItem& item = node.items[c];
-    const Summary s{item.roi, item.box, item.res, item.value};
-    if (visitor.enter(s)) visit(node.first_child + c, level - 1, item.value, visitor, hits, stats);
+    if (visitor.enter(Summary{item.roi, item.box, item.res, item.value}))
+      entered.push_back(node.first_child + c);
+  }
+  if (advise_ && !entered.empty()) advise_(entered);
+  for (std::uint64_t child : entered) {
+    visit(child, level - 1, node.items[child - node.first_child].value, visitor, hits, stats);
   }
 }
 

@@ -236,6 +236,12 @@ class RTree {
   // which also rules out cycles) and a malformation throws smr::Error (kCorrupt) naming the node.
   RTree(ByteView header, std::function<Bytes(std::uint64_t node_id)> fetch, std::string table);
 
+  // Called, if set, with the children a query is about to enter below a node, before it reads
+  // them (a caller reading from disk can ask for them all at once).
+  void set_advise(std::function<void(std::span<const std::uint64_t> node_ids)> advise) {
+    advise_ = std::move(advise);
+  }
+
   std::uint64_t leaf_count() const { return level_sizes_.empty() ? 0 : level_sizes_.front(); }
   std::uint64_t entry_count() const { return root_.count; }
   std::uint64_t node_count() const { return node_count_; }
@@ -256,6 +262,7 @@ class RTree {
              Visitor& visitor, std::vector<Hit>& hits, QueryStats& stats) const;
 
   std::function<Bytes(std::uint64_t)> fetch_;
+  std::function<void(std::span<const std::uint64_t>)> advise_;
   std::string table_;
   std::vector<std::uint64_t> level_sizes_;   // nodes per level, leaves first
   std::vector<std::uint64_t> level_starts_;  // first node id of each level

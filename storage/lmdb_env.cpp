@@ -670,9 +670,29 @@ std::optional<ByteView> ReadTxn::get_bytes(Table table, ByteView key,
   if (rc == MDB_NOTFOUND) {
     throw_internal(env_->where(table) + ", key " + key_text + ": LMDB missed a key of its pages");
   }
+  if (v.mv_size > 4096) {
+    // The file is opened MDB_NORDAHEAD, so a value over several pages would be read a page per
+    // fault, each waiting on the disk: asked for whole, its pages are read together.
+    const auto start = reinterpret_cast<std::uintptr_t>(v.mv_data) & ~std::uintptr_t{4095};
+    const auto end = reinterpret_cast<std::uintptr_t>(v.mv_data) + v.mv_size;
+    (void)::madvise(reinterpret_cast<void*>(start), end - start, MADV_WILLNEED);  // advisory
+  }
   env_->check_value(*node, v, [&] { return env_->where(table) + ", key " + key_text; });
   env_->bytes_read.fetch_add(v.mv_size, std::memory_order_relaxed);
   return from_val(v);
+}
+
+void ReadTxn::will_need(Table table, std::span<const std::uint64_t> keys) const {
+  for (std::uint64_t key : keys) {
+    const Bytes k = key_u64(key);
+    const std::optional<Node> node = env_->find(table, k, std::to_string(key));
+    if (!node || node->flags != kBigData) continue;  // absent, or in the leaf page just read
+    const std::uint64_t first = read_le(node->data, 8);
+    const std::uint64_t count = (kPageHeader - 1 + node->size) / env_->page_size + 1;
+    if (first + count > env_->pages) continue;  // get() will say why
+    (void)::madvise(const_cast<std::uint8_t*>(env_->page(first)), count * env_->page_size,
+                    MADV_WILLNEED);  // advisory
+  }
 }
 
 std::optional<ByteView> ReadTxn::get(Table table, std::uint64_t key) const {

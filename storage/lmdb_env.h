@@ -95,6 +95,9 @@ class ReadTxn {
 
   std::optional<ByteView> get(Table table, std::uint64_t key) const;  // key_u64(key)
   std::optional<ByteView> get(Table table, std::string_view key) const;
+  // Asks the OS to start reading the values of `keys` (those stored on pages of their own) without
+  // waiting for them: get() on them later finds them read, or in flight together.
+  void will_need(Table table, std::span<const std::uint64_t> keys) const;
   // Every entry of `table` in key order.
   void for_each(Table table, const std::function<void(ByteView key, ByteView value)>& visit) const;
   std::uint64_t count(Table table) const;

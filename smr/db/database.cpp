@@ -237,6 +237,18 @@ void Database::prefetch(std::span<const std::uint64_t> pages) const {
   prefetcher_->want(std::move(missing));
 }
 
+void Database::will_need(std::span<const std::uint64_t> pages) const {
+  std::vector<std::uint64_t> keys;
+  keys.reserve(pages.size());
+  for (std::uint64_t p : pages) {
+    if (p < page_count_) keys.push_back((std::uint64_t{1} << 60) | p);
+  }
+  std::vector<std::uint64_t> missing = cache_->missing(keys);
+  if (missing.empty()) return;
+  for (std::uint64_t& k : missing) k &= (std::uint64_t{1} << 60) - 1;
+  naming_file(path(), [&] { env_->read().will_need(Table::kPages, missing); });
+}
+
 void Database::decode_ahead(std::uint64_t page) const {
   if (cache_->contains((std::uint64_t{1} << 60) | page)) return;
   fetch(1, Table::kPages, page);
@@ -272,6 +284,14 @@ std::unique_ptr<Database> Database::open(const std::string& path, const Options&
           return std::get<Bytes>(*self->cached(3, Table::kRtree, node));
         },
         std::string(table_name(Table::kRtree)));
+  });
+  db->rtree_->set_advise([self](std::span<const std::uint64_t> nodes) {
+    std::vector<std::uint64_t> keys;
+    keys.reserve(nodes.size());
+    for (std::uint64_t n : nodes) keys.push_back((std::uint64_t{3} << 60) | n);
+    std::vector<std::uint64_t> missing = self->cache_->missing(keys);
+    for (std::uint64_t& k : missing) k &= (std::uint64_t{1} << 60) - 1;
+    if (!missing.empty()) self->env_->read().will_need(Table::kRtree, missing);
   });
   if (db->rtree_->entry_count() != db->op_count_ || db->rtree_->leaf_count() != db->page_count_)
     throw Error(ErrorKind::kCorrupt, path + ": R-tree and meta disagree on the counts");

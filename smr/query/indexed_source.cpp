@@ -39,7 +39,12 @@ std::vector<index::Hit> IndexedSource::rcf_hits(const RcfOracle& rcf) const {
 
 std::vector<OpId> IndexedSource::maybe_not_completely_finer(const RcfOracle& rcf) const {
   std::vector<OpId> ids;
-  for (const index::Hit& h : rcf_hits(rcf)) ids.push_back(OpId{h.id});
+  std::vector<std::uint64_t> pages;
+  for (const index::Hit& h : rcf_hits(rcf)) {
+    ids.push_back(OpId{h.id});
+    if (pages.empty() || pages.back() != h.leaf) pages.push_back(h.leaf);
+  }
+  db_.will_need(pages);  // the pages the candidates are on, read ahead if not in the cache
   return ids;
 }
 

@@ -36,7 +36,8 @@ class IndexedSource final : public OpSource, public RcfIndexedSource {
   /// Reduced extraction's X from the R-tree: every op not completely finer than `rcf`. Reads
   /// the R-tree nodes the query enters and the data pages of the entries it accepts.
   std::vector<OpId> not_completely_finer(const RcfOracle& rcf) const override;
-  /// The entries the R-tree query accepts (a superset of not_completely_finer), reading no page.
+  /// The entries the R-tree query accepts (a superset of not_completely_finer), reading no page
+  /// (it asks the OS to read ahead those of theirs the cache lacks: Database::will_need).
   std::vector<OpId> maybe_not_completely_finer(const RcfOracle& rcf) const override;
   /// The database is safe to read from several threads.
   bool concurrent_queries() const override { return true; }
