@@ -108,10 +108,10 @@ summarize() {
 }
 
 if [[ "${PLOT_ONLY:-0}" == 1 ]]; then  # redraw the PNGs and the table of the results written
-  for f in "$RES"/flythrough_*.json; do
+  for f in "$RES"/flythrough_{3d,fbm,jacksboro}*.json; do
     plot "$f" "${f%.json}.png" "smrdb flythrough $(basename "${f%.json}" | sed 's/^flythrough_//') ($(jq -r .database "$f" | xargs basename))"
   done
-  summarize "$RES"/flythrough_*.json
+  summarize "$RES"/flythrough_{3d,fbm,jacksboro}*.json
   exit 0
 fi
 
@@ -162,6 +162,28 @@ if has_run big_walk && [[ -f "$BIG_DB" ]]; then
   cat "$BIG_DB" >/dev/null
   fly "fbm32769_walk" "$BIG_DB" --line "$(forward_line "$BIG_DB")" --frames "$BIG_WALK_FRAMES" \
     --fps 60 --speed "$(walking_speed "$BIG_DB")" --viewport 1920x1080
+  # Cold: the OS's page cache dropped before each of COLD_RUNS starts (needs root; skipped
+  # otherwise): open to first frame, into results/flythrough_cold.json (not a flythrough_ run).
+  if [[ -w /proc/sys/vm/drop_caches ]]; then
+    cold=()
+    for ((i = 0; i < ${COLD_RUNS:-5}; i++)); do
+      sync
+      echo 3 >/proc/sys/vm/drop_caches
+      sleep 1
+      "$smrdb" flythrough "$BIG_DB" --json --line "$(forward_line "$BIG_DB")" --frames 30 --fps 60 \
+        --speed "$(walking_speed "$BIG_DB")" --viewport 1920x1080 -q >"$work/cold.json"
+      cold+=("$(jq '{open_to_first_frame_ms: .summary.open_to_first_frame_ms,
+                     first_frame_ms: .summary.first_frame_ms, pages_read: .io.pages_read,
+                     lmdb_bytes_read: .io.lmdb_bytes_read}' "$work/cold.json")")
+      log "  cold start $((i + 1)): $(jq .summary.open_to_first_frame_ms "$work/cold.json") ms to the first frame"
+    done
+    printf '%s\n' "${cold[@]}" | jq -s --arg date "$(date -u +%Y-%m-%dT%H:%M:%SZ)" \
+      --arg commit "$(git -C "$root" rev-parse --short HEAD 2>/dev/null || echo unknown)" \
+      '{date: $date, commit: $commit, database: "fbm32769", viewport: "1920x1080",
+        note: "OS page cache dropped before each run (echo 3 > /proc/sys/vm/drop_caches)",
+        runs: ., open_to_first_frame_ms: ([.[].open_to_first_frame_ms] | sort |
+        {min: .[0], median: .[length / 2 | floor], max: .[-1]})}' >"$RES/flythrough_cold.json"
+  fi
 fi
 
-summarize "$RES"/flythrough_*.json
+summarize "$RES"/flythrough_{3d,fbm,jacksboro}*.json
