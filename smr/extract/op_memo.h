@@ -13,6 +13,7 @@
 #include <array>
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "smr/core/id_map.h"
@@ -54,6 +55,41 @@ class OpMemo {
     return slot == nullptr ? kNone : *slot - 1;
   }
   Entry& operator[](std::uint32_t e) { return entries_[e]; }
+  /// Entry e's marks for the current update's traversal (cleared the first time it touches e).
+  std::uint8_t& marks(std::uint32_t e) {
+    Entry& entry = entries_[e];
+    if (entry.marked != update_) {
+      entry.marked = update_;
+      entry.marks = 0;
+    }
+    return entry.marks;
+  }
+  /// Entry c and those of its ancestors that `skip` does not exclude (nor `seen` in their marks),
+  /// each once and marked `seen`, into `group` parents first (a depth-first post-order over the
+  /// parent links, `up` its stack). Each parent gathered gets its child's level + 1: its witness
+  /// is that child, which joins X with it (Session).
+  template <class Skip>
+  void gather(const OpSource& source, std::uint32_t c, std::uint8_t seen, Skip skip,
+              std::vector<std::uint32_t>& group,
+              std::vector<std::pair<std::uint32_t, std::uint32_t>>& up) {
+    group.clear();
+    up.assign(1, {c, 0});
+    while (!up.empty()) {
+      auto& [e, next] = up.back();
+      if (next == entries_[e].parents) {
+        group.push_back(e);
+        up.pop_back();
+        continue;
+      }
+      const std::uint32_t level = entries_[e].level + 1;
+      const std::uint32_t parent = this->parent(source, e, next++);
+      std::uint8_t& m = marks(parent);
+      if ((m & seen) || skip(parent)) continue;
+      m |= seen;
+      entries_[parent].level = level;
+      up.push_back({parent, 0});
+    }
+  }
   OpId id(std::uint32_t e) const { return ids_[e]; }
   /// Parent i of entry e, read the first time.
   std::uint32_t parent(const OpSource& source, std::uint32_t e, std::uint32_t i) {

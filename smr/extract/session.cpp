@@ -391,14 +391,7 @@ void Session::refine_kept(Changes& changes, FrameStats& stats) {
   const std::uint32_t now = updates_;
   constexpr std::uint8_t kQueued = 1, kRejected = 2, kSeen = 4, kReached = 8;
   OpMemo& memo = memo_;
-  const auto marks = [&memo, now](std::uint32_t e) -> std::uint8_t& {
-    OpMemo::Entry& entry = memo[e];
-    if (entry.marked != now) {
-      entry.marked = now;
-      entry.marks = 0;
-    }
-    return entry.marks;
-  };
+  const auto marks = [&memo](std::uint32_t e) -> std::uint8_t& { return memo.marks(e); };
   std::vector<std::uint32_t> stack, group, reached;
   std::vector<std::pair<std::uint32_t, std::uint32_t>> up;  // (entry, next parent)
   reached.reserve(x_.size() + 64);
@@ -417,27 +410,6 @@ void Session::refine_kept(Changes& changes, FrameStats& stats) {
       m |= kQueued;
       memo[child].level = memo[e].level + 1;  // its witness: e offers it
       stack.push_back(child);
-    }
-  };
-  // `c` and its ancestors not reached yet, each once, into `group`, parents before children (a
-  // depth-first post-order over the parent links: no sort).
-  const auto collect = [&](std::uint32_t c) {
-    group.clear();
-    up.assign(1, {c, 0});
-    while (!up.empty()) {
-      auto& [e, next] = up.back();
-      if (next == memo[e].parents) {
-        group.push_back(e);
-        up.pop_back();
-        continue;
-      }
-      const std::uint32_t level = memo[e].level + 1;  // the parent's witness: e, in X
-      const std::uint32_t parent = memo.parent(source_, e, next++);
-      std::uint8_t& m = marks(parent);
-      if (m & (kReached | kSeen)) continue;
-      m |= kSeen;
-      memo[parent].level = level;
-      up.push_back({parent, 0});
     }
   };
   if (!memo_synced_) {
@@ -460,7 +432,9 @@ void Session::refine_kept(Changes& changes, FrameStats& stats) {
       continue;
     }
     marks(c) |= kSeen;
-    collect(c);
+    // c and its ancestors not reached yet.
+    memo.gather(
+        source_, c, kSeen, [&](std::uint32_t p) { return (marks(p) & kReached) != 0; }, group, up);
     for (std::uint32_t a : group) {
       if (!memo[a].in_x) {
         add_op(*source_.op(memo.id(a)), changes);
@@ -526,16 +500,8 @@ bool Session::refine_incremental(Changes& changes, FrameStats& stats,
   std::vector<OpMemo::Lapse> lapsed;
   memo.collect_lapsed(lapsed);
   if (lapsed.size() > x_.size() / 4 + 64) return false;  // the lapsed ones are judged there
-  const std::uint32_t now = updates_;
   constexpr std::uint8_t kInU = 1, kSeen = 2;
-  const auto marks = [&memo, now](std::uint32_t e) -> std::uint8_t& {
-    OpMemo::Entry& entry = memo[e];
-    if (entry.marked != now) {
-      entry.marked = now;
-      entry.marks = 0;
-    }
-    return entry.marks;
-  };
+  const auto marks = [&memo](std::uint32_t e) -> std::uint8_t& { return memo.marks(e); };
   const auto finer = [&](std::uint32_t e) { return memo.verdict(source_, e, OpMemo::kFiner); };
   const auto completely_finer = [&](std::uint32_t e) {
     return memo.verdict(source_, e, OpMemo::kCompletelyFiner);
@@ -656,25 +622,10 @@ bool Session::refine_incremental(Changes& changes, FrameStats& stats,
   std::vector<std::pair<std::uint32_t, std::uint32_t>> up;  // (entry, next parent)
   std::vector<std::uint32_t> group;
   const auto join = [&](std::uint32_t c, std::uint32_t level) {  // c and its missing ancestors
-    group.clear();
     memo[c].level = level;
     marks(c) |= kSeen;
-    up.assign(1, {c, 0});
-    while (!up.empty()) {
-      auto& [e, next] = up.back();
-      if (next == memo[e].parents) {
-        group.push_back(e);
-        up.pop_back();
-        continue;
-      }
-      const std::uint32_t below = memo[e].level + 1;
-      const std::uint32_t parent = memo.parent(source_, e, next++);
-      std::uint8_t& m = marks(parent);
-      if (memo[parent].in_x || (m & kSeen)) continue;
-      m |= kSeen;
-      memo[parent].level = below;
-      up.push_back({parent, 0});
-    }
+    memo.gather(
+        source_, c, kSeen, [&](std::uint32_t p) { return memo[p].in_x; }, group, up);
     for (std::uint32_t a : group) {  // parents first
       add_op(*source_.op(memo.id(a)), changes);
       memo[a].in_x = true;
