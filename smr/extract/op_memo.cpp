@@ -117,7 +117,8 @@ bool OpMemo::verdict(const OpSource& source, std::uint32_t e, int which) {
   Entry& entry = entries_[e];
   const std::uint8_t bit = std::uint8_t(1u << which);
   const std::uint32_t at = entry.epoch[which];
-  if (at != 0 && at >= valid_from_ && update_ - at < kRing) {
+  const std::uint8_t reported = std::uint8_t(kReported << which);
+  if (at != 0 && at >= valid_from_ && update_ - at < kRing && (entry.verdicts & reported) == 0) {
     const Epoch& ep = ring_[at % kRing];
     if (ep.update == at && ep.needed <= double(entry.margin[which])) {
       ++kept_;
@@ -156,6 +157,7 @@ bool OpMemo::verdict(const OpSource& source, std::uint32_t e, int which) {
   lapses_[update_ % kRing].push_back({f, e, std::uint8_t(which)});
   entry.verdicts = std::uint8_t(value ? (entry.verdicts | bit) : (entry.verdicts & ~bit));
   entry.verdicts = std::uint8_t(cold_start ? (entry.verdicts | cold) : (entry.verdicts & ~cold));
+  entry.verdicts = std::uint8_t(entry.verdicts & ~reported);
   return value;
 }
 
@@ -203,9 +205,15 @@ void OpMemo::collect_lapsed(std::vector<Lapse>& out) {
     }
     for (; at < bucket.size() && double(bucket[at].margin) < ep.needed; ++at) {
       const Lapse& l = bucket[at];
-      if (entries_[l.entry].epoch[l.which] == ep.update) out.push_back(l);
+      if (entries_[l.entry].epoch[l.which] == ep.update) {
+        out.push_back(l);
+        // Reported once, so lapsed for good: the camera may come back within the margin, but
+        // nothing would report the verdict when it leaves again.
+        entries_[l.entry].verdicts |= std::uint8_t(kReported << l.which);
+      }
     }
   }
+  for (const Lapse& l : expired_) entries_[l.entry].verdicts |= std::uint8_t(kReported << l.which);
   out.insert(out.end(), expired_.begin(), expired_.end());
   expired_.clear();
 }

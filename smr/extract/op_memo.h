@@ -35,8 +35,10 @@ class OpMemo {
     std::uint32_t marked = 0;  // update `marks` belong to (and the last that met the entry)
     std::array<std::uint32_t, 2> epoch{0, 0};  // update that judged each verdict (0: never)
     std::array<float, 2> margin{0.0f, 0.0f};   // motion each verdict holds for (rounded down)
-    std::uint8_t verdicts = 0;  // bit kFiner, bit kCompletelyFiner; 4 << which: judged cold
-    std::uint8_t marks = 0;     // the current traversal's (Session)
+    /// Bit kFiner, bit kCompletelyFiner; 4 << which: judged cold; kReported << which: its lapse
+    /// was reported (collect_lapsed), so it is judged again when next asked for.
+    std::uint8_t verdicts = 0;
+    std::uint8_t marks = 0;                 // the current traversal's (Session)
     std::array<std::int8_t, 2> rung{0, 0};  // each margin's rung (OpMemo::judge)
     bool in_x = false;
     /// A witness's: some predecessor in the reachability graph of X (Session) has a lower one.
@@ -135,7 +137,9 @@ class OpMemo {
   /// Appends every verdict that lapses in this update and was not judged since (each judged
   /// verdict waits in its update's bucket, sorted by margin; the motion from that update's pose
   /// only grows the prefix that lapsed), without looking at the others: an update that needs no
-  /// traversal of X (Session) learns what may have changed. Each lapse is reported once.
+  /// traversal of X (Session) learns what may have changed. Each lapse is reported once, and a
+  /// verdict reported stays lapsed (verdict() judges it again) even if the camera comes back
+  /// within its margin: nothing would report it when the camera left again.
   void collect_lapsed(std::vector<Lapse>& out);
   /// Verdicts held (judged for this signature, within the ring), lapsed or not.
   std::uint64_t held() const { return held_; }
@@ -173,7 +177,8 @@ class OpMemo {
   Judged judge(const OpView& op, const OpSource& source, int which, bool seek, int hint,
                double scale) const;
 
-  static constexpr std::uint32_t kRing = 256;  // poses kept: older verdicts lapse
+  static constexpr std::uint32_t kRing = 256;    // poses kept: older verdicts lapse
+  static constexpr std::uint8_t kReported = 16;  // Entry::verdicts: a lapse reported
   struct Epoch {
     std::uint32_t update = 0;
     RcfPose pose;
