@@ -88,7 +88,9 @@ struct FrameStats {
   std::uint64_t triangles = 0;   // the mesh's triangles after the update, void ones included
   std::uint64_t triangles_in = 0, triangles_out = 0;
   std::uint64_t ops_tested = 0;  // ops read and judged by the RCF in this update
-  /// Verdicts of earlier updates reused (op_memo.h: the camera stayed within their margins).
+  /// Verdicts of earlier updates reused (op_memo.h: the camera stayed within their margins): in a
+  /// traversal those it asked for; in an update without one (traversed false) every verdict held
+  /// and not judged again, since X rests on them all.
   std::uint64_t verdicts_kept = 0;
   /// The refining walked all of X (false: it started from the verdicts that lapsed, only).
   bool traversed = true;
