@@ -89,7 +89,7 @@ OpMemo::Judged OpMemo::judge(const OpView& op, const OpSource& source, int which
     return which == kFiner ? rcf_->is_finer(op, source) : rcf_->is_completely_finer(op, source);
   };
   if (!seek) return {exact(), 0.0, hint};
-  const double guess = std::max(8.0 * last_motion(), std::ldexp(scale, -12));
+  const double guess = std::max(8.0 * steady_motion(), std::ldexp(scale, -12));
   const auto within = [&](int k) {
     const double m = std::ldexp(guess, k);
     const Motion motion{m, m / scale};
@@ -132,11 +132,12 @@ bool OpMemo::verdict(const OpSource& source, std::uint32_t e, int which) {
   // alone (no margin) on 7 updates of 8 (which ones varies by op, so no update pays for all), so
   // ops near the RCF's edge cost one test an update.
   // Nor is a margin sought in the first update of a run of poses (a cold start): with no motion
-  // seen yet, a guess would be wasted more often than not. Those verdicts all lapse in the next
+  // seen yet, a guess would be wasted more often than not. Nor in a jump (a motion 16 times the
+  // steady one), which lapses nearly every verdict anyway. Those verdicts all lapse in the next
   // update, which seeks their margins at once (staggered, the restless rule would keep most of X
   // judged again for eight updates).
   const std::uint8_t cold = std::uint8_t(4u << which);
-  const bool cold_start = previous() == nullptr;
+  const bool cold_start = previous() == nullptr || last_motion() > 16.0 * steady_motion();
   const bool restless = cold_start || (at + 1 == update_ && (entry.verdicts & cold) == 0 &&
                                        (update_ + ids_[e].value) % 8 != 0);
   const Judged j =
@@ -226,6 +227,20 @@ const OpMemo::Epoch* OpMemo::previous() const {
 double OpMemo::last_motion() const {
   const Epoch* before = previous();
   return before == nullptr ? 0.0 : before->needed;
+}
+
+// The least of the last three updates' motions (a run of consecutive updates): a jump away and
+// back does not make the margins sought after it a thousand times too wide (none would hold, and
+// the verdicts would be judged again update after update).
+double OpMemo::steady_motion() const {
+  double least = last_motion();
+  for (std::uint32_t back = 1; back <= 2 && update_ > back + 1; ++back) {
+    const Epoch& a = ring_[(update_ - back) % kRing];
+    const Epoch& b = ring_[(update_ - back - 1) % kRing];
+    if (a.update != update_ - back || b.update + 1 != a.update || b.update < valid_from_) break;
+    least = std::min(least, b.pose.needed_to(a.pose));
+  }
+  return least;
 }
 
 std::uint64_t OpMemo::memory_bytes() const {

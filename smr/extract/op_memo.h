@@ -159,6 +159,8 @@ class OpMemo {
   std::uint64_t memory_bytes() const;
   /// The motion from the previous update's camera to the current one (0 without one).
   double last_motion() const;
+  /// The least motion of the last three updates (the margin search's guess: OpMemo::judge).
+  double steady_motion() const;
   const RcfPose& pose() const { return ring_[update_ % kRing].pose; }
 
  private:
