@@ -5,6 +5,7 @@
 #include <functional>
 #include <queue>
 #include <string>
+#include <system_error>
 #include <tuple>
 #include <utility>
 
@@ -343,15 +344,20 @@ Session::Refresh Session::refresh_candidates(const RcfOracle& rcf) {
     const auto* copyable = dynamic_cast<const Rcf*>(&rcf);
     if (!next_candidates_.valid() && copyable != nullptr && indexed_->concurrent_queries() &&
         c.pose.needed_to(now) > 0.5 * c.margin) {
-      next_candidates_ = std::async(std::launch::async, [indexed = indexed_, rcf_copy = *copyable,
-                                                         pose = now, margin = candidate_margin(),
-                                                         current = c.ids] {
-        CandidateSet next{pose, margin, candidate_ids(*indexed, rcf_copy, pose, margin), true, {}};
-        next.ids->for_each([&](std::uint64_t id, std::uint8_t) {
-          if (!current->contains(id)) next.entering.insert(id);
-        });
-        return next;
-      });
+      try {
+        next_candidates_ =
+            std::async(std::launch::async, [indexed = indexed_, rcf_copy = *copyable, pose = now,
+                                            margin = candidate_margin(), current = c.ids] {
+              CandidateSet next{
+                  pose, margin, candidate_ids(*indexed, rcf_copy, pose, margin), true, {}};
+              next.ids->for_each([&](std::uint64_t id, std::uint8_t) {
+                if (!current->contains(id)) next.entering.insert(id);
+              });
+              return next;
+            });
+      } catch (const std::system_error&) {
+        // No thread to be had: the set is found when it is needed, on this one.
+      }
     }
     return Refresh::kSame;
   }
