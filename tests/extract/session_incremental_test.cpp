@@ -22,6 +22,7 @@
 #include "smr/extract/session.h"
 #include "tests/query/written_database.h"
 #include "tests/support/datasets.h"
+#include "tests/support/extraction_result.h"
 #include "tests/support/meshes.h"
 #include "tests/support/rcf_spread.h"
 #include "tests/support/sanitized.h"
@@ -29,11 +30,7 @@
 namespace smr {
 namespace {
 
-std::vector<TriRef> sorted(std::span<const TriRef> t) {
-  std::vector<TriRef> v(t.begin(), t.end());
-  std::sort(v.begin(), v.end());
-  return v;
-}
+using test::sorted;
 
 // The first difference between the session's X and the fresh one, for a failure message.
 std::string x_difference(const std::vector<OpId>& got, const std::vector<OpId>& want) {

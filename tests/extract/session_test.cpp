@@ -16,6 +16,7 @@
 #include "smr/extract/session.h"
 #include "tests/query/written_database.h"
 #include "tests/support/datasets.h"
+#include "tests/support/extraction_result.h"
 #include "tests/support/meshes.h"
 #include "tests/support/rcf_spread.h"
 #include "tests/support/sanitized.h"
@@ -23,11 +24,7 @@
 namespace smr {
 namespace {
 
-std::vector<TriRef> sorted(std::span<const TriRef> t) {
-  std::vector<TriRef> v(t.begin(), t.end());
-  std::sort(v.begin(), v.end());
-  return v;
-}
+using test::sorted;
 
 // A sequence through the spread: neighbours in it differ a little (tolerances, AOIs moving) or a
 // lot (a camera jumping away and back).
