@@ -226,27 +226,28 @@ void Database::prefetch(std::span<const std::uint64_t> pages) const {
   const std::uint64_t page_bytes =
       decoded == 0 ? std::uint64_t{256} << 10 : cache_->stats().bytes_decoded / decoded + 1;
   const std::size_t most = std::min<std::uint64_t>(pages.size(), cache_->budget() / 4 / page_bytes);
+  std::vector<std::uint64_t> missing = uncached(1, pages.first(most), page_count_);
+  if (!missing.empty()) prefetcher_->want(std::move(missing));
+}
+
+// The ids (below `count`) of items of `kind` the cache lacks, in their order.
+std::vector<std::uint64_t> Database::uncached(std::uint64_t kind,
+                                              std::span<const std::uint64_t> ids,
+                                              std::uint64_t count) const {
   std::vector<std::uint64_t> keys;
-  keys.reserve(most);
-  for (std::uint64_t p : pages.first(most)) {
-    if (p < page_count_) keys.push_back((std::uint64_t{1} << 60) | p);
+  keys.reserve(ids.size());
+  for (std::uint64_t id : ids) {
+    if (id < count) keys.push_back((kind << 60) | id);
   }
   std::vector<std::uint64_t> missing = cache_->missing(keys);
-  if (missing.empty()) return;
   for (std::uint64_t& k : missing) k &= (std::uint64_t{1} << 60) - 1;
-  prefetcher_->want(std::move(missing));
+  return missing;
 }
 
 void Database::will_need(std::span<const std::uint64_t> pages) const {
-  std::vector<std::uint64_t> keys;
-  keys.reserve(pages.size());
-  for (std::uint64_t p : pages) {
-    if (p < page_count_) keys.push_back((std::uint64_t{1} << 60) | p);
-  }
-  std::vector<std::uint64_t> missing = cache_->missing(keys);
-  if (missing.empty()) return;
-  for (std::uint64_t& k : missing) k &= (std::uint64_t{1} << 60) - 1;
-  naming_file(path(), [&] { env_->read().will_need(Table::kPages, missing); });
+  const std::vector<std::uint64_t> missing = uncached(1, pages, page_count_);
+  if (!missing.empty())
+    naming_file(path(), [&] { env_->read().will_need(Table::kPages, missing); });
 }
 
 void Database::decode_ahead(std::uint64_t page) const {
@@ -286,11 +287,7 @@ std::unique_ptr<Database> Database::open(const std::string& path, const Options&
         std::string(table_name(Table::kRtree)));
   });
   db->rtree_->set_advise([self](std::span<const std::uint64_t> nodes) {
-    std::vector<std::uint64_t> keys;
-    keys.reserve(nodes.size());
-    for (std::uint64_t n : nodes) keys.push_back((std::uint64_t{3} << 60) | n);
-    std::vector<std::uint64_t> missing = self->cache_->missing(keys);
-    for (std::uint64_t& k : missing) k &= (std::uint64_t{1} << 60) - 1;
+    const std::vector<std::uint64_t> missing = self->uncached(3, nodes, self->rtree_->node_count());
     if (!missing.empty()) self->env_->read().will_need(Table::kRtree, missing);
   });
   if (db->rtree_->entry_count() != db->op_count_ || db->rtree_->leaf_count() != db->page_count_)

@@ -94,6 +94,8 @@ class Database final : public OpSource {
       std::variant<std::shared_ptr<const DecodedPage>, std::vector<Locator>, storage::Bytes>;
   std::shared_ptr<const CacheItem> cached(std::uint64_t kind, Table table, std::uint64_t id) const;
   std::shared_ptr<const CacheItem> fetch(std::uint64_t kind, Table table, std::uint64_t id) const;
+  std::vector<std::uint64_t> uncached(std::uint64_t kind, std::span<const std::uint64_t> ids,
+                                      std::uint64_t count) const;
   // The same item, held by this thread's memo until its next lookup of that kind (no reference
   // count touched): for reads that finish before the next lookup.
   const CacheItem& memoized(std::uint64_t kind, Table table, std::uint64_t id) const;
