@@ -156,9 +156,9 @@ bool OpMemo::verdict(const OpSource& source, std::uint32_t e, int which) {
   entry.margin[which] = f;
   entry.epoch[which] = update_;
   lapses_[update_ % kRing].push_back({f, e, std::uint8_t(which)});
-  entry.verdicts = std::uint8_t(value ? (entry.verdicts | bit) : (entry.verdicts & ~bit));
-  entry.verdicts = std::uint8_t(cold_start ? (entry.verdicts | cold) : (entry.verdicts & ~cold));
-  entry.verdicts = std::uint8_t(entry.verdicts & ~reported);
+  // The new value, judged cold or not, its lapse not reported.
+  entry.verdicts = std::uint8_t((entry.verdicts & ~(bit | cold | reported)) | (value ? bit : 0) |
+                                (cold_start ? cold : 0));
   return value;
 }
 

@@ -40,9 +40,9 @@ class OpMemo {
     std::uint8_t verdicts = 0;
     std::uint8_t marks = 0;                 // the current traversal's (Session)
     std::array<std::int8_t, 2> rung{0, 0};  // each margin's rung (OpMemo::judge)
-    bool in_x = false;
+    bool in_x = false;                      // the op is in the session's X (kept by Session)
     /// A witness's: some predecessor in the reachability graph of X (Session) has a lower one.
-    std::uint32_t level = 0;  // the op is in the session's X (kept by Session::refine_kept)
+    std::uint32_t level = 0;
   };
 
   /// Starts update number `update` (increasing from 1) for `rcf`: verdicts judged under another
@@ -186,8 +186,8 @@ class OpMemo {
     RcfPose pose;
     double needed = 0.0;  // the motion from this pose to the current one, in its scale
   };
-  const Epoch* previous() const;
-  std::uint64_t lapse_bytes() const;  // the previous update's, if it was the one before this
+  const Epoch* previous() const;  // the previous update's, if it was the one before this
+  std::uint64_t lapse_bytes() const;
 
   const RcfOracle* rcf_ = nullptr;
   std::uint32_t update_ = 0;

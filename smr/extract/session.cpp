@@ -306,7 +306,7 @@ void Session::refine(const RcfOracle& rcf, const SessionBudget& budget, double s
 
 // The index's candidates (RcfIndexedSource::maybe_not_completely_finer) for every camera within
 // a margin of one pose, found again when the camera leaves it. The margin is 2 updates of the
-// last one's motion, within [scale / 1024, scale / 16] (a wide one reads pages no view needs).
+// last one's motion, within [scale / 256, scale / 16] (a wide one reads pages no view needs).
 // Once the camera has used half of it, the next set is sought on another thread from the pose of
 // then (when the source allows it and the RCF can be copied), so that the update that leaves the
 // current set finds the next one ready instead of querying the index itself (4-5 ms on the
@@ -348,8 +348,7 @@ Session::Refresh Session::refresh_candidates(const RcfOracle& rcf) {
         next_candidates_ =
             std::async(std::launch::async, [indexed = indexed_, rcf_copy = *copyable, pose = now,
                                             margin = candidate_margin(), current = c.ids] {
-              CandidateSet next{
-                  pose, margin, candidate_ids(*indexed, rcf_copy, pose, margin), true, {}};
+              CandidateSet next{pose, margin, candidate_ids(*indexed, rcf_copy, pose, margin), {}};
               next.ids->for_each([&](std::uint64_t id, std::uint8_t) {
                 if (!current->contains(id)) next.entering.insert(id);
               });
@@ -369,8 +368,19 @@ Session::Refresh Session::refresh_candidates(const RcfOracle& rcf) {
     }
   }
   const double margin = candidate_margin();
-  install(CandidateSet{now, margin, candidate_ids(*indexed_, rcf, now, margin), false, {}});
+  install(CandidateSet{now, margin, candidate_ids(*indexed_, rcf, now, margin), {}});
   return Refresh::kNew;
+}
+
+// Memo entries of X leaving it, finest first: each is then a leaf of X (a child still in X would
+// make it reachable), so its fragment gives way to its PreF.
+void Session::remove_finest_first(std::vector<std::uint32_t>& entries, Changes& changes) {
+  std::sort(entries.begin(), entries.end(),
+            [&](std::uint32_t a, std::uint32_t b) { return memo_.id(a) > memo_.id(b); });
+  for (std::uint32_t e : entries) {
+    remove_op(*source_.op(memo_.id(e)), changes);
+    memo_[e].in_x = false;
+  }
 }
 
 // Child i of entry e as the refining meets it: its entry, or kNone when the index rules it out
@@ -465,12 +475,7 @@ void Session::refine_kept(Changes& changes, FrameStats& stats) {
   }
   reached_.swap(reached);
   reached_update_ = now;
-  std::sort(extra.begin(), extra.end(),
-            [&](std::uint32_t a, std::uint32_t b) { return memo.id(a) > memo.id(b); });
-  for (std::uint32_t e : extra) {
-    remove_op(*source_.op(memo.id(e)), changes);
-    memo[e].in_x = false;
-  }
+  remove_finest_first(extra, changes);
   stats.unreached_coarsenings = extra.size();
   stats.ops_tested = memo.judged() - judged;
   stats.verdicts_kept = memo.kept() - kept;
@@ -615,12 +620,7 @@ bool Session::refine_incremental(Changes& changes, FrameStats& stats,
     for (std::uint32_t v : held_out) {
       if (marks(v) & kInU) gone.push_back(v);
     }
-    std::sort(gone.begin(), gone.end(),
-              [&](std::uint32_t a, std::uint32_t b) { return memo.id(a) > memo.id(b); });
-    for (std::uint32_t v : gone) {
-      remove_op(*source_.op(memo.id(v)), changes);
-      memo[v].in_x = false;
-    }
+    remove_finest_first(gone, changes);
     stats.unreached_coarsenings = gone.size();
   }
 
@@ -702,11 +702,10 @@ Frame Session::update(const RcfOracle& rcf, const SessionBudget& budget) {
     // no longer rules out (the children to look at again); after any other new set the update
     // checks every child again (a traversal).
     const Refresh refresh = indexed_ != nullptr ? refresh_candidates(rcf) : Refresh::kSame;
-    const IdMap<std::uint8_t>* entering =
-        refresh == Refresh::kNext && candidates_.has_entering ? &candidates_.entering : nullptr;
-    if (refresh == Refresh::kNew || (refresh == Refresh::kNext && entering == nullptr) ||
-        !memo_synced_ || !memo_.continuous() || updates_ % kTraverseEvery == 0 ||
-        !refine_incremental(changes, frame.stats, entering)) {
+    if (refresh == Refresh::kNew || !memo_synced_ || !memo_.continuous() ||
+        updates_ % kTraverseEvery == 0 ||
+        !refine_incremental(changes, frame.stats,
+                            refresh == Refresh::kNext ? &candidates_.entering : nullptr)) {
       refine_kept(changes, frame.stats);
     }
   } else if (!budget.coarsen_only) {

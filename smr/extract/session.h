@@ -147,6 +147,7 @@ class Session {
   enum class Refresh { kSame, kNext, kNew };  // kNext: a set found ahead, with its entering ids
   Refresh refresh_candidates(const RcfOracle& rcf);
   double candidate_margin() const;
+  void remove_finest_first(std::vector<std::uint32_t>& entries, Changes& changes);
 
   const OpSource& source_;
   SessionOptions options_;
@@ -165,8 +166,7 @@ class Session {
     RcfPose pose;
     double margin = 0.0;
     std::shared_ptr<const IdMap<std::uint8_t>> ids;
-    /// Found on another thread: the ids not in the set it replaces (`entering`, filled then).
-    bool has_entering = false;
+    /// Found on another thread (Refresh::kNext): the ids not in the set it replaces.
     IdMap<std::uint8_t> entering;
     bool covers(const RcfPose& now) const {
       return pose.signature == now.signature && pose.needed_to(now) <= margin;
