@@ -3,7 +3,8 @@
 //
 //   extract DB   For one view (a named camera placed relative to the database's bounds, or an
 //                explicit --eye/--target) and each --pixel-error and algorithm (minimal surface,
-//                reduced extraction from the R-tree):
+//                its triangles by the set formula, "minimal-pages", and reduced extraction from the
+//                R-tree):
 //                - read amplification: bytes fetched from LMDB (pages, R-tree nodes, op locators)
 //                  / bytes of the pages the output needs. A page is *needed* when some output
 //                  triangle (void ones included) belongs to one of its ops; a page is *touched*
@@ -19,6 +20,10 @@
 //                zstd, draco) and measures on every real page: geometry bytes per vertex and per
 //                triangle, decode_geometry throughput (MB/s of input, triangles/s) and whole-page
 //                decode_page throughput, and the database's total bytes per model vertex.
+//   decode DB    decode_page alone on the real pages of a built database (every --stride-th
+//                page, copied out of LMDB first): microseconds per page and nanoseconds per op,
+//                the figure page-format work is judged by; --keep holds every page of a pass, so
+//                each is decoded into fresh memory as in a first view (not into the last one's).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -89,8 +94,10 @@ class RecordingSource final : public smr::OpSource, public smr::RcfIndexedSource
     }
     return db_.not_completely_finer(rcf);
   }
-  std::vector<smr::OpId> maybe_not_completely_finer(const smr::RcfOracle& rcf) const override {
-    return db_.maybe_not_completely_finer(rcf);  // reads no page
+  smr::CandidateOps maybe_not_completely_finer(const smr::RcfOracle& rcf,
+                                               bool /*read_ahead*/) const override {
+    // Reads no page, and has none read ahead: the pages counted are those the extraction reads.
+    return db_.maybe_not_completely_finer(rcf, false);
   }
   mutable std::vector<std::uint64_t> ops;
   mutable std::vector<std::uint64_t> leaves;
@@ -120,11 +127,19 @@ struct Timed {
   std::uint64_t pages_read_to_mesh = 0;  // of stats.pages_read, by to_mesh
 };
 
-Timed run_extraction(const smr::Database& db, const smr::Rcf& rcf, bool reduced) {
+// One extraction by algorithm `alg`: minimal (advancing front), minimal-pages (its triangles by
+// the set formula, ExpansionOptions::fronts false) or reduced.
+smr::Extraction extract_by(const smr::OpSource& source, const smr::Rcf& rcf,
+                           const std::string& alg) {
+  if (alg == "reduced") return smr::extract_reduced(source, rcf);
+  return smr::extract_minimal_surface(source, rcf, {.fronts = alg == "minimal"});
+}
+
+Timed run_extraction(const smr::Database& db, const smr::Rcf& rcf, const std::string& alg) {
   Timed t;
   std::uint64_t t0 = now_ns();
   const smr::IndexedSource source(db);
-  t.e = reduced ? smr::extract_reduced(source, rcf) : smr::extract_minimal_surface(source, rcf);
+  t.e = extract_by(source, rcf, alg);
   t.extract_seconds = seconds_since(t0);
   const std::uint64_t pages_before_mesh = db.stats().pages_read;
   t0 = now_ns();
@@ -138,12 +153,12 @@ Timed run_extraction(const smr::Database& db, const smr::Rcf& rcf, bool reduced)
 }
 
 // One run on a fresh Database (opening it timed); `keep`, when given, receives that Database.
-Timed fresh_run(const ExtractArgs& a, const smr::Rcf& rcf, bool reduced,
+Timed fresh_run(const ExtractArgs& a, const smr::Rcf& rcf, const std::string& alg,
                 std::unique_ptr<smr::Database>* keep = nullptr) {
   const std::uint64_t t0 = now_ns();
   auto db = smr::Database::open(a.db, {std::size_t(a.cache_mb) << 20});
   const double open = seconds_since(t0);
-  Timed t = run_extraction(*db, rcf, reduced);
+  Timed t = run_extraction(*db, rcf, alg);
   t.open_seconds = open;
   if (keep) *keep = std::move(db);
   return t;
@@ -264,22 +279,22 @@ struct CaseTimes {
 // Cold (the file dropped from the OS page cache first, then a fresh process-like Database), warm
 // (a fresh Database each time, the file in the OS page cache) and hot (the last warm Database
 // again: its cache holds what fits of the pages it decoded).
-CaseTimes time_case(const ExtractArgs& a, const smr::Rcf& rcf, bool reduced, json& c) {
+CaseTimes time_case(const ExtractArgs& a, const smr::Rcf& rcf, const std::string& alg, json& c) {
   CaseTimes t;
   if (a.cold) {
     c["resident_bytes_after_drop"] = drop_from_page_cache(a.db);
-    t.cold = fresh_run(a, rcf, reduced);
+    t.cold = fresh_run(a, rcf, alg);
     c["resident_bytes_after_cold_run"] = resident_bytes(a.db);
   }
   std::unique_ptr<smr::Database> keep;
   for (int i = 0; i < a.repeat; ++i) {
-    Timed run = fresh_run(a, rcf, reduced, i + 1 == a.repeat ? &keep : nullptr);
+    Timed run = fresh_run(a, rcf, alg, i + 1 == a.repeat ? &keep : nullptr);
     t.warm_extract.push_back(run.extract_seconds);
     t.warm_total.push_back(run.open_seconds + run.extract_seconds + run.mesh_seconds);
     if (i == 0) t.first = std::move(run);
   }
   for (int i = 0; i < a.repeat; ++i)
-    t.hot_extract.push_back(run_extraction(*keep, rcf, reduced).extract_seconds);
+    t.hot_extract.push_back(run_extraction(*keep, rcf, alg).extract_seconds);
   return t;
 }
 
@@ -293,15 +308,14 @@ struct PageUse {
   smr::DatabaseStats unbounded;  // the recorded run's statistics
 };
 
-PageUse page_use(const ExtractArgs& a, const PageIndex& index, const smr::Rcf& rcf, bool reduced,
-                 const smr::Extraction& e) {
+PageUse page_use(const ExtractArgs& a, const PageIndex& index, const smr::Rcf& rcf,
+                 const std::string& alg, const smr::Extraction& e) {
   PageUse u;
   for (const smr::TriRef& t : e.triangles) u.needed.insert(index.page_of.at(t.op.value));
   for (std::uint64_t p : u.needed) u.needed_bytes += index.page_size[p];
   const auto big = smr::Database::open(a.db, {std::size_t{1} << 40});
   RecordingSource rec(*big);
-  const smr::Extraction re =
-      reduced ? smr::extract_reduced(rec, rcf) : smr::extract_minimal_surface(rec, rcf);
+  const smr::Extraction re = extract_by(rec, rcf, alg);
   (void)smr::to_mesh(rec, re.triangles);
   std::unordered_set<std::uint64_t> seen;
   auto touch = [&](std::uint64_t p) {
@@ -407,11 +421,13 @@ void print_case(const CaseTimes& t, const PageUse& u) {
 // One view x pixel error x algorithm: times, page use, amplification, raw read.
 json run_case(const ExtractArgs& a, const PageIndex& index, const smr::Rcf& rcf, double px,
               const std::string& alg, const std::string& view) {
-  const bool reduced = alg == "reduced";
+  if (alg != "minimal" && alg != "minimal-pages" && alg != "reduced")
+    smr::throw_input("--algorithms: unknown algorithm '" + alg +
+                     "' (minimal, minimal-pages, reduced)");
   std::fprintf(stderr, "  %s %gpx %s\n", view.c_str(), px, alg.c_str());
   json c = {{"pixel_error", px}, {"algorithm", alg}};
-  const CaseTimes t = time_case(a, rcf, reduced, c);
-  const PageUse u = page_use(a, index, rcf, reduced, t.first.e);
+  const CaseTimes t = time_case(a, rcf, alg, c);
+  const PageUse u = page_use(a, index, rcf, alg, t.first.e);
   c["output"] = output_json(t.first);
   c["io"] = json(t.first.stats);
   c["io"]["pages_read_to_mesh"] = t.first.pages_read_to_mesh;
@@ -600,6 +616,70 @@ json mode_codecs(const CodecArgs& a) {
   return out;
 }
 
+// ---- mode: decode ---------------------------------------------------------------------------
+
+struct DecodeArgs {
+  std::string db;
+  std::uint64_t stride = 1;
+  double min_seconds = 1.0;
+  bool keep = false;  // every page of a pass held until its end: each decoded into fresh memory
+};
+
+json mode_decode(const DecodeArgs& a) {
+  const auto db = smr::Database::open(a.db, {std::size_t{16} << 20});
+  std::vector<smr::storage::Bytes> pages;
+  {
+    const smr::storage::Env env = smr::storage::Env::open_read_only(a.db, smr::kTableNames);
+    const smr::storage::ReadTxn txn = env.read();
+    for (std::uint64_t p = 0; p < db->page_count(); p += a.stride) {
+      const auto v = txn.get(smr::Table::kPages, p);
+      if (!v) smr::throw_internal("decode: page " + std::to_string(p) + " missing");
+      pages.emplace_back(v->begin(), v->end());
+    }
+  }
+  std::vector<smr::storage::ByteView> payloads;
+  std::uint64_t ops = 0, bytes = 0, decoded_bytes = 0;
+  std::array<std::uint64_t, 7> totals{};
+  for (std::size_t i = 0; i < pages.size(); ++i) {
+    payloads.push_back(smr::storage::unseal(pages[i], "pages", std::to_string(i)));
+    const smr::PageSections parts = smr::page_sections(payloads.back(), "page");
+    for (std::size_t k = 0; k < totals.size(); ++k) totals[k] += parts.totals[k];
+    const auto page = smr::decode_page(payloads.back(), db->grid(), db->info(), "page");
+    ops += page->size();
+    bytes += pages[i].size();
+    decoded_bytes += page->memory_bytes();
+  }
+  std::uint64_t sink = 0;
+  const double s = time_passes(a.min_seconds, [&] {
+    std::vector<std::shared_ptr<const smr::DecodedPage>> keep;
+    for (const auto& p : payloads) {
+      keep.push_back(smr::decode_page(p, db->grid(), db->info(), "page"));
+      sink += keep.back()->size();
+      if (!a.keep) keep.clear();
+    }
+  });
+  if (sink == 42) std::fprintf(stderr, " ");
+  std::fprintf(stderr, "bench_db decode %s: %zu pages, %.1f us/page, %.0f ns/op\n", a.db.c_str(),
+               pages.size(), 1e6 * s / double(pages.size()), 1e9 * s / double(ops));
+  json per_op = json::object();  // the page header's totals (page.h), per op
+  const char* names[] = {"vertices", "list", "triangles", "pre", "links", "parents", "children"};
+  for (std::size_t k = 0; k < totals.size(); ++k)
+    per_op[names[k]] = double(totals[k]) / double(ops);
+  return {{"mode", "decode"},
+          {"db", a.db},
+          {"per_op", per_op},
+          {"machine", smr::bench::machine_json()},
+          {"pages", pages.size()},
+          {"ops", ops},
+          {"page_bytes", bytes},
+          {"decoded_bytes_per_page", double(decoded_bytes) / double(pages.size())},
+          {"seconds_per_pass", s},
+          {"us_per_page", 1e6 * s / double(pages.size())},
+          {"ns_per_op", 1e9 * s / double(ops)},
+          {"pages_kept", a.keep},
+          {"input_mb_per_s", double(bytes) / 1e6 / s}};
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -619,7 +699,7 @@ int main(int argc, char** argv) {
   ex->add_option("--pixel-error", ea.pixel_errors, "Screen-space tolerances (comma list)")
       ->delimiter(',')
       ->capture_default_str();
-  ex->add_option("--algorithms", ea.algorithms, "minimal,reduced")
+  ex->add_option("--algorithms", ea.algorithms, "minimal,minimal-pages,reduced")
       ->delimiter(',')
       ->capture_default_str();
   ex->add_option("--cache-mb", ea.cache_mb, "Page cache budget of the measured runs, MiB")
@@ -643,10 +723,20 @@ int main(int argc, char** argv) {
   co->add_option("--min-seconds", ca.min_seconds, "Minimum time per decode measurement")
       ->capture_default_str();
   co->add_option("--name", ca.name, "Dataset name (file names, JSON)")->required();
+  DecodeArgs da;
+  CLI::App* de = app.add_subcommand("decode", "decode_page speed on a database's real pages");
+  de->add_option("db", da.db, "Database file")->required();
+  de->add_option("--stride", da.stride, "Every N-th page")->capture_default_str();
+  de->add_option("--min-seconds", da.min_seconds, "Minimum measuring time")->capture_default_str();
+  de->add_flag("--keep", da.keep,
+               "Hold every decoded page to the end of a pass (fresh memory, as a first view has)");
   CLI11_PARSE(app, argc, argv);
   try {
     json out;
-    if (*ex) {
+    if (*de) {
+      da.stride = std::max<std::uint64_t>(1, da.stride);
+      out = mode_decode(da);
+    } else if (*ex) {
       ea.cold = !no_cold;
       ea.raw = !no_raw;
       ea.repeat = std::max(1, ea.repeat);

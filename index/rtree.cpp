@@ -451,6 +451,7 @@ void RTree::visit(std::uint64_t node_id, std::uint64_t level, std::uint64_t expe
                   " entries, its parent says " + std::to_string(expected_count));
   }
   if (level == 0) {
+    const std::size_t before = hits.size();
     for (const detail::NodeItem& item : node.items) {
       ++stats.entries_tested;
       const Entry e{item.value, item.roi, item.box, item.res, 0};
@@ -459,6 +460,7 @@ void RTree::visit(std::uint64_t node_id, std::uint64_t level, std::uint64_t expe
         ++stats.hits;
       }
     }
+    visitor.leaf_done(static_cast<std::uint32_t>(node_id), hits.size() - before);
     return;
   }
   std::vector<std::uint64_t> entered;

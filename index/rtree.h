@@ -211,6 +211,8 @@ class Visitor {
   virtual ~Visitor() = default;
   virtual bool enter(const Summary& subtree) = 0;
   virtual bool accept(const Entry& entry) = 0;  // weight is 0 for entries read back
+  // After the entries of leaf `leaf` were tested, `accepted` of them accepted.
+  virtual void leaf_done(std::uint32_t /*leaf*/, std::size_t /*accepted*/) {}
 };
 
 struct Hit {

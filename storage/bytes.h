@@ -60,6 +60,11 @@ class ByteReader {
   // is most of a page's records.
   std::uint64_t varint() {
     if (pos_ < in_.size() && in_[pos_] < 0x80) return in_[pos_++];
+    if (pos_ + 1 < in_.size() && in_[pos_ + 1] < 0x80) {  // two bytes, the next most common
+      const std::uint64_t v = (in_[pos_] & 0x7fu) | std::uint64_t{in_[pos_ + 1]} << 7;
+      pos_ += 2;
+      return v;
+    }
     return varint_long();
   }
   std::int64_t svarint() {

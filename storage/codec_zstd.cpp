@@ -56,6 +56,16 @@ Bytes zstd_decompress(ByteView in, std::size_t max_bytes, std::string_view conte
   const std::size_t cap =
       max_bytes == std::numeric_limits<std::size_t>::max() ? max_bytes : max_bytes + 1;
   Bytes out;
+  // A frame that declares a size within 256x the input and is all of the input decodes in one
+  // call straight into its output (the stream below copies through its window: 1.4x the time).
+  if (declared != ZSTD_CONTENTSIZE_UNKNOWN && declared <= 256 * in.size() + 65536 &&
+      ZSTD_findFrameCompressedSize(in.data(), in.size()) == in.size()) {
+    out.resize(std::size_t(declared));
+    const std::size_t n = ZSTD_decompressDCtx(stream, out.data(), out.size(), in.data(), in.size());
+    if (ZSTD_isError(n)) fail(ZSTD_getErrorName(n));
+    if (n != out.size()) fail("frame shorter than it declares");
+    return out;
+  }
   // A declared size within 256x the input (zstd's usual ratios are far below) is trusted for the
   // first allocation, so a page decodes without regrowing; beyond that the output grows as data
   // arrives, so forged frames can at most take 256x their own size.

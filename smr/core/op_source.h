@@ -122,9 +122,11 @@ class OpSource {
   virtual OpPlace place_of(OpId id) const { return {locality(id), OpPlace::kNoIndex}; }
   /// Every op of a place that place_of gave an index in; throws smr::Error like op().
   virtual OpBatch batch(std::uint64_t /*place*/) const { return {}; }
-  /// A hint: these places (in the order given) are read soon. smr/db decodes them on a thread of
-  /// its own meanwhile; replaces the previous hint. Never needed for correctness.
-  virtual void prefetch(std::span<const std::uint64_t> /*places*/) const {}
+  /// A hint: these places (in the order given) are read soon, the first of them next by the reader
+  /// itself. smr/db decodes the others on a thread of its own meanwhile, as many as a quarter of
+  /// its cache holds; replaces the previous hint. Returns how many of `places` the hint took (0:
+  /// the source reads nothing ahead). Never needed for correctness.
+  virtual std::size_t prefetch(std::span<const std::uint64_t> /*places*/) const { return 0; }
 
   /// Triangle `t`; throws smr::Error if it does not exist.
   FragmentTriangle triangle(TriRef t) const;

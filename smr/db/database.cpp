@@ -218,16 +218,22 @@ class Database::Prefetcher {
   std::jthread thread_;                 // last: started once the rest exists, stopped first
 };
 
-void Database::prefetch(std::span<const std::uint64_t> pages) const {
-  if (prefetcher_ == nullptr || pages.empty()) return;
+std::size_t Database::prefetch(std::span<const std::uint64_t> pages) const {
+  if (prefetcher_ == nullptr || pages.empty()) return 0;
   // At most a quarter of the cache ahead, or the pages prefetched first would be evicted by the
   // later ones before they are read. Pages are sized by those decoded so far (256 KiB before).
   const std::uint64_t decoded = pages_read_.load(std::memory_order_relaxed);
   const std::uint64_t page_bytes =
       decoded == 0 ? std::uint64_t{256} << 10 : cache_->stats().bytes_decoded / decoded + 1;
   const std::size_t most = std::min<std::uint64_t>(pages.size(), cache_->budget() / 4 / page_bytes);
-  std::vector<std::uint64_t> missing = uncached(1, pages.first(most), page_count_);
-  if (!missing.empty()) prefetcher_->want(std::move(missing));
+  if (most <= 1) return most;
+  // The first page is the reader's next (it reads it itself): kept first, cached or not.
+  std::vector<std::uint64_t> missing = uncached(1, pages.subspan(1, most - 1), page_count_);
+  if (!missing.empty()) {
+    missing.insert(missing.begin(), pages[0]);
+    prefetcher_->want(std::move(missing));
+  }
+  return most;
 }
 
 // The ids (below `count`) of items of `kind` the cache lacks, in their order.

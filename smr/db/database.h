@@ -60,7 +60,7 @@ class Database final : public OpSource {
     return {l.page, l.slot};
   }
   OpBatch batch(std::uint64_t page) const override;
-  void prefetch(std::span<const std::uint64_t> pages) const override;
+  std::size_t prefetch(std::span<const std::uint64_t> pages) const override;
   /// Asks the OS to read the data pages not in the cache ahead (storage::ReadTxn::will_need): a
   /// cold start then waits on many reads at once instead of one after another.
   void will_need(std::span<const std::uint64_t> pages) const;

@@ -103,16 +103,26 @@ struct LocalTri {
   std::array<std::uint32_t, 3> v;
 };
 
+// The directed edges of PreF's triangles: edge k of triangle i, (a, b), as a << 32 | b at 3i + k.
+template <class Pre>
+void pre_edge_keys(std::span<const Pre> pre_tris, std::vector<std::uint64_t>& keys) {
+  keys.resize(3 * pre_tris.size());
+  for (std::size_t i = 0; i < pre_tris.size(); ++i) {
+    const auto& v = pre_tris[i].v;
+    keys[3 * i] = std::uint64_t{v[0]} << 32 | v[1];
+    keys[3 * i + 1] = std::uint64_t{v[1]} << 32 | v[2];
+    keys[3 * i + 2] = std::uint64_t{v[2]} << 32 | v[0];
+  }
+}
+
 // The link a boundary edge (a, b) of F gets from PreF (Hypermesh, Brown 4.5.1): the first PreF
 // triangle with the same directed edge (it lies on the inside of F's boundary, which is PreF's)
-// and that edge; nullopt when none has it.
-template <class Pre>
-std::optional<EdgeRef> inside_link(std::span<const TriRef> pre, std::span<const Pre> pre_tris,
+// and that edge; nullopt when none has it. `keys`: pre_edge_keys of PreF.
+std::optional<EdgeRef> inside_link(std::span<const TriRef> pre, std::span<const std::uint64_t> keys,
                                    std::uint32_t a, std::uint32_t b) {
-  for (std::size_t i = 0; i < pre_tris.size(); ++i) {
-    for (std::uint8_t k = 0; k < 3; ++k) {
-      if (pre_tris[i].v[k] == a && pre_tris[i].v[(k + 1) % 3] == b) return EdgeRef{pre[i], k};
-    }
+  const std::uint64_t key = std::uint64_t{a} << 32 | b;
+  for (std::size_t j = 0; j < keys.size(); ++j) {
+    if (keys[j] == key) return EdgeRef{pre[j / 3], std::uint8_t(j % 3)};
   }
   return std::nullopt;
 }
@@ -292,6 +302,8 @@ class PageEncoder {
   // gives is not stored.
   void write_links(const Op& op) {
     std::size_t next = 0;
+    std::vector<std::uint64_t> pre_keys;
+    pre_edge_keys(std::span<const PreTriangle>(op.pre_tris), pre_keys);
     for_each_boundary_edge(std::span<const FragmentTriangle>(op.fragment), op.vertices.size(),
                            [&](std::uint32_t tri, std::uint8_t edge) {
                              if (next == op.coarser.size() || op.coarser[next].tri != tri ||
@@ -301,9 +313,8 @@ class PageEncoder {
                              }
                              const CoarserLink& l = op.coarser[next++];
                              const auto& t = op.fragment[tri];
-                             const auto in = inside_link(std::span<const TriRef>(op.pre),
-                                                         std::span<const PreTriangle>(op.pre_tris),
-                                                         t.v[edge], t.v[(edge + 1) % 3]);
+                             const auto in =
+                                 inside_link(op.pre, pre_keys, t.v[edge], t.v[(edge + 1) % 3]);
                              if (in && *in == l.coarser) {
                                w(kEdges).u8(kInside);
                                return;
@@ -531,7 +542,7 @@ class PageDecoder {
       prev_res = res_bits(h.res);
       res_of_.emplace_back(h.id, h.res);
     }
-    std::sort(res_of_.begin(), res_of_.end());
+    if (!std::is_sorted(res_of_.begin(), res_of_.end())) std::sort(res_of_.begin(), res_of_.end());
   }
 
   // A resolution stored as the difference of its bits from `base`'s (res_bits).
@@ -695,6 +706,7 @@ class PageDecoder {
     CoarserLink* links = links_ + links_used_;
     ByteReader& er = in_[kEdges];
     ByteReader& lr = in_[kLinks];
+    pre_edge_keys(op.pre_tris, pre_keys_);
     for_each_boundary_edge(std::span<const LocalTri>(local_tris_), op.vertex_list.size(),
                            [&](std::uint32_t tri, std::uint8_t edge) {
                              const std::uint8_t code = er.u8();
@@ -707,7 +719,7 @@ class PageDecoder {
                              if (code == kInside) {
                                const auto& t = op.fragment[tri];
                                const auto in =
-                                   inside_link(op.pre, op.pre_tris, t.v[edge], t.v[(edge + 1) % 3]);
+                                   inside_link(op.pre, pre_keys_, t.v[edge], t.v[(edge + 1) % 3]);
                                if (!in)
                                  er.fail("a boundary edge without a PreF triangle inside it");
                                l.coarser = *in;
@@ -805,6 +817,7 @@ class PageDecoder {
   std::vector<LocalTri> local_tris_;  // the current op's fragment, in its list's indices
   std::vector<std::pair<std::uint64_t, double>> res_of_;  // the page's ops: id, birth_res
   std::vector<double> child_res_;
+  std::vector<std::uint64_t> pre_keys_;  // the current op's pre_edge_keys
 };
 
 std::shared_ptr<const DecodedPage> decode_page(ByteView page, const QuantGrid& grid,

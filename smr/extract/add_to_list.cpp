@@ -21,6 +21,8 @@ class OpFlags {
   bool completely_finer(const OpView& op) { return get(op, 1); }
   bool in_x(OpId id) const { return (flags_.get(id.value) & kInX) != 0; }
   void add_to_x(OpId id) { flags_[id.value] |= kInX; }
+  void mark_candidate(OpId id) { flags_[id.value] |= kCandidate; }
+  bool candidate(OpId id) const { return (flags_.get(id.value) & kCandidate) != 0; }
   /// X in decreasing id order, `x` being its members in any order.
   void sort_descending(std::vector<OpId>& x) const {
     const std::uint64_t n = flags_.size();
@@ -35,7 +37,7 @@ class OpFlags {
   }
 
  private:
-  static constexpr std::uint8_t kInX = 0x10;
+  static constexpr std::uint8_t kInX = 0x10, kCandidate = 0x20;
   bool get(const OpView& op, int which) {
     std::uint8_t& e = flags_[op.id.value];
     const std::uint8_t known = std::uint8_t(1u << (2 * which)),
@@ -52,20 +54,37 @@ class OpFlags {
   IdTable<std::uint8_t> flags_;
 };
 
+// Hints every place the index leaves candidates on, so that the source reads them on its own
+// thread while the traversal runs; true if the hint took them all. The traversal sweeps upwards
+// from R^0's place, and the hint lists the rest from the top down: the two meet in the middle
+// rather than queueing on the same places. (Hinting only the places waiting ahead of the sweep
+// kept the reader waiting for the prefetcher 2.9 ms of a 15.6 ms 1 px view of the 16385^2
+// database; this way 0.1 ms, and the view took 11.9 ms.)
+bool hint_places(const OpSource& source, std::vector<std::uint64_t> places) {
+  const std::uint64_t first = source.place_of(kBaseOp).place;
+  std::sort(places.begin(), places.end(), std::greater<>());
+  places.erase(std::unique(places.begin(), places.end()), places.end());
+  places.erase(std::remove(places.begin(), places.end(), first), places.end());
+  places.insert(places.begin(), first);  // the reader's own first place (OpSource::prefetch)
+  return source.prefetch(places) == places.size();
+}
+
 std::vector<OpId> traverse(const OpSource& source, const RcfOracle& rcf, bool with_ancestors) {
-  OpFlags flags(source, rcf);
   // With an index, a child outside its conservative candidates (Maheshwari 4.4's query over
   // the ops' boxes) is completely finer and is not fetched; only candidates are read and tested
   // exactly. Without it, the test reads every child of every non-finer op of X: finer ops, in
   // pages the output does not use (4x the needed pages on a 268 M-sample terrain).
-  const bool indexed = dynamic_cast<const RcfIndexedSource*>(&source) != nullptr;
-  IdTable<std::uint8_t> candidates(indexed ? source.op_count() : 0);
   const auto* indexed_source = dynamic_cast<const RcfIndexedSource*>(&source);
+  CandidateOps candidates;
+  bool hinted_all = false;  // the source reads every candidate place ahead: no hints per place
   if (indexed_source != nullptr) {
-    for (OpId id : indexed_source->maybe_not_completely_finer(rcf)) candidates[id.value] = 1;
+    candidates = indexed_source->maybe_not_completely_finer(rcf, true);
+    hinted_all = hint_places(source, candidates.places);
   }
+  OpFlags flags(source, rcf);
+  for (OpId id : candidates.ids) flags.mark_candidate(id);
   const auto ruled_out = [&](OpId c) {  // completely finer by the index alone
-    return indexed_source != nullptr && candidates.get(c.value) == 0;
+    return indexed_source != nullptr && !flags.candidate(c);
   };
   // X is a closure, the same whatever order ops are visited in; they are visited page by page
   // (OpSource::locality), sweeping upwards through the pages and wrapping around, and a child is
@@ -104,10 +123,12 @@ std::vector<OpId> traverse(const OpSource& source, const RcfOracle& rcf, bool wi
     if (next == waiting.end()) next = waiting.begin();
     const std::uint64_t here = *next;
     const std::uint32_t b = *bucket_of.find(here) - 1;
-    ahead.clear();  // the places the sweep visits next, for the source to read meanwhile
-    for (auto it = std::next(next); it != waiting.end() && ahead.size() < kAhead; ++it)
-      ahead.push_back(*it);
-    source.prefetch(ahead);
+    if (!hinted_all) {  // the places the sweep visits next, for the source to read meanwhile
+      ahead.clear();
+      for (auto it = std::next(next); it != waiting.end() && ahead.size() < kAhead; ++it)
+        ahead.push_back(*it);
+      source.prefetch(ahead);
+    }
     // Ops pushed into this bucket while it is processed join it (buckets may grow: re-indexed).
     while (!buckets[b].empty()) {
       const Pending p = buckets[b].back();

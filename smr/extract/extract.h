@@ -52,6 +52,12 @@ struct ExpansionOptions {
   bool fronts = true;
 };
 
+/// An index's conservative answer to "which ops may be not completely finer than the RCF".
+struct CandidateOps {
+  std::vector<OpId> ids;
+  std::vector<std::uint64_t> places;  // the ids' places (OpSource::locality), each once
+};
+
 /// A source that answers "which ops are not completely finer than the RCF" from an index instead
 /// of a scan of every op (smr/query/indexed_source.h: a database's R-tree over ROI boxes,
 /// Maheshwari 4.4).
@@ -62,8 +68,10 @@ class RcfIndexedSource {
   /// added): reduced extraction's X.
   virtual std::vector<OpId> not_completely_finer(const RcfOracle& rcf) const = 0;
   /// A superset of not_completely_finer() found without reading ops (a conservative test on
-  /// index entries), so that AddToList can rule out children without fetching them.
-  virtual std::vector<OpId> maybe_not_completely_finer(const RcfOracle& rcf) const = 0;
+  /// index entries), so that AddToList can rule out children without fetching them, and the
+  /// places they lie on. `read_ahead`: the caller reads those places next, starting at R^0's,
+  /// and the source may start reading them (OpSource::prefetch) before it returns.
+  virtual CandidateOps maybe_not_completely_finer(const RcfOracle& rcf, bool read_ahead) const = 0;
   /// Whether maybe_not_completely_finer may run on another thread while the source is read (a
   /// session then looks ahead on a second core).
   virtual bool concurrent_queries() const { return false; }

@@ -157,7 +157,8 @@ class Session::Refiner {
     // completely finer and is not read (reading them all decodes pages the mesh never uses).
     if (const auto* indexed = dynamic_cast<const RcfIndexedSource*>(&s_.source_)) {
       indexed_ = true;
-      for (OpId id : indexed->maybe_not_completely_finer(rcf_)) marks_.set(id.value, kCandidate);
+      for (OpId id : indexed->maybe_not_completely_finer(rcf_, false).ids)
+        marks_.set(id.value, kCandidate);
     }
   }
 
@@ -325,7 +326,8 @@ std::shared_ptr<const IdMap<std::uint8_t>> candidate_ids(const RcfIndexedSource&
   const double scale = pose.scale > 0.0 ? pose.scale : 1.0;
   auto ids = std::make_shared<IdMap<std::uint8_t>>();
   for (OpId o :
-       indexed.maybe_not_completely_finer(MovedIndexRcf(rcf, Motion{margin, margin / scale})))
+       indexed.maybe_not_completely_finer(MovedIndexRcf(rcf, Motion{margin, margin / scale}), false)
+           .ids)
     ids->insert(o.value);
   return ids;
 }

@@ -15,7 +15,7 @@ namespace {
 // Brown Lemma 5.2.1 through the R-tree: a subtree is skipped when every op in it is completely
 // finer (Rcf::region_completely_finer on the union of the ops' own boxes, at the subtree's least
 // birth_res: conservative and monotone); an entry passing its box test is then judged exactly.
-class RcfVisitor final : public index::Visitor {
+class RcfVisitor : public index::Visitor {
  public:
   RcfVisitor(const RcfOracle& rcf, const CrmrInfo& info) : rcf_(rcf), info_(info) {}
   bool enter(const index::Summary& s) override {
@@ -30,6 +30,25 @@ class RcfVisitor final : public index::Visitor {
   const CrmrInfo& info_;
 };
 
+// The query with its pages hinted to the database's prefetcher as their leaves are found, so that
+// decoding starts while the query runs (about 2 ms of a warm 1 px view of the 16385^2 database),
+// every 4 leaves, until a hint no longer takes them all (a quarter of the cache).
+class ReadAheadVisitor final : public RcfVisitor {
+ public:
+  ReadAheadVisitor(const RcfOracle& rcf, const Database& db, std::uint64_t first)
+      : RcfVisitor(rcf, db.info()), db_(db), pages_{first} {}
+  void leaf_done(std::uint32_t leaf, std::size_t accepted) override {
+    if (accepted == 0 || stopped_ || leaf == pages_[0]) return;
+    pages_.push_back(leaf);
+    if (pages_.size() % 4 == 1) stopped_ = db_.prefetch(pages_) < pages_.size();
+  }
+
+ private:
+  const Database& db_;
+  std::vector<std::uint64_t> pages_;  // the reader's first page, then those found
+  bool stopped_ = false;
+};
+
 }  // namespace
 
 std::vector<index::Hit> IndexedSource::rcf_hits(const RcfOracle& rcf) const {
@@ -37,15 +56,22 @@ std::vector<index::Hit> IndexedSource::rcf_hits(const RcfOracle& rcf) const {
   return db_.rtree_query(visitor);
 }
 
-std::vector<OpId> IndexedSource::maybe_not_completely_finer(const RcfOracle& rcf) const {
-  std::vector<OpId> ids;
-  std::vector<std::uint64_t> pages;
-  for (const index::Hit& h : rcf_hits(rcf)) {
-    ids.push_back(OpId{h.id});
-    if (pages.empty() || pages.back() != h.leaf) pages.push_back(h.leaf);
+CandidateOps IndexedSource::maybe_not_completely_finer(const RcfOracle& rcf,
+                                                       bool read_ahead) const {
+  CandidateOps c;
+  std::vector<index::Hit> hits;
+  if (read_ahead) {
+    ReadAheadVisitor visitor(rcf, db_, db_.place_of(kBaseOp).place);
+    hits = db_.rtree_query(visitor);
+  } else {
+    hits = rcf_hits(rcf);
   }
-  db_.will_need(pages);  // the pages the candidates are on, read ahead if not in the cache
-  return ids;
+  for (const index::Hit& h : hits) {  // grouped by leaf: a leaf's page is its number
+    c.ids.push_back(OpId{h.id});
+    if (c.places.empty() || c.places.back() != h.leaf) c.places.push_back(h.leaf);
+  }
+  db_.will_need(c.places);  // the pages the candidates are on, read ahead if not in the cache
+  return c;
 }
 
 std::vector<OpId> IndexedSource::not_completely_finer(const RcfOracle& rcf) const {

@@ -31,14 +31,17 @@ class IndexedSource final : public OpSource, public RcfIndexedSource {
   }
   OpPlace place_of(OpId id) const override { return db_.place_of(id); }
   OpBatch batch(std::uint64_t page) const override { return db_.batch(page); }
-  void prefetch(std::span<const std::uint64_t> pages) const override { db_.prefetch(pages); }
+  std::size_t prefetch(std::span<const std::uint64_t> pages) const override {
+    return db_.prefetch(pages);
+  }
 
   /// Reduced extraction's X from the R-tree: every op not completely finer than `rcf`. Reads
   /// the R-tree nodes the query enters and the data pages of the entries it accepts.
   std::vector<OpId> not_completely_finer(const RcfOracle& rcf) const override;
   /// The entries the R-tree query accepts (a superset of not_completely_finer), reading no page
-  /// (it asks the OS to read ahead those of theirs the cache lacks: Database::will_need).
-  std::vector<OpId> maybe_not_completely_finer(const RcfOracle& rcf) const override;
+  /// (it asks the OS to read ahead those of theirs the cache lacks: Database::will_need; with
+  /// `read_ahead`, the database's prefetcher too, as the query finds them).
+  CandidateOps maybe_not_completely_finer(const RcfOracle& rcf, bool read_ahead) const override;
   /// The database is safe to read from several threads.
   bool concurrent_queries() const override { return true; }
   /// The R-tree query behind both: accepted entries, grouped by leaf (= data page).
