@@ -212,7 +212,9 @@ SelectiveRefinement::Select SelectiveRefinement::select_by(const NodeCriterion& 
     const SelectiveIndex::Node& n = index_->nodes()[node];
     const Sphere sphere{pos_[n.vertex], double(n.radius)};
     if (c.frustum && sphere_outside(c.camera, sphere)) return false;
-    if (c.backface && backfacing(c.camera, sphere, n.cone)) return false;
+    if (c.backface &&
+        backfacing(c.camera, c.backface_over_sphere ? sphere : Sphere{sphere.center, 0.0}, n.cone))
+      return false;
     const double d = std::max(glm::length(sphere.center - c.camera.eye) - sphere.radius, 1e-12);
     return op.error * c.camera.focal_px() / d > c.pixel_error;
   };

@@ -175,12 +175,17 @@ class SplitMesh {
 /// Hoppe 1997's per-vertex criterion (the one Kim & Lee's experiments and OpenMesh's VDPM use),
 /// over a node's dual piece: an active vertex is selected unless its sphere (its position, radius
 /// r(n)) is outside the view frustum, or (backface) the normal cone of its dual piece faces away
-/// from the eye over that sphere, or its split op's error projects to at most pixel_error at the
-/// sphere's nearest distance to the eye.
+/// from the eye, or its split op's error projects to at most pixel_error at the sphere's nearest
+/// distance to the eye.
 struct NodeCriterion {
   Camera camera;
   bool frustum = true, backface = true;
   double pixel_error = 1.0;
+  /// Where the back-face test looks from the eye: over the whole sphere (true: conservative, the
+  /// cone faces away from every point of it), or at the vertex alone, as Hoppe 1997 section 4.2
+  /// and OpenMesh's VDPM make it (false: not conservative; a vertex near the silhouette can be
+  /// judged facing away while part of its dual piece faces the eye).
+  bool backface_over_sphere = true;
 };
 
 struct SelectiveStats {

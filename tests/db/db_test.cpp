@@ -9,7 +9,9 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <set>
 #include <thread>
+#include <tuple>
 #include <unordered_map>
 
 #include "base/error.h"
@@ -175,6 +177,55 @@ TEST(Database, PrefetchingChangesNothingAndDecodesEachPageOnce) {
     // Timing decides which prefetched page a reader evicts, so allow a tenth more reads than
     // without prefetching (a lookahead past the cache would thrash: twice as many or more).
     EXPECT_LE(small_on.stats.pages_read * 10, small_off.stats.pages_read * 11);
+  }
+}
+
+TEST(Database, ViewsReadAheadOnlyTheIndexsCandidatePages) {
+  // A view's AddToList hands the R-tree's candidate pages to the prefetcher, during the query and
+  // after it, top down (add_to_list.cpp, hint_places): the same X, triangles and mesh as without
+  // prefetching; every page decoded is a candidate page and none is decoded twice. Small pages,
+  // so that a view leaves most of them out.
+  const test::Dataset& d = test::dataset(test::dataset_names().front());
+  TempDir dir;
+  const std::string path = dir.file("model.smrdb");
+  Crmr m = d.crmr;
+  WriteOptions wo;
+  wo.page_bytes = 4096 - 16;
+  const WriteReport w = write_database(m, path, wo);
+  int views = 0;
+  std::uint64_t read_ahead = 0;
+  for (const test::NamedSpec& named : test::rcf_spread(m.header)) {
+    if (!named.spec.camera) continue;
+    SCOPED_TRACE(named.name);
+    const Rcf rcf = make_rcf(named.spec, ModelKind::kTerrain, &d.dem);
+    const auto run = [&](bool prefetch) {
+      const auto db = Database::open(path, {std::size_t{1} << 30, prefetch});
+      const IndexedSource source(*db);
+      const CandidateOps c = source.maybe_not_completely_finer(rcf, false);
+      std::set<std::uint64_t> places;
+      for (OpId id : c.ids) places.insert(source.locality(id));
+      EXPECT_EQ(std::set<std::uint64_t>(c.places.begin(), c.places.end()), places);
+      EXPECT_EQ(places.size(), c.places.size());  // each once
+      ExpansionOptions o;
+      o.fronts = false;
+      Extraction e = extract_minimal_surface(source, rcf, o);
+      TriangleMesh mesh = to_mesh(source, e.triangles);
+      return std::tuple{std::move(e), std::move(mesh), db->stats(), places.size() + 1};
+    };
+    const auto [off, off_mesh, off_stats, off_places] = run(false);
+    const auto [on, on_mesh, on_stats, on_places] = run(true);
+    EXPECT_EQ(on.x, off.x);
+    EXPECT_EQ(on.triangles, off.triangles);
+    EXPECT_EQ(on_mesh.triangles, off_mesh.triangles);
+    EXPECT_EQ(on_mesh.positions, off_mesh.positions);
+    EXPECT_GE(on_stats.pages_read, off_stats.pages_read);
+    EXPECT_LE(on_stats.pages_read, on_places);  // candidate pages, and R^0's
+    if (off_stats.pages_read * 2 < w.pages) ++views;
+    read_ahead += on_stats.pages_prefetched;
+  }
+  EXPECT_GT(views, 0);  // some view left most pages out
+  if (std::thread::hardware_concurrency() > 1) {
+    EXPECT_GT(read_ahead, 0u);
   }
 }
 

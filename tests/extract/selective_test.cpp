@@ -285,6 +285,40 @@ TEST_P(SelectiveMeshTest, ViewDependentCutsAreManifoldDualPieceMeshesThatMeetThe
   RecordProperty("forced_splits", std::to_string(forced));
 }
 
+TEST_P(SelectiveMeshTest, NormalConesHoldEverySourceNormalBelowThemAndBeatTheUnion) {
+  // Hoppe 1997 section 4.2: a node's cone bounds the normals of the source triangles at the
+  // source vertices below it (what the back-face test may cull on), checked for every triangle,
+  // corner and ancestor; and it is never wider than the union of its children's cones.
+  const Built& b = built(GetParam());
+  const SelectiveIndex& ix = *b.index;
+  const std::vector<Vec3>& pos = ix.source_positions();
+  ASSERT_EQ(pos.size(), b.source.positions.size());
+  std::uint64_t checked = 0;
+  for (const Tri& t : b.source.triangles) {
+    const Vec3 n = triangle_normal(pos[t[0]], pos[t[1]], pos[t[2]]);
+    if (!(glm::length(n) > 0.5)) continue;  // degenerate: no normal to bound
+    for (std::uint32_t x : t) {
+      for (std::uint32_t node = ix.leaf(x); node != SelectiveIndex::kNone;
+           node = ix.nodes()[node].parent) {
+        const NormalCone& c = ix.nodes()[node].cone;
+        if (c.half_angle >= M_PI) continue;
+        ASSERT_LE(std::acos(std::clamp(glm::dot(n, c.axis), -1.0, 1.0)),
+                  c.half_angle + 1e-7)  // acos near 1: ~1e-8
+            << "node " << node << " above vertex " << x;
+        ++checked;
+      }
+    }
+  }
+  EXPECT_GT(checked, 3 * b.source.triangles.size());
+  std::uint64_t narrower = 0;
+  for (const SelectiveIndex::Split& s : ix.splits()) {
+    const NormalCone joined = cone_union(ix.nodes()[s.child_t].cone, ix.nodes()[s.child_u].cone);
+    EXPECT_LE(ix.nodes()[s.node].cone.half_angle, joined.half_angle);
+    narrower += ix.nodes()[s.node].cone.half_angle < joined.half_angle - 1e-6;
+  }
+  EXPECT_GT(narrower, 0u);
+}
+
 TEST_P(SelectiveMeshTest, CollapsingEverySplitReturnsToTheBaseMesh) {
   const Built& b = built(GetParam());
   RcfSpec spec = camera_spec(b.crmr.info(), Vec3{1, 0.3, 0.2}, 1.5, 1.0);
