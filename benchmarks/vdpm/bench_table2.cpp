@@ -13,8 +13,9 @@
 //       op instead),
 // at equal selection criteria (the same frustum and back-face tests and a tolerance of 1e-3 px:
 // refine everything visible, Kim & Lee's criteria) and at equal measured error (VDPM at
-// --tau px; ours at the largest tau of a ladder whose measured two-sided p99 -- and, separately,
-// max -- is within VDPM's, screen_error.h). Prints one JSON object.
+// --tau px; ours, with the sphere back-face test, at the largest tau of a ladder whose measured
+// two-sided p99 -- and, separately, max -- is within VDPM's, screen_error.h). Prints one JSON
+// object.
 #include <cmath>
 #include <cstdint>
 #include <fstream>
