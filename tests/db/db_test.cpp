@@ -183,7 +183,7 @@ TEST(Database, PrefetchingChangesNothingAndDecodesEachPageOnce) {
 TEST(Database, ViewsReadAheadOnlyTheIndexsCandidatePages) {
   // A view's AddToList hands the R-tree's candidate pages to the prefetcher, during the query and
   // after it, top down (add_to_list.cpp, hint_places): the same X, triangles and mesh as without
-  // prefetching; every page decoded is a candidate page and none is decoded twice. Small pages,
+  // prefetching, and no more page decodes than the candidate pages (and R^0's). Small pages,
   // so that a view leaves most of them out.
   const test::Dataset& d = test::dataset(test::dataset_names().front());
   TempDir dir;
