@@ -149,11 +149,11 @@ class Database::Prefetcher {
     thread_.request_stop();
     wake_.notify_all();
   }
-  void want(std::vector<std::uint64_t> pages) {
+  void want(std::vector<std::uint64_t> pages) {  // in this order
     {
       std::lock_guard lock(mutex_);
       queue_ = std::move(pages);
-      next_ = queue_.size() > 1 ? 1 : 0;  // the first one is the reader's next: it decodes it
+      next_ = 0;
     }
     wake_.notify_one();
   }
@@ -226,13 +226,10 @@ std::size_t Database::prefetch(std::span<const std::uint64_t> pages) const {
   const std::uint64_t page_bytes =
       decoded == 0 ? std::uint64_t{256} << 10 : cache_->stats().bytes_decoded / decoded + 1;
   const std::size_t most = std::min<std::uint64_t>(pages.size(), cache_->budget() / 4 / page_bytes);
+  // The first page is the reader's next: it reads it itself.
   if (most <= 1) return most;
-  // The first page is the reader's next (it reads it itself): kept first, cached or not.
   std::vector<std::uint64_t> missing = uncached(1, pages.subspan(1, most - 1), page_count_);
-  if (!missing.empty()) {
-    missing.insert(missing.begin(), pages[0]);
-    prefetcher_->want(std::move(missing));
-  }
+  if (!missing.empty()) prefetcher_->want(std::move(missing));
   return most;
 }
 
