@@ -2,7 +2,9 @@
 // figure run_extract_vs_martini.sh sets beside @mapbox/martini's getMesh. Prints one JSON object.
 //
 // Cases, each with minimal surface (Brown 5.1; "minimal-pages": its triangles from the set formula,
-// ExpansionOptions::fronts false) and reduced extraction (Brown 5.2; terrain only):
+// ExpansionOptions::fronts false), reduced extraction (Brown 5.2; terrain only) and, for the
+// constant-level case, "level-cut" (smr/query/level_cut.h: what `smrdb extract --floor` runs; its
+// mesh comes straight from the pages, no to_mesh; --verify compares it with minimal-pages'):
 //   full     an RCF of constant object-space level 1 (`smrdb extract --floor 1`): the whole
 //            finest mesh M^m, every data page read;
 //   oblique  a 1 px screen-space view (bench_db's named `oblique` camera relative to the bounds,
@@ -25,8 +27,10 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -40,6 +44,7 @@
 #include "smr/extract/extract.h"
 #include "smr/io/mesh_writer.h"
 #include "smr/query/indexed_source.h"
+#include "smr/query/level_cut.h"
 #include "smr/rcf/spec.h"
 #include "tools/report_json.h"
 
@@ -53,7 +58,7 @@ using smr::bench::seconds_since;
 struct Args {
   std::string db, ply, view = "oblique", eye, target, viewport = "1024x768";
   std::vector<std::string> cases{"full", "oblique"};
-  std::vector<std::string> algorithms{"minimal", "minimal-pages", "reduced"};
+  std::vector<std::string> algorithms{"minimal", "minimal-pages", "reduced", "level-cut"};
   double pixel_error = 1.0, fov = 60.0;
   std::uint64_t cache_mb = 1024;
   int repeat = 5;
@@ -87,8 +92,61 @@ struct Run {
   std::string tiling;  // "ok" or the first failure; empty when not checked
 };
 
+// A mesh's triangles as position triples, each rotated to start at its least corner, sorted: equal
+// for two meshes with the same triangles in any order, whatever their vertex numbering.
+std::vector<std::array<smr::Vec3, 3>> canonical_triangles(const smr::TriangleMesh& m) {
+  const auto less = [](const smr::Vec3& a, const smr::Vec3& b) {
+    return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z);
+  };
+  std::vector<std::array<smr::Vec3, 3>> out;
+  for (const auto& t : m.triangles) {
+    std::array<smr::Vec3, 3> p{m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]};
+    const auto first = std::min_element(p.begin(), p.end(), less);
+    std::rotate(p.begin(), first, p.end());
+    out.push_back(p);
+  }
+  std::sort(out.begin(), out.end(), [&](const auto& a, const auto& b) {
+    return std::lexicographical_compare(a.begin(), a.end(), b.begin(), b.end(), less);
+  });
+  return out;
+}
+
+// The level cut (smr/query/level_cut.h) of a constant-level case; `verify`: the same triangles as
+// the minimal surface's set formula.
+Run run_level_cut(const smr::Database& db, const smr::Rcf& rcf, double level,
+                  const std::string& ply, bool verify) {
+  Run r;
+  const json before = db.stats();
+  const std::uint64_t t0 = now_ns();
+  smr::LevelCutStats cs;
+  const std::optional<smr::TriangleMesh> mesh = smr::extract_level_cut(db, level, 0, &cs);
+  r.extract = seconds_since(t0);
+  if (!mesh) smr::throw_input(db.path() + ": void triangles: the level cut does not apply");
+  r.io = io_delta(before, db.stats());
+  if (!ply.empty()) {
+    const std::uint64_t t1 = now_ns();
+    smr::write_mesh(ply, *mesh);
+    r.write = seconds_since(t1);
+    r.ply_bytes = std::filesystem::file_size(ply);
+  }
+  r.stats.x = r.stats.x_plus = cs.x;
+  r.stats.triangles = cs.triangles;
+  r.stats.extract_seconds = r.extract;
+  r.vertices = mesh->positions.size();
+  r.triangles = mesh->triangles.size();
+  if (verify) {
+    const smr::IndexedSource source(db);
+    const smr::Extraction e = smr::extract_minimal_surface(source, rcf, {.fronts = false});
+    r.tiling = canonical_triangles(*mesh) == canonical_triangles(smr::to_mesh(db, e.triangles))
+                   ? "ok"
+                   : "the level cut differs from the minimal surface's set formula";
+  }
+  return r;
+}
+
 Run run_once(const smr::Database& db, const smr::Rcf& rcf, const std::string& alg,
-             const std::string& ply, bool verify) {
+             const std::string& ply, bool verify, std::optional<double> level) {
+  if (alg == "level-cut") return run_level_cut(db, rcf, *level, ply, verify);
   Run r;
   const json before = db.stats();
   std::uint64_t t0 = now_ns();
@@ -172,15 +230,16 @@ json cache_json(const json& io, std::uint64_t cache_mb) {
       {"evictions", io.value("cache_evictions", std::uint64_t{0})}};
 }
 
-json run_case(const Args& a, const std::string& name, const smr::Rcf& rcf, const std::string& alg) {
+json run_case(const Args& a, const std::string& name, const smr::Rcf& rcf, const std::string& alg,
+              std::optional<double> level) {
   std::vector<Run> warm, hot;
   std::vector<double> open;
   for (int i = 0; i < a.repeat; ++i) {
     const std::uint64_t t0 = now_ns();
     const auto db = smr::Database::open(a.db, {std::size_t(a.cache_mb) << 20});
     open.push_back(seconds_since(t0));
-    warm.push_back(run_once(*db, rcf, alg, a.ply, a.verify && i == 0));
-    hot.push_back(run_once(*db, rcf, alg, a.ply, false));
+    warm.push_back(run_once(*db, rcf, alg, a.ply, a.verify && i == 0, level));
+    hot.push_back(run_once(*db, rcf, alg, a.ply, false, level));
   }
   const Run& first = warm.front();
   const smr::ExtractStats& s = first.stats;
@@ -280,10 +339,12 @@ json run(const Args& a) {
     smr::validate(spec);
     const smr::Rcf rcf = smr::make_rcf(spec, info.kind, nullptr);
     for (const std::string& alg : a.algorithms) {
-      if (alg != "minimal" && alg != "minimal-pages" && alg != "reduced")
+      if (alg != "minimal" && alg != "minimal-pages" && alg != "reduced" && alg != "level-cut")
         smr::throw_input("--algorithms: unknown algorithm '" + alg + "'");
       if (alg == "reduced" && info.kind != smr::ModelKind::kTerrain) continue;
-      cases.push_back(run_case(a, name, rcf, alg));
+      const std::optional<double> level = smr::constant_level(spec);
+      if (alg == "level-cut" && !level) continue;  // a constant level only
+      cases.push_back(run_case(a, name, rcf, alg, level));
     }
   }
   out["cases"] = cases;
@@ -300,7 +361,8 @@ int main(int argc, char** argv) {
   Args a;
   app.add_option("db", a.db, "Database file")->required();
   app.add_option("--cases", a.cases, "full,oblique")->delimiter(',')->capture_default_str();
-  app.add_option("--algorithms", a.algorithms, "minimal,minimal-pages,reduced")
+  app.add_option("--algorithms", a.algorithms,
+                 "minimal,minimal-pages,reduced,level-cut (the last: constant-level cases only)")
       ->delimiter(',')
       ->capture_default_str();
   app.add_option("--cache-mb", a.cache_mb, "Decoded-page cache budget, MiB")->capture_default_str();

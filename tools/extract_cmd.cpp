@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "base/error.h"
+#include "smr/core/clock.h"
 #include "smr/core/invariants.h"
 #include "smr/db/database.h"
 #include "smr/extract/extract.h"
@@ -17,6 +18,7 @@
 #include "smr/io/mesh_writer.h"
 #include "smr/io/render.h"
 #include "smr/query/indexed_source.h"
+#include "smr/query/level_cut.h"
 #include "tools/commands.h"
 #include "tools/parse.h"
 #include "tools/report_json.h"
@@ -224,6 +226,25 @@ nlohmann::json run_extract(const Database& db, const Heightfield* dem, const Rcf
     throw_input("--critical-lines needs the source DEM: pass --dem");
   const Rcf rcf = make_rcf(spec, db.info(), dem);
   if (a.algorithm == "selective") return run_selective(db, rcf, a);
+  // A constant level alone (--floor): the level cut, from the pages (smr/query/level_cut.h).
+  const std::optional<double> level = constant_level(spec);
+  if (level && a.algorithm == "minimal" && a.max_triangles == 0 && a.max_ms <= 0.0 && !verify) {
+    LevelCutStats cut;
+    const auto t0 = Clock::now();
+    if (std::optional<TriangleMesh> mesh = extract_level_cut(db, *level, 0, &cut)) {
+      ExtractStats stats;
+      stats.extract_seconds = seconds_since(t0);
+      stats.x = stats.x_plus = stats.ops_visited = cut.x;
+      stats.triangles = cut.triangles;
+      report["rcf"] = rcf.describe();
+      report["extraction"] = stats;
+      report["extraction"]["algorithm"] = a.algorithm;
+      report["extraction"]["order"] = "level cut (pages)";
+      report["io"] = db.stats();
+      write_output(db, *mesh, a, report);
+      return report;
+    }  // a void triangle: the general path
+  }
   ExpansionOptions expansion;
   expansion.max_held_bytes = a.held_mb << 20;
   expansion.fronts = a.order == "fronts";

@@ -346,6 +346,21 @@ const Database::CacheItem& Database::memoized(std::uint64_t kind, Table table,
   return *m.item;
 }
 
+Bytes Database::page_bytes(std::uint64_t page) const {
+  const std::string name = std::string(table_name(Table::kPages)) + "/" + key_text(page);
+  Bytes raw;
+  naming_file(path(), [&] {
+    const storage::ReadTxn txn = env_->read();
+    const auto value = txn.get(Table::kPages, page);
+    if (!value) throw Error(ErrorKind::kCorrupt, path() + ": " + name + " is missing");
+    const ByteView payload = storage::unseal(*value, table_name(Table::kPages), key_text(page));
+    raw.assign(payload.begin(), payload.end());
+  });
+  pages_read_.fetch_add(1);
+  page_bytes_read_.fetch_add(raw.size());
+  return raw;
+}
+
 storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table,
                                                                std::uint64_t id) const {
   storage::PageCache<CacheItem>::Loaded loaded;

@@ -76,6 +76,9 @@ class Database final : public OpSource {
   DatabaseStats stats() const;
   /// Decoded ops of data page `page` (through the cache).
   std::shared_ptr<const DecodedPage> page(std::uint64_t page) const;
+  /// The stored bytes of data page `page`, unsealed (checksum checked), read past the cache: for
+  /// readers that take only part of a page (cut_page). Counted in stats() as a page read.
+  storage::Bytes page_bytes(std::uint64_t page) const;
   /// Where the op locators say op `id` is: its data page and slot. Reads no page.
   std::pair<std::uint64_t, std::uint32_t> locator(OpId id) const {
     const Locator l = locate(id);

@@ -432,6 +432,77 @@ class PageDecoder {
     return page;
   }
 
+  // The cut of the page below `below` (page.h, cut_page); false if it has a void triangle.
+  bool cut(double below, PageCut& out) {
+    records_ = storage::zstd_decompress(packed_, kMaxRecordBytes, context_);
+    geometry_ = storage::decode_geometry(codec_, geo_bytes_, context_);
+    open_streams();
+    check_totals();
+    out.vertex_ids.clear();
+    out.positions.clear();
+    out.triangles.clear();
+    out.values.clear();
+    out.ops_in_x = 0;
+    const auto n = std::size_t(totals_.vertices);
+    page_ids_.resize(n);
+    read_vertex_ids([&](std::size_t i, std::uint64_t id, const auto&) { page_ids_[i] = id; });
+    // Below 1 or more every op is in X (level_cut.h): no killer's resolution is needed, nor read.
+    const bool every_op = below > 1.0;
+    read_heads(!every_op);
+    stamp_.assign(n, 0);
+    used_.assign(n, 0);
+    std::uint64_t parents = 0, pre = 0;
+    for (const Head& h : heads_) {
+      if (h.vertices == 0) fail("an op without vertices");
+      if (h.triangles == 0 && h.pre == 0) fail("an op without triangles");
+      const bool in_x = h.id == kBaseOp.value || h.res < below;
+      out.ops_in_x += in_x ? 1 : 0;
+      cut_list_.resize(h.vertices);
+      read_list(h.vertices, cut_list_.data());
+      take(h.vertices, list_used_, totals_.list, "vertex-list entries");
+      cut_children_.resize(h.children);
+      take(h.children, ids_used_, totals_.children, "children");
+      read_children(h, cut_children_.data());
+      child_res_.assign(h.children, 1.0);
+      for (std::size_t i = 0; i < h.children && !every_op; ++i)
+        child_res_[i] = child_res(cut_children_[i].value, h.res);
+      take(h.triangles, face_, totals_.triangles, "triangles");
+      ByteReader& kr = in_[kKillers];
+      for (std::size_t i = 0; i < h.triangles; ++i) {
+        std::array<std::uint32_t, 3> c{};
+        for (std::uint32_t& k : c) k = cut_list_[local_corner(in_[kCorners], h.vertices)];
+        const std::uint64_t killer = kr.varint();
+        if (killer > h.children) kr.fail("killer out of range");
+        if (!in_x || (killer != 0 && child_res_[killer - 1] < below)) continue;
+        for (std::uint32_t& k : c) {
+          std::uint32_t& u = used_[k];
+          if (u == 0) {
+            out.vertex_ids.push_back(page_ids_[k]);
+            out.positions.push_back(grid_.dequantize(geometry_.positions[k]));
+            u = std::uint32_t(out.vertex_ids.size());
+          }
+          k = u - 1;
+        }
+        out.triangles.push_back(c);
+        out.values.push_back(killer == 0 ? 1.0f : float(child_res_[killer - 1]));
+      }
+      // Fragment voids, then PreF voids (the order encode_page writes them in).
+      if (in_[kVoids].varint() != 0 || in_[kVoids].varint() != 0) return false;
+      parents += h.parents;
+      pre += h.pre;
+    }
+    for (Stream s : {kOpHeads, kResolutions, kVertexIds, kLists, kCorners, kChildren, kKillers,
+                     kVoids}) {
+      if (!in_[s].at_end()) in_[s].fail("bytes no op reads");
+    }
+    if (!every_op && !in_[kChildRes].at_end()) in_[kChildRes].fail("bytes no op reads");
+    if (fresh_ != totals_.vertices) fail("vertices no op lists");
+    if (list_used_ != totals_.list || face_ != totals_.triangles || ids_used_ != totals_.children ||
+        parents != totals_.parents || pre != totals_.pre)
+      fail("the page's totals disagree with its records");
+    return true;
+  }
+
   std::vector<std::pair<std::string, Bytes>> streams() {
     records_ = storage::zstd_decompress(packed_, kMaxRecordBytes, context_);
     open_streams();
@@ -525,7 +596,8 @@ class PageDecoder {
     double res = 0.0;
   };
 
-  void read_heads() {
+  // `by_id`: keeps the ops' resolutions by id too (res_of_), for their parents on the page.
+  void read_heads(bool by_id = true) {
     heads_.resize(op_count_);  // op_count_ <= the heads' bytes (check_totals)
     ByteReader& r = in_[kOpHeads];
     std::uint64_t prev = 0;
@@ -540,7 +612,7 @@ class PageDecoder {
       if (h.fresh > h.vertices) r.fail("implausible new vertex count");
       h.res = read_res(in_[kResolutions], prev_res);
       prev_res = res_bits(h.res);
-      res_of_.emplace_back(h.id, h.res);
+      if (by_id) res_of_.emplace_back(h.id, h.res);
     }
     if (!std::is_sorted(res_of_.begin(), res_of_.end())) std::sort(res_of_.begin(), res_of_.end());
   }
@@ -554,6 +626,14 @@ class PageDecoder {
   }
 
   void read_vertices() {
+    read_vertex_ids([&](std::size_t i, std::uint64_t id, const std::array<std::int32_t, 3>& q) {
+      vertices_[i] = {VertexId(id), grid_.dequantize(q)};
+    });
+  }
+
+  // f(i, id, quantized position) for each page vertex i, in table order.
+  template <class F>
+  void read_vertex_ids(F&& f) {
     ByteReader& r = in_[kVertexIds];
     const std::uint8_t mode = r.u8();
     if (mode > kGridKeys) r.fail("unknown vertex id code");
@@ -572,7 +652,7 @@ class PageDecoder {
       } else {
         prev += std::uint64_t(r.svarint());
       }
-      vertices_[i] = {VertexId(prev), grid_.dequantize(q)};
+      f(i, prev, q);
     }
   }
 
@@ -589,18 +669,8 @@ class PageDecoder {
     op.id = OpId(h.id);
     op.birth_res = h.res;
     op.error = stored_op_error(info_, op.birth_res);
-    const std::uint32_t stamp = ++op_stamp_;
     const std::size_t list_at = take(h.vertices, list_used_, totals_.list, "vertex-list entries");
-    ByteReader& r = in_[kLists];
-    for (std::size_t i = 0; i < h.vertices; ++i) {
-      const std::uint64_t code = r.varint();
-      if (code == 0 && fresh_ == totals_.vertices) r.fail("more vertices than the page's total");
-      if (code > fresh_) r.fail("vertex index out of range");
-      const auto p = std::uint32_t(code == 0 ? fresh_++ : fresh_ - code);
-      if (stamp_[p] == stamp) r.fail("an op lists a vertex twice");
-      stamp_[p] = stamp;
-      list_[list_at + i] = p;
-    }
+    read_list(h.vertices, list_ + list_at);
     op.vertices = {vertices_, std::size_t(totals_.vertices)};
     op.vertex_list = {list_ + list_at, std::size_t(h.vertices)};
     op.new_vertex_count = std::uint32_t(h.fresh);
@@ -612,10 +682,37 @@ class PageDecoder {
     read_roi_and_cone(op, set_box_and_sphere(op));
   }
 
+  // An op's vertex list: n page vertex indices into `list`.
+  void read_list(std::uint64_t n, std::uint32_t* list) {
+    const std::uint32_t stamp = ++op_stamp_;
+    ByteReader& r = in_[kLists];
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint64_t code = r.varint();
+      if (code == 0 && fresh_ == totals_.vertices) r.fail("more vertices than the page's total");
+      if (code > fresh_) r.fail("vertex index out of range");
+      const auto p = std::uint32_t(code == 0 ? fresh_++ : fresh_ - code);
+      if (stamp_[p] == stamp) r.fail("an op lists a vertex twice");
+      stamp_[p] = stamp;
+      list[i] = p;
+    }
+  }
+
+  // An op's children, increasing from the op, into `children`.
+  void read_children(const Head& h, OpId* children) {
+    ByteReader& cr = in_[kChildren];
+    std::uint64_t prev = h.id;
+    for (std::size_t i = 0; i < h.children; ++i) {
+      const std::uint64_t d = cr.varint();
+      if (d == 0 || d >= ~prev) cr.fail("child id out of range");  // the sum stays below ~0
+      prev += d;
+      children[i] = OpId(prev);
+    }
+  }
+
   // A corner as stored: an index into the op's vertex list (op.vertex_list[it] is the page's).
-  static std::uint32_t local_corner(ByteReader& r, const OpView& op) {
+  static std::uint32_t local_corner(ByteReader& r, std::size_t list_size) {
     const std::uint64_t c = r.varint();
-    if (c >= op.vertex_list.size()) r.fail("a corner out of its op's vertex list");
+    if (c >= list_size) r.fail("a corner out of its op's vertex list");
     return std::uint32_t(c);
   }
 
@@ -630,14 +727,7 @@ class PageDecoder {
   void read_children_and_fragment(OpView& op, const Head& h) {
     OpId* children =
         ids_ + take(h.children, ids_used_, totals_.parents + totals_.children, "DAG links");
-    ByteReader& cr = in_[kChildren];
-    std::uint64_t prev = h.id;
-    for (std::size_t i = 0; i < h.children; ++i) {
-      const std::uint64_t d = cr.varint();
-      if (d == 0 || d >= ~prev) cr.fail("child id out of range");  // the sum stays below ~0
-      prev += d;
-      children[i] = OpId(prev);
-    }
+    read_children(h, children);
     op.children = {children, std::size_t(h.children)};
     child_res_.resize(h.children);
     for (std::size_t i = 0; i < h.children; ++i)
@@ -648,7 +738,7 @@ class PageDecoder {
     for (std::size_t i = 0; i < h.triangles; ++i) {
       FragmentTriangle& t = tris[i];
       for (int k = 0; k < 3; ++k) {
-        local_tris_[i].v[k] = local_corner(in_[kCorners], op);
+        local_tris_[i].v[k] = local_corner(in_[kCorners], h.vertices);
         t.v[k] = op.vertex_list[local_tris_[i].v[k]];
       }
       const std::uint64_t killer = kr.varint();
@@ -694,7 +784,7 @@ class PageDecoder {
       const std::uint64_t pi = pr.varint();
       if (pi >= h.parents) pr.fail("PreF parent out of range");
       pre[i] = {parents[pi], std::uint32_t(pr.varint())};
-      for (auto& c : pre_tris[i].v) c = op.vertex_list[local_corner(in_[kPreCorners], op)];
+      for (auto& c : pre_tris[i].v) c = op.vertex_list[local_corner(in_[kPreCorners], h.vertices)];
     }
     op.pre = {pre, std::size_t(h.pre)};
     op.pre_tris = {pre_tris, std::size_t(h.pre)};
@@ -818,11 +908,22 @@ class PageDecoder {
   std::vector<std::pair<std::uint64_t, double>> res_of_;  // the page's ops: id, birth_res
   std::vector<double> child_res_;
   std::vector<std::uint64_t> pre_keys_;  // the current op's pre_edge_keys
+  // cut(): the page's vertex ids, per page vertex 1 + its index in the cut (0: unused), and the
+  // current op's list and children.
+  std::vector<std::uint64_t> page_ids_;
+  std::vector<std::uint32_t> used_, cut_list_;
+  std::vector<OpId> cut_children_;
 };
 
 std::shared_ptr<const DecodedPage> decode_page(ByteView page, const QuantGrid& grid,
                                                const CrmrInfo& info, const std::string& context) {
   return PageDecoder(page, grid, info, context).run();
+}
+
+bool cut_page(ByteView page, const QuantGrid& grid, double below, PageCut& out,
+              const std::string& context) {
+  const CrmrInfo info;  // the cut derives no error
+  return PageDecoder(page, grid, info, context).cut(below, out);
 }
 
 std::vector<std::pair<std::string, Bytes>> page_record_streams(ByteView page,

@@ -76,6 +76,27 @@ storage::Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid
 std::shared_ptr<const DecodedPage> decode_page(storage::ByteView page, const QuantGrid& grid,
                                                const CrmrInfo& info, const std::string& context);
 
+/// What a cut at one level takes from a data page (smr/query/level_cut.h): X is R^0 and the ops
+/// whose birth_res is below `below`, and the page's triangles in it are those of its ops in X whose
+/// killer is not in X (Brown's set formula, Lemma 5.1.1). Only the streams that decide it are read
+/// (heads, resolutions, vertex ids, lists, corners, children and their resolutions, killers,
+/// voids); what is read is checked as decode_page checks it. Vertices are the page's that those
+/// triangles use, in order of first use.
+struct PageCut {
+  std::vector<std::uint64_t> vertex_ids;                // used page vertices: their ids
+  std::vector<Vec3> positions;                          // and positions
+  std::vector<std::array<std::uint32_t, 3>> triangles;  // corners index vertex_ids
+  std::vector<float> values;                            // per triangle: its death_res
+  std::uint64_t ops_in_x = 0;
+};
+
+/// The cut of one page (PageCut). Returns false, `out` then unspecified, if the page holds a void
+/// triangle (in a fragment or a PreF): void triangles make an op completely finer whatever its
+/// resolution (Rcf::is_completely_finer), so X is no longer a function of birth_res alone.
+/// Malformed input throws smr::Error (kCorrupt) naming `context`.
+bool cut_page(storage::ByteView page, const QuantGrid& grid, double below, PageCut& out,
+              const std::string& context);
+
 /// A page's parts as stored (the layout above), before anything is decompressed or checked
 /// beyond the framing: for tools that measure pages. Throws kCorrupt naming `context`.
 struct PageSections {

@@ -437,7 +437,9 @@ using smr::test::kSanitized;
 // (ExpansionOptions::max_held_bytes): with none held beyond the first page the mesh is the same,
 // and fewer bytes were held.
 TEST_F(DbCli, HeldMbChangesTheReadsNotTheMesh) {
-  const std::string e = "extract " + db() + " --floor 1 -q --json ";
+  // --verify: the general path (a constant level alone otherwise takes the level cut, which holds
+  // no op).
+  const std::string e = "extract " + db() + " --floor 1 -q --json --verify ";
   const CliRun none = smrdb(e + "--held-mb 0 -o " + path("none.obj"));
   ASSERT_EQ(none.code, 0) << none.out;
   const CliRun held = smrdb(e + "-o " + path("held.obj"));
@@ -447,6 +449,51 @@ TEST_F(DbCli, HeldMbChangesTheReadsNotTheMesh) {
   const auto h = nlohmann::json::parse(held.out)["extraction"]["held_bytes_peak"];
   EXPECT_LT(n.get<std::uint64_t>(), h.get<std::uint64_t>());
   EXPECT_NE(smrdb("extract --help").out.find("--held-mb"), std::string::npos);
+}
+
+// An OBJ's triangles as sets of corner positions (its vertex lines), each rotated to start at its
+// least corner (keeping its winding), sorted.
+std::vector<std::array<std::string, 3>> obj_faces(const std::string& obj) {
+  std::vector<std::string> v;
+  std::vector<std::array<std::string, 3>> tris;
+  std::istringstream in(obj);
+  for (std::string line; std::getline(in, line);) {
+    if (line.rfind("v ", 0) == 0) v.push_back(line);
+    if (line.rfind("f ", 0) != 0) continue;
+    std::istringstream corners(line.substr(2));
+    std::array<std::size_t, 3> c{};
+    corners >> c[0] >> c[1] >> c[2];
+    std::array<std::string, 3> t{v.at(c[0] - 1), v.at(c[1] - 1), v.at(c[2] - 1)};
+    std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());
+    tris.push_back(t);
+  }
+  std::sort(tris.begin(), tris.end());
+  return tris;
+}
+
+// A constant --floor alone takes the level cut (smr/query/level_cut.h): the general path's mesh
+// (--verify takes that one) up to the order of its triangles, the same |X|, at several levels.
+TEST_F(DbCli, AConstantFloorTakesTheLevelCutAndGivesTheSameMesh) {
+  for (const char* level : {"0", "0.3", "0.7", "1"}) {
+    SCOPED_TRACE(level);
+    const std::string e = "extract " + db() + " --floor " + level + " -q --json ";
+    const CliRun cut = smrdb(e + "-o " + path("cut.obj"));
+    ASSERT_EQ(cut.code, 0) << cut.out;
+    const CliRun general = smrdb(e + "--verify -o " + path("general.obj"));
+    ASSERT_EQ(general.code, 0) << general.out;
+    const auto c = nlohmann::json::parse(cut.out), g = nlohmann::json::parse(general.out);
+    EXPECT_EQ(c["extraction"]["order"], "level cut (pages)");
+    EXPECT_EQ(g["extraction"]["order"], "fronts");
+    EXPECT_EQ(c["extraction"]["x"], g["extraction"]["x"]);
+    EXPECT_EQ(c["output"]["triangles"], g["output"]["triangles"]);
+    EXPECT_EQ(c["output"]["vertices"], g["output"]["vertices"]);
+    EXPECT_EQ(obj_faces(read_file(path("cut.obj"))), obj_faces(read_file(path("general.obj"))));
+  }
+  // Anything beside the level (here an area of interest) takes the general path.
+  const CliRun aoi =
+      smrdb("extract " + db() + " --floor 0.3 --aoi 10,10,12,1 -q --json -o " + path("aoi.obj"));
+  ASSERT_EQ(aoi.code, 0) << aoi.out;
+  EXPECT_EQ(nlohmann::json::parse(aoi.out)["extraction"]["order"], "fronts");
 }
 
 // --order pages: the same mesh up to the order of its triangles (its vertices are numbered by
@@ -464,25 +511,7 @@ TEST_F(DbCli, OrderPagesGivesTheSameMesh) {
   EXPECT_GT(f["extraction"]["fans"].get<std::uint64_t>(), 0u);
   EXPECT_EQ(p["extraction"]["fans"].get<std::uint64_t>(), 0u);
   EXPECT_EQ(p["extraction"]["order"], "pages");
-  // The same vertex lines and the same triangles as sets of corner positions.
-  const auto faces = [](const std::string& obj) {
-    std::vector<std::string> v;
-    std::vector<std::array<std::string, 3>> tris;
-    std::istringstream in(obj);
-    for (std::string line; std::getline(in, line);) {
-      if (line.rfind("v ", 0) == 0) v.push_back(line);
-      if (line.rfind("f ", 0) != 0) continue;
-      std::istringstream corners(line.substr(2));
-      std::array<std::size_t, 3> c{};
-      corners >> c[0] >> c[1] >> c[2];
-      std::array<std::string, 3> t{v.at(c[0] - 1), v.at(c[1] - 1), v.at(c[2] - 1)};
-      std::rotate(t.begin(), std::min_element(t.begin(), t.end()), t.end());  // keeps winding
-      tris.push_back(t);
-    }
-    std::sort(tris.begin(), tris.end());
-    return tris;
-  };
-  EXPECT_EQ(faces(read_file(path("fronts.obj"))), faces(read_file(path("pages.obj"))));
+  EXPECT_EQ(obj_faces(read_file(path("fronts.obj"))), obj_faces(read_file(path("pages.obj"))));
   expect_user_error(
       "extract " + db() + " --floor 1 --order pages --algorithm reduced -o " + path("x.obj"),
       "--order pages");

@@ -21,6 +21,9 @@
 //   geometry  the decoded geometry changed (every face corner moved to the previous and next
 //             vertex, every coordinate set to the int32 extremes and moved far), re-encoded with
 //             the page's codec.
+// Each input is also cut (cut_page, smr/query/level_cut.h) below 0.5 and below infinity: the cut
+// must reject a truncated page, throw only kCorrupt errors naming the page, and, where decode_page
+// accepts the input, equal the cut computed from the decoded ops.
 // Each decode either gives a page that passes check_page (spans inside the page's block, every
 // index in range, killers among the children, resolutions in [0, 1], boxes holding their corners,
 // ROIs their boxes, ...) or throws smr::Error of kind kCorrupt whose message names the page
@@ -56,9 +59,11 @@
 #include <iterator>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
+#include <tuple>
 #include <vector>
 
 #include "base/error.h"
@@ -339,32 +344,102 @@ struct Tally {
   std::size_t decodes = 0, decoded = 0, rejected = 0;
 };
 
-// Decodes `bytes` as a page of `model`: an smr::Error must be kCorrupt and name the page; a page
-// must pass check_page. Returns the page, or nullptr when rejected.
-std::shared_ptr<const DecodedPage> decode(ByteView bytes, const Model& model, Tally& tally) {
-  g_case.input = bytes;
-  ++tally.decodes;
-  std::shared_ptr<const DecodedPage> page;
+// Runs f(), a decoder of g_case's input, under the watchdog: true if it returned, false if it
+// threw an smr::Error of kind kCorrupt naming the page; anything else fails.
+template <class F>
+bool accepted(const char* who, F&& f) {
   if (g_watchdog) ::alarm(kCaseSeconds);
   try {
-    page = decode_page(bytes, model.grid, model.info, g_case.page);
+    f();
   } catch (const Error& e) {
     if (g_watchdog) ::alarm(0);
     if (e.kind() != ErrorKind::kCorrupt)
-      fail("an smr::Error of kind " + std::to_string(int(e.kind())) +
+      fail(std::string(who) + ": an smr::Error of kind " + std::to_string(int(e.kind())) +
            ", not kCorrupt: " + e.what());
     if (std::string_view(e.what()).find(g_case.page) == std::string_view::npos)
-      fail(std::string("an error that does not name the page: ") + e.what());
-    ++tally.rejected;
-    return nullptr;
+      fail(std::string(who) + ": an error that does not name the page: " + e.what());
+    return false;
   } catch (const std::exception& e) {
-    fail(std::string("a non-smr exception: ") + e.what());
+    fail(std::string(who) + ": a non-smr exception: " + e.what());
   } catch (...) {
-    fail("an exception of unknown type");
+    fail(std::string(who) + ": an exception of unknown type");
   }
   if (g_watchdog) ::alarm(0);
+  return true;
+}
+
+// What the cut of `page` below `below` must be (level_cut.h, cut_page), from the decoded ops:
+// every triangle of an op in X whose killer is not, as its corners' positions and its death_res;
+// nullopt if the page has a void triangle.
+using CutTriangle = std::tuple<Vec3, Vec3, Vec3, float>;
+std::optional<std::vector<CutTriangle>> expected_cut(const DecodedPage& page, double below) {
+  std::vector<CutTriangle> out;
+  for (const OpView& op : page.ops()) {
+    for (const auto& t : op.pre_tris)
+      if (t.is_void()) return std::nullopt;
+    for (const FragmentTriangle& t : op.fragment) {
+      if (t.is_void()) return std::nullopt;
+      const bool in_x = op.id == kBaseOp || op.birth_res < below;
+      if (in_x && (!t.killer.valid() || !(t.death_res < below)))
+        out.emplace_back(op.position(t, 0), op.position(t, 1), op.position(t, 2),
+                         float(t.death_res));
+    }
+  }
+  return out;
+}
+
+// Cuts `bytes` (cut_page) at two levels: an smr::Error must be kCorrupt and name the page; a
+// truncated page must be rejected; when `page` (decode_page's answer) is given, the cut must be
+// its expected_cut. The cut reads fewer streams than decode_page, so it may accept a page whose
+// damage lies in the others.
+void cut(ByteView bytes, const Model& model, const DecodedPage* page) {
+  for (double below : {std::numeric_limits<double>::infinity(), 0.5}) {
+    PageCut c;
+    bool whole = false;
+    if (!accepted("cut_page", [&] { whole = cut_page(bytes, model.grid, below, c, g_case.page); }))
+      continue;
+    if (std::strcmp(g_case.kind, "prefix") == 0) fail("cut_page accepted a truncated page");
+    for (const auto& t : c.triangles) {
+      for (std::uint32_t v : t)
+        if (v >= c.positions.size()) fail("cut_page: a corner out of its vertices");
+    }
+    if (c.values.size() != c.triangles.size() || c.vertex_ids.size() != c.positions.size())
+      fail("cut_page: arrays of different lengths");
+    if (page == nullptr) continue;
+    const auto want = expected_cut(*page, below);
+    if (whole != want.has_value()) fail("cut_page and decode_page disagree on void triangles");
+    if (!whole) continue;
+    std::vector<CutTriangle> got;
+    for (std::size_t i = 0; i < c.triangles.size(); ++i) {
+      const auto& t = c.triangles[i];
+      got.emplace_back(c.positions[t[0]], c.positions[t[1]], c.positions[t[2]], c.values[i]);
+    }
+    if (got != *want) fail("cut_page differs from the cut of decode_page's ops");
+  }
+}
+
+// Decodes `bytes` as a page of `model`: an smr::Error must be kCorrupt and name the page; a page
+// must pass check_page. Returns the page, or nullptr when rejected.
+std::shared_ptr<const DecodedPage> decode_page_checked(ByteView bytes, const Model& model,
+                                                       Tally& tally) {
+  g_case.input = bytes;
+  ++tally.decodes;
+  std::shared_ptr<const DecodedPage> page;
+  if (!accepted("decode_page",
+                [&] { page = decode_page(bytes, model.grid, model.info, g_case.page); })) {
+    ++tally.rejected;
+    return nullptr;
+  }
   if (auto bad = check_page(*page, model.info); !bad.empty()) fail("an inconsistent page: " + bad);
   ++tally.decoded;
+  return page;
+}
+
+// Decodes `bytes` as a page of `model`: an smr::Error must be kCorrupt and name the page; a page
+// must pass check_page. Returns the page, or nullptr when rejected. Cuts it too (cut()).
+std::shared_ptr<const DecodedPage> decode(ByteView bytes, const Model& model, Tally& tally) {
+  const auto page = decode_page_checked(bytes, model, tally);
+  cut(bytes, model, page.get());
   return page;
 }
 

@@ -1,0 +1,43 @@
+// The minimal mesh of a constant object-space RCF (`--floor L` alone: the whole model at one
+// resolution, what a user asks for as "the model at error e" and what martini's getMesh(maxError)
+// gives), straight from the data pages, without AddToList's traversal or the ops' decoding.
+//
+// With a constant level L, IsFiner and IsCompletelyFiner (Rcf) depend on resolutions alone: a
+// triangle meets the RCF at resolution r iff meets_level(r, L). birth_res is non-decreasing from
+// parent to child (DESIGN.md section 8), every parent gives its child a PreF triangle that the
+// child kills at the child's birth_res, so, with no void triangle, AddToList's fixed point (Brown
+// 5.1.1, Fig. 5.2) is X = R^0 and the ops that do not meet L; by induction on the ids: a parent
+// of such an op does not meet L either, is in X, and is not finer, so the op is reached and is
+// not completely finer; and neither rule adds an op that meets L. The set formula (Lemma 5.1.1)
+// then keeps the fragment triangles of X whose killer is not in X: one pass over the pages that
+// hold an op of X, each read alone, on every core, merged in page order.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+
+#include "smr/core/mesh.h"
+#include "smr/db/database.h"
+#include "smr/rcf/spec.h"
+
+namespace smr {
+
+struct LevelCutStats {
+  std::uint64_t x = 0;          // |X|
+  std::uint64_t pages = 0;      // data pages read (those with an op of X)
+  std::uint64_t triangles = 0;  // output triangles
+};
+
+/// The level of a spec that is a constant object-space level and nothing else, or nullopt.
+std::optional<double> constant_level(const RcfSpec& spec);
+
+/// The minimal mesh meeting the constant level `level` (in [0, 1]): the triangles of the set
+/// formula in page order (each op's in fragment order), vertices numbered by first use, per
+/// triangle its death_res as triangle_values: the mesh to_mesh makes of extract_minimal_surface's
+/// triangles, up to their order. nullopt if a page the cut reads holds a void triangle (the
+/// closed form of X does not hold there; extract_minimal_surface does). Reads pages past the
+/// cache on `threads` threads (0: one per core); the result does not depend on their number.
+std::optional<TriangleMesh> extract_level_cut(const Database& db, double level, unsigned threads,
+                                              LevelCutStats* stats = nullptr);
+
+}  // namespace smr
