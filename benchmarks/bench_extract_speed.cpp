@@ -119,7 +119,7 @@ Run run_level_cut(const smr::Database& db, const smr::Rcf& rcf, double level,
   const json before = db.stats();
   const std::uint64_t t0 = now_ns();
   smr::LevelCutStats cs;
-  const std::optional<smr::TriangleMesh> mesh = smr::extract_level_cut(db, level, 0, &cs);
+  const std::optional<smr::TriangleMesh> mesh = smr::extract_level_cut(db, level, {}, &cs);
   r.extract = seconds_since(t0);
   if (!mesh) smr::throw_input(db.path() + ": void triangles: the level cut does not apply");
   r.io = io_delta(before, db.stats());

@@ -231,7 +231,7 @@ nlohmann::json run_extract(const Database& db, const Heightfield* dem, const Rcf
   if (level && a.algorithm == "minimal" && a.max_triangles == 0 && a.max_ms <= 0.0 && !verify) {
     LevelCutStats cut;
     const auto t0 = Clock::now();
-    if (std::optional<TriangleMesh> mesh = extract_level_cut(db, *level, 0, &cut)) {
+    if (std::optional<TriangleMesh> mesh = extract_level_cut(db, *level, {}, &cut)) {
       ExtractStats stats;
       stats.extract_seconds = seconds_since(t0);
       stats.x = stats.x_plus = stats.ops_visited = cut.x;

@@ -50,8 +50,10 @@ std::optional<double> constant_level(const RcfSpec& spec) {
   return alone ? spec.floor : std::nullopt;
 }
 
-std::optional<TriangleMesh> extract_level_cut(const Database& db, double level, unsigned threads,
+std::optional<TriangleMesh> extract_level_cut(const Database& db, double level,
+                                              const LevelCutOptions& options,
                                               LevelCutStats* stats) {
+  const unsigned threads = options.threads;
   // An op is in X iff it is R^0 or its birth_res does not meet the level (meets_level).
   const double below = meets_level(1.0, level) ? level : std::numeric_limits<double>::infinity();
   std::vector<std::uint64_t> pages;
@@ -87,7 +89,8 @@ std::optional<TriangleMesh> extract_level_cut(const Database& db, double level, 
     mesh.triangle_values.reserve(2 * v + 64);
   }
   std::vector<std::uint32_t> local;  // a page's vertices: their mesh indices
-  std::atomic<bool> whole{true};     // no void triangle met
+  std::atomic<bool> whole{true};     // no void triangle met, the mesh within max_triangles
+  std::atomic<bool> voids{false};
   LevelCutStats s;
   const auto merge = [&](const PageCut& c) {
     local.resize(c.vertex_ids.size());
@@ -127,22 +130,27 @@ std::optional<TriangleMesh> extract_level_cut(const Database& db, double level, 
         const std::uint64_t page = pages[first + i];
         if (!cut_page(db.page_bytes(page), db.grid(), below, (*item)[i],
                       table + std::to_string(page)))
-          whole = false;  // the caller takes the general path: the rest is not needed
+          voids = true, whole = false;  // the caller takes the general path: no more is needed
       }
     } catch (...) {
       error = std::current_exception();
     }
     turns.run(k, [&] {
       if (error) std::rethrow_exception(error);
-      if (!whole) return;
-      for (const PageCut& c : *item) merge(c);
+      for (std::size_t i = 0; i < item->size() && whole; ++i) {
+        merge((*item)[i]);
+        if (options.max_triangles != 0 && mesh.triangles.size() > options.max_triangles)
+          whole = false;
+      }
     });
     std::lock_guard lock(spare_mu);
     spare.push_back(std::move(item));
   });
-  if (!whole) return std::nullopt;
+  s.voids = voids;
+  s.over_budget = !whole && !voids;
   s.triangles = mesh.triangles.size();
   if (stats != nullptr) *stats = s;
+  if (!whole) return std::nullopt;
   return mesh;
 }
 

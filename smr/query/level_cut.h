@@ -22,10 +22,17 @@
 
 namespace smr {
 
+struct LevelCutOptions {
+  unsigned threads = 0;             // reading and cutting pages (0: one per core)
+  std::uint64_t max_triangles = 0;  // stop once the mesh has more (0: no limit)
+};
+
 struct LevelCutStats {
-  std::uint64_t x = 0;          // |X|
-  std::uint64_t pages = 0;      // data pages read (those with an op of X)
+  std::uint64_t x = 0;          // |X| (of the pages merged)
+  std::uint64_t pages = 0;      // data pages merged (those with an op of X)
   std::uint64_t triangles = 0;  // output triangles
+  bool voids = false;           // stopped at a page with a void triangle
+  bool over_budget = false;     // stopped past max_triangles
 };
 
 /// The level of a spec that is a constant object-space level and nothing else, or nullopt.
@@ -35,9 +42,11 @@ std::optional<double> constant_level(const RcfSpec& spec);
 /// formula in page order (each op's in fragment order), vertices numbered by first use, per
 /// triangle its death_res as triangle_values: the mesh to_mesh makes of extract_minimal_surface's
 /// triangles, up to their order. nullopt if a page the cut reads holds a void triangle (the
-/// closed form of X does not hold there; extract_minimal_surface does). Reads pages past the
-/// cache on `threads` threads (0: one per core); the result does not depend on their number.
-std::optional<TriangleMesh> extract_level_cut(const Database& db, double level, unsigned threads,
+/// closed form of X does not hold there; extract_minimal_surface does) or if the mesh passes
+/// options.max_triangles (the stats say which). Reads pages past the cache on options.threads
+/// threads; the result does not depend on their number.
+std::optional<TriangleMesh> extract_level_cut(const Database& db, double level,
+                                              const LevelCutOptions& options = {},
                                               LevelCutStats* stats = nullptr);
 
 }  // namespace smr

@@ -85,7 +85,7 @@ void expect_cut_is_the_minimal_surface(const Crmr& crmr, const std::string& name
   for (double level : levels_of(db)) {
     SCOPED_TRACE("level " + std::to_string(level));
     LevelCutStats stats;
-    const std::optional<TriangleMesh> cut = extract_level_cut(db, level, 2, &stats);
+    const std::optional<TriangleMesh> cut = extract_level_cut(db, level, {.threads = 2}, &stats);
     if (voids) {
       // A cut that reads only void-free pages may still answer; it must then be right.
       if (!cut) continue;
@@ -118,7 +118,7 @@ TEST(LevelCut, IsTheMinimalSurfaceOnRealMeshes) {
 TEST(LevelCut, FullResolutionIsTheSourceMesh) {
   const test::BuiltMesh& m = test::built_mesh("fandisk.off");
   const test::WrittenDatabase w(m.crmr);
-  const std::optional<TriangleMesh> cut = extract_level_cut(w.database(), 1.0, 0);
+  const std::optional<TriangleMesh> cut = extract_level_cut(w.database(), 1.0);
   ASSERT_TRUE(cut.has_value());
   ASSERT_EQ(cut->triangles.size(), m.source.triangles.size());
   TriangleMesh source = m.source;
@@ -133,8 +133,8 @@ TEST(LevelCut, ReadsOnlyThePagesOfX) {
   const test::WrittenDatabase w(test::dataset("fbm129").crmr);
   const Database& db = w.database();
   LevelCutStats coarse, full;
-  ASSERT_TRUE(extract_level_cut(db, 0.5, 0, &coarse));
-  ASSERT_TRUE(extract_level_cut(db, 1.0, 0, &full));
+  ASSERT_TRUE(extract_level_cut(db, 0.5, {}, &coarse));
+  ASSERT_TRUE(extract_level_cut(db, 1.0, {}, &full));
   EXPECT_EQ(full.pages, db.page_count());
   EXPECT_EQ(full.x, db.op_count());
   EXPECT_LT(coarse.pages, full.pages / 2);
@@ -144,10 +144,11 @@ TEST(LevelCut, ReadsOnlyThePagesOfX) {
 TEST(LevelCut, TheThreadCountChangesNothing) {
   const test::WrittenDatabase w(test::dataset("fbm129").crmr);
   for (double level : {0.3, 1.0}) {
-    const std::optional<TriangleMesh> one = extract_level_cut(w.database(), level, 1);
+    const std::optional<TriangleMesh> one = extract_level_cut(w.database(), level, {.threads = 1});
     ASSERT_TRUE(one.has_value());
     for (unsigned threads : {2u, 3u}) {
-      const std::optional<TriangleMesh> more = extract_level_cut(w.database(), level, threads);
+      const std::optional<TriangleMesh> more =
+          extract_level_cut(w.database(), level, {.threads = threads});
       ASSERT_TRUE(more.has_value());
       EXPECT_EQ(more->positions, one->positions);
       EXPECT_EQ(more->triangles, one->triangles);
@@ -160,7 +161,24 @@ TEST(LevelCut, NoDataDemsTakeTheGeneralPath) {
   const Crmr& crmr = test::dataset("elev").crmr;
   ASSERT_TRUE(has_void_triangle(crmr)) << "elev.tif is expected to have no-data";
   const test::WrittenDatabase w(crmr);
-  EXPECT_FALSE(extract_level_cut(w.database(), 1.0, 0).has_value());
+  LevelCutStats stats;
+  EXPECT_FALSE(extract_level_cut(w.database(), 1.0, {}, &stats).has_value());
+  EXPECT_TRUE(stats.voids);
+  EXPECT_FALSE(stats.over_budget);
+}
+
+TEST(LevelCut, StopsPastMaxTriangles) {
+  const test::WrittenDatabase w(test::dataset("fbm129").crmr);
+  LevelCutStats all, capped;
+  const std::optional<TriangleMesh> mesh = extract_level_cut(w.database(), 1.0, {}, &all);
+  ASSERT_TRUE(mesh.has_value());
+  const std::uint64_t n = mesh->triangles.size();
+  EXPECT_TRUE(extract_level_cut(w.database(), 1.0, {.max_triangles = n}).has_value());
+  EXPECT_FALSE(extract_level_cut(w.database(), 1.0, {.max_triangles = n / 3}, &capped));
+  EXPECT_TRUE(capped.over_budget);
+  EXPECT_FALSE(capped.voids);
+  EXPECT_GT(capped.triangles, n / 3);
+  EXPECT_LT(capped.pages, all.pages);  // it stopped early
 }
 
 TEST(LevelCut, OnlyAConstantLevelAloneIsOne) {

@@ -5,10 +5,12 @@
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 
 #include "base/error.h"
 #include "smr/extract/extract.h"
 #include "smr/extract/session.h"
+#include "smr/query/level_cut.h"
 #include "smr/rcf/spec.h"
 #include "smr/tiles/pyramid.h"
 #include "tools/report_json.h"
@@ -212,6 +214,21 @@ Response Api::extract(const Db& db, const Request& request) {
   const auto cap = std::uint64_t(p.integer("max_triangles", 1, std::int64_t(options_.max_triangles),
                                            std::int64_t(options_.max_triangles)));
   const Rcf rcf = make_rcf(spec, db.db->info(), nullptr);
+  const auto respond = [&](const TriangleMesh& mesh, bool complete) {
+    Response r;
+    r.content_type = "model/gltf-binary";
+    r.body = glb_(*db.db, mesh, json{{"rcf", rcf.describe()}});
+    r.headers.push_back({"X-Smrdb-Triangles", std::to_string(mesh.triangles.size())});
+    r.headers.push_back({"X-Smrdb-Complete", complete ? "true" : "false"});
+    return r;
+  };
+  // A constant floor alone: the level cut, as smrdb extract takes it (the same mesh, byte for
+  // byte), when it fits the cap; otherwise the budgeted refinement below.
+  if (const std::optional<double> level = constant_level(spec)) {
+    const std::optional<TriangleMesh> mesh =
+        extract_level_cut(*db.db, *level, {.max_triangles = cap});
+    if (mesh) return respond(*mesh, true);
+  }
   ExpansionOptions expansion;  // as smrdb extract's defaults
   const SessionBudget budget{.max_period_ms = options_.timeout_ms, .max_triangles = cap};
   FrameStats fs;
@@ -227,12 +244,7 @@ Response Api::extract(const Db& db, const Request& request) {
   }
   const TriangleMesh mesh = to_mesh(*db.db, e.triangles);
   e = Extraction{};
-  Response r;
-  r.content_type = "model/gltf-binary";
-  r.body = glb_(*db.db, mesh, json{{"rcf", rcf.describe()}});
-  r.headers.push_back({"X-Smrdb-Triangles", std::to_string(mesh.triangles.size())});
-  r.headers.push_back({"X-Smrdb-Complete", fs.complete ? "true" : "false"});
-  return r;
+  return respond(mesh, fs.complete);
 }
 
 Response Api::layer(const Db& db, const Request& request) const {
