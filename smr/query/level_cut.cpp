@@ -72,6 +72,7 @@ std::optional<TriangleMesh> extract_level_cut(const Database& db, double level,
     if (!has_base) pages.push_back(base);
     std::sort(pages.begin(), pages.end());
   }
+  db.will_need(pages);  // a cold file is then read many pages at once, not one after another
   // Each thread cuts a few pages at a time, then merges them in their turn (Turnstile: page
   // order) while the other cuts the next: two threads on two cores, the merge never waiting on a
   // third. An item's arrays are kept for a later one.
