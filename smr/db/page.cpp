@@ -491,8 +491,8 @@ class PageDecoder {
       parents += h.parents;
       pre += h.pre;
     }
-    for (Stream s : {kOpHeads, kResolutions, kVertexIds, kLists, kCorners, kChildren, kKillers,
-                     kVoids}) {
+    for (Stream s :
+         {kOpHeads, kResolutions, kVertexIds, kLists, kCorners, kChildren, kKillers, kVoids}) {
       if (!in_[s].at_end()) in_[s].fail("bytes no op reads");
     }
     if (!every_op && !in_[kChildRes].at_end()) in_[kChildRes].fail("bytes no op reads");
