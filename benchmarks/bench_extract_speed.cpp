@@ -92,25 +92,6 @@ struct Run {
   std::string tiling;  // "ok" or the first failure; empty when not checked
 };
 
-// A mesh's triangles as position triples, each rotated to start at its least corner, sorted: equal
-// for two meshes with the same triangles in any order, whatever their vertex numbering.
-std::vector<std::array<smr::Vec3, 3>> canonical_triangles(const smr::TriangleMesh& m) {
-  const auto less = [](const smr::Vec3& a, const smr::Vec3& b) {
-    return std::tie(a.x, a.y, a.z) < std::tie(b.x, b.y, b.z);
-  };
-  std::vector<std::array<smr::Vec3, 3>> out;
-  for (const auto& t : m.triangles) {
-    std::array<smr::Vec3, 3> p{m.positions[t[0]], m.positions[t[1]], m.positions[t[2]]};
-    const auto first = std::min_element(p.begin(), p.end(), less);
-    std::rotate(p.begin(), first, p.end());
-    out.push_back(p);
-  }
-  std::sort(out.begin(), out.end(), [&](const auto& a, const auto& b) {
-    return std::lexicographical_compare(a.begin(), a.end(), b.begin(), b.end(), less);
-  });
-  return out;
-}
-
 // The level cut (smr/query/level_cut.h) of a constant-level case; `verify`: the same triangles as
 // the minimal surface's set formula.
 Run run_level_cut(const smr::Database& db, const smr::Rcf& rcf, double level,
@@ -137,7 +118,7 @@ Run run_level_cut(const smr::Database& db, const smr::Rcf& rcf, double level,
   if (verify) {
     const smr::IndexedSource source(db);
     const smr::Extraction e = smr::extract_minimal_surface(source, rcf, {.fronts = false});
-    r.tiling = canonical_triangles(*mesh) == canonical_triangles(smr::to_mesh(db, e.triangles))
+    r.tiling = smr::same_triangles(*mesh, smr::to_mesh(db, e.triangles))
                    ? "ok"
                    : "the level cut differs from the minimal surface's set formula";
   }

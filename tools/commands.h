@@ -60,8 +60,10 @@ struct IngestArgs {
 /// `extract` and `build`: the output and how to extract it.
 struct ExtractArgs {
   std::string algorithm = "minimal", out, png, dem;
-  std::string order = "fronts";  // ExpansionOptions::fronts: "fronts" or "pages"
-  std::string compress;          // glTF outputs: "draco" or "meshopt" (empty: none)
+  // "fronts" or "pages" (ExpansionOptions::fronts); empty: fronts, or the level cut for a constant
+  // level alone (smr/query/level_cut.h)
+  std::string order;
+  std::string compress;  // glTF outputs: "draco" or "meshopt" (empty: none)
   std::uint64_t cache_mb = 64;
   std::uint64_t held_mb = 512;      // ExpansionOptions::max_held_bytes, in MiB
   std::uint64_t max_triangles = 0;  // SessionBudget (smr/extract/session.h); 0 = none

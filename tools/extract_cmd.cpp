@@ -1,6 +1,7 @@
 // smrdb extract: the refinement condition's flags, the extraction and its report.
 #include <cstdio>
 #include <optional>
+#include <span>
 #include <tuple>
 #include <utility>
 
@@ -114,8 +115,8 @@ void ExtractArgs::add_to(CLI::App& app, bool with_budgets) {
   app.add_option("--order", order,
                  "fronts: triangles as the advancing front emits them, in fans (Brown 5.1.2); "
                  "pages: the same triangles from the set formula, page by page (minimal only; "
-                 "faster)")
-      ->capture_default_str();
+                 "faster). Default: fronts, but a constant --floor alone takes the level cut "
+                 "(the same triangles straight from the pages, page order)");
   app.add_option("-o,--output", out, "Output mesh (.obj, .ply, or glTF .glb/.gltf)")->required();
   app.add_option("--compress", compress,
                  "glTF output only: draco (KHR_draco_mesh_compression) or meshopt "
@@ -139,7 +140,7 @@ void ExtractArgs::add_to(CLI::App& app, bool with_budgets) {
 void ExtractArgs::validate() const {
   if (algorithm != "minimal" && algorithm != "reduced" && algorithm != "selective")
     throw_input("--algorithm must be 'minimal', 'reduced' or 'selective', got '" + algorithm + "'");
-  if (order != "fronts" && order != "pages")
+  if (!order.empty() && order != "fronts" && order != "pages")
     throw_input("--order must be 'fronts' or 'pages', got '" + order + "'");
   if (order == "pages" && algorithm != "minimal")
     throw_input(
@@ -219,6 +220,32 @@ void write_output(const Database& db, const TriangleMesh& mesh, const ExtractArg
   }
 }
 
+namespace {
+
+// --verify: the output tiles the domain (terrain) or is a manifold surface (meshes).
+void verify_output(const Database& db, std::span<const TriRef> triangles) {
+  if (db.info().kind == ModelKind::kTerrain) {
+    const InvariantReport r = check_tiling(db, triangles);
+    if (!r.ok()) throw_internal("output does not tile the domain: " + r.summary());
+  } else {
+    const SurfaceReport r = check_surface(db, triangles);
+    if (!r.report.ok()) throw_internal("output is not a manifold surface: " + r.report.summary());
+  }
+}
+
+// --verify of a level cut: the minimal surface's set formula gives the same triangles (and |X|),
+// and they pass verify_output.
+void verify_level_cut(const Database& db, const Rcf& rcf, const TriangleMesh& mesh,
+                      const LevelCutStats& cut) {
+  const IndexedSource source(db);
+  const Extraction e = extract_minimal_surface(source, rcf, {.fronts = false});
+  verify_output(db, e.triangles);
+  if (e.x.size() != cut.x || !same_triangles(mesh, to_mesh(db, e.triangles)))
+    throw_internal("the level cut differs from the minimal surface's set formula");
+}
+
+}  // namespace
+
 nlohmann::json run_extract(const Database& db, const Heightfield* dem, const RcfSpec& spec,
                            const ExtractArgs& a, bool verify) {
   nlohmann::json report;
@@ -226,9 +253,11 @@ nlohmann::json run_extract(const Database& db, const Heightfield* dem, const Rcf
     throw_input("--critical-lines needs the source DEM: pass --dem");
   const Rcf rcf = make_rcf(spec, db.info(), dem);
   if (a.algorithm == "selective") return run_selective(db, rcf, a);
-  // A constant level alone (--floor): the level cut, from the pages (smr/query/level_cut.h).
+  // A constant level alone (--floor): the level cut, from the pages (smr/query/level_cut.h),
+  // unless the fronts' fans were asked for.
   const std::optional<double> level = constant_level(spec);
-  if (level && a.algorithm == "minimal" && a.max_triangles == 0 && a.max_ms <= 0.0 && !verify) {
+  if (level && a.algorithm == "minimal" && a.order != "fronts" && a.max_triangles == 0 &&
+      a.max_ms <= 0.0) {
     LevelCutStats cut;
     const auto t0 = Clock::now();
     if (std::optional<TriangleMesh> mesh = extract_level_cut(db, *level, {}, &cut)) {
@@ -236,6 +265,7 @@ nlohmann::json run_extract(const Database& db, const Heightfield* dem, const Rcf
       stats.extract_seconds = seconds_since(t0);
       stats.x = stats.x_plus = stats.ops_visited = cut.x;
       stats.triangles = cut.triangles;
+      if (verify) verify_level_cut(db, rcf, *mesh, cut);
       report["rcf"] = rcf.describe();
       report["extraction"] = stats;
       report["extraction"]["algorithm"] = a.algorithm;
@@ -247,7 +277,7 @@ nlohmann::json run_extract(const Database& db, const Heightfield* dem, const Rcf
   }
   ExpansionOptions expansion;
   expansion.max_held_bytes = a.held_mb << 20;
-  expansion.fronts = a.order == "fronts";
+  expansion.fronts = a.order != "pages";
   const IndexedSource source(db);  // the R-tree answers the RCF's queries
   Extraction e;
   if (a.max_triangles != 0 || a.max_ms > 0.0) {
@@ -270,14 +300,8 @@ nlohmann::json run_extract(const Database& db, const Heightfield* dem, const Rcf
   report["rcf"] = rcf.describe();
   report["extraction"] = e.stats;
   report["extraction"]["algorithm"] = a.algorithm;
-  report["extraction"]["order"] = a.order;
-  if (verify && db.info().kind == ModelKind::kTerrain) {
-    const InvariantReport r = check_tiling(db, e.triangles);
-    if (!r.ok()) throw_internal("output does not tile the domain: " + r.summary());
-  } else if (verify) {
-    const SurfaceReport r = check_surface(db, e.triangles);
-    if (!r.report.ok()) throw_internal("output is not a manifold surface: " + r.report.summary());
-  }
+  report["extraction"]["order"] = expansion.fronts ? "fronts" : "pages";
+  if (verify) verify_output(db, e.triangles);
   const TriangleMesh mesh = to_mesh(db, e.triangles);
   report["io"] = db.stats();
   // Neither the triangle list nor the decoded pages are needed to write the mesh: let them go

@@ -27,6 +27,10 @@ struct TriangleMesh {
 /// triangle_values are not carried over.
 TriangleMesh midpoint_subdivided(const TriangleMesh& in);
 
+/// Whether two meshes have the same triangles, each with its triangle_value when both meshes have
+/// values: the same corner positions in the same winding, in any order and vertex numbering.
+bool same_triangles(const TriangleMesh& a, const TriangleMesh& b);
+
 /// A triangle mesh read in passes, never held whole: the out-of-core builder's input
 /// (smr::build_block_pm). Indices are into the vertex order; the mesh must be manifold and
 /// consistently oriented (what read_mesh validates in memory). A file stream may know its counts

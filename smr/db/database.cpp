@@ -346,32 +346,34 @@ const Database::CacheItem& Database::memoized(std::uint64_t kind, Table table,
   return *m.item;
 }
 
-Bytes Database::page_bytes(std::uint64_t page) const {
-  const std::string name = std::string(table_name(Table::kPages)) + "/" + key_text(page);
+Bytes Database::read_value(Table table, std::uint64_t id) const {
   Bytes raw;
-  naming_file(path(), [&] {
-    const storage::ReadTxn txn = env_->read();
-    const auto value = txn.get(Table::kPages, page);
-    if (!value) throw Error(ErrorKind::kCorrupt, path() + ": " + name + " is missing");
-    const ByteView payload = storage::unseal(*value, table_name(Table::kPages), key_text(page));
-    raw.assign(payload.begin(), payload.end());
+  const storage::ReadTxn txn = env_->read();
+  const auto value = txn.get(table, id);
+  if (!value)
+    throw Error(ErrorKind::kCorrupt, path() + ": " + std::string(table_name(table)) + "/" +
+                                         key_text(id) + " is missing");
+  raw.assign(value->begin(), value->end());
+  return raw;
+}
+
+Bytes Database::page_bytes(std::uint64_t page) const {
+  Bytes out = naming_file(path(), [&] {
+    const Bytes raw = read_value(Table::kPages, page);
+    page_bytes_read_.fetch_add(raw.size());
+    const ByteView payload = storage::unseal(raw, table_name(Table::kPages), key_text(page));
+    return Bytes(payload.begin(), payload.end());
   });
   pages_read_.fetch_add(1);
-  page_bytes_read_.fetch_add(raw.size());
-  return raw;
+  maybe_release();  // the mapped file's pages, as reads through the cache let them go
+  return out;
 }
 
 storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table,
                                                                std::uint64_t id) const {
   storage::PageCache<CacheItem>::Loaded loaded;
   const std::string name = std::string(table_name(table)) + "/" + key_text(id);
-  Bytes raw;
-  {
-    const storage::ReadTxn txn = env_->read();
-    const auto value = txn.get(table, id);
-    if (!value) throw Error(ErrorKind::kCorrupt, path() + ": " + name + " is missing");
-    raw.assign(value->begin(), value->end());
-  }
+  Bytes raw = read_value(table, id);
   loaded.bytes_read = raw.size();
   if (table == Table::kRtree) {
     loaded.charged_bytes = kCacheItemOverhead + heap_block_bytes(raw.capacity());

@@ -104,6 +104,8 @@ class Database final : public OpSource {
   const CacheItem& memoized(std::uint64_t kind, Table table, std::uint64_t id) const;
   struct Memo;
   static Memo& memo(std::uint64_t kind);
+  // A value as stored (sealed); throws kCorrupt naming it when it is missing.
+  storage::Bytes read_value(Table table, std::uint64_t id) const;
   // Reads and decodes one value (the cache's loader).
   storage::PageCache<CacheItem>::Loaded load(Table table, std::uint64_t id) const;
   Locator locate(OpId id) const;

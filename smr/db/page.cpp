@@ -445,23 +445,26 @@ class PageDecoder {
     out.ops_in_x = 0;
     const auto n = std::size_t(totals_.vertices);
     page_ids_.resize(n);
-    read_vertex_ids([&](std::size_t i, std::uint64_t id, const auto&) { page_ids_[i] = id; });
-    // Below 1 or more every op is in X (level_cut.h): no killer's resolution is needed, nor read.
+    read_vertex_ids([&](std::size_t i, std::uint64_t id, const auto&) {
+      if (id == ~std::uint64_t{0}) fail("vertex id out of range");  // a map's empty key
+      page_ids_[i] = id;
+    });
+    // `below` above 1: every op is in X (level_cut.h), no killer's resolution is needed nor read.
     const bool every_op = below > 1.0;
     read_heads(!every_op);
     stamp_.assign(n, 0);
     used_.assign(n, 0);
-    std::uint64_t parents = 0, pre = 0;
+    std::size_t parents = 0, pre = 0;  // counted, not read
     for (const Head& h : heads_) {
       if (h.vertices == 0) fail("an op without vertices");
       if (h.triangles == 0 && h.pre == 0) fail("an op without triangles");
       const bool in_x = h.id == kBaseOp.value || h.res < below;
       out.ops_in_x += in_x ? 1 : 0;
+      take(h.vertices, list_used_, totals_.list, "vertex-list entries");  // before any resize
       cut_list_.resize(h.vertices);
       read_list(h.vertices, cut_list_.data());
-      take(h.vertices, list_used_, totals_.list, "vertex-list entries");
-      cut_children_.resize(h.children);
       take(h.children, ids_used_, totals_.children, "children");
+      cut_children_.resize(h.children);
       read_children(h, cut_children_.data());
       child_res_.assign(h.children, 1.0);
       for (std::size_t i = 0; i < h.children && !every_op; ++i)
@@ -488,8 +491,8 @@ class PageDecoder {
       }
       // Fragment voids, then PreF voids (the order encode_page writes them in).
       if (in_[kVoids].varint() != 0 || in_[kVoids].varint() != 0) return false;
-      parents += h.parents;
-      pre += h.pre;
+      take(h.parents, parents, totals_.parents, "parents");
+      take(h.pre, pre, totals_.pre, "PreF triangles");
     }
     for (Stream s :
          {kOpHeads, kResolutions, kVertexIds, kLists, kCorners, kChildren, kKillers, kVoids}) {

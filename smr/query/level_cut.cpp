@@ -62,15 +62,13 @@ std::optional<TriangleMesh> extract_level_cut(const Database& db, double level,
     for (std::uint64_t p = 0; p < pages.size(); ++p) pages[p] = p;
   } else {
     BelowVisitor visitor(below);
-    const std::uint64_t base = db.place_of(kBaseOp).place;
-    bool has_base = false;
     for (const index::Hit& h : db.rtree_query(visitor)) {
-      if (!pages.empty() && pages.back() == h.leaf) continue;  // grouped by leaf
+      if (!pages.empty() && pages.back() == h.leaf) continue;  // mostly grouped by leaf
       pages.push_back(h.leaf);
-      has_base = has_base || h.leaf == base;
     }
-    if (!has_base) pages.push_back(base);
+    pages.push_back(db.place_of(kBaseOp).place);  // R^0 is in X whatever its resolution
     std::sort(pages.begin(), pages.end());
+    pages.erase(std::unique(pages.begin(), pages.end()), pages.end());
   }
   db.will_need(pages);  // a cold file is then read many pages at once, not one after another
   // Each thread cuts a few pages at a time, then merges them in their turn (Turnstile: page
@@ -90,8 +88,8 @@ std::optional<TriangleMesh> extract_level_cut(const Database& db, double level,
     mesh.triangle_values.reserve(2 * v + 64);
   }
   std::vector<std::uint32_t> local;  // a page's vertices: their mesh indices
-  std::atomic<bool> whole{true};     // no void triangle met, the mesh within max_triangles
-  std::atomic<bool> voids{false};
+  std::atomic<bool> go{true};  // no void triangle met, the mesh within max_triangles, no error
+  bool voids = false;          // set in a turn
   LevelCutStats s;
   const auto merge = [&](const PageCut& c) {
     local.resize(c.vertex_ids.size());
@@ -115,43 +113,55 @@ std::optional<TriangleMesh> extract_level_cut(const Database& db, double level,
   Turnstile turns;
   parallel_for((pages.size() + kPagesPerItem - 1) / kPagesPerItem, threads, [&](std::size_t k) {
     std::unique_ptr<Item> item;
-    {
-      std::lock_guard lock(spare_mu);
-      if (!spare.empty()) {
-        item = std::move(spare.back());
-        spare.pop_back();
-      }
-    }
-    if (!item) item = std::make_unique<Item>();
-    const std::size_t first = k * kPagesPerItem;
-    item->resize(std::min(kPagesPerItem, pages.size() - first));
+    std::size_t cut = 0;       // pages of the item cut
+    bool item_voids = false;   // the cut stopped at a page with a void triangle
     std::exception_ptr error;  // thrown in its turn: every turn must come (Turnstile)
     try {
-      for (std::size_t i = 0; i < item->size() && whole; ++i) {
-        const std::uint64_t page = pages[first + i];
-        if (!cut_page(db.page_bytes(page), db.grid(), below, (*item)[i],
-                      table + std::to_string(page)))
-          voids = true, whole = false;  // the caller takes the general path: no more is needed
+      {
+        std::lock_guard lock(spare_mu);
+        if (!spare.empty()) {
+          item = std::move(spare.back());
+          spare.pop_back();
+        }
+      }
+      if (!item) item = std::make_unique<Item>();
+      const std::size_t first = k * kPagesPerItem;
+      item->resize(std::min(kPagesPerItem, pages.size() - first));
+      for (; cut < item->size() && go; ++cut) {
+        const std::uint64_t page = pages[first + cut];
+        if (!cut_page(db.page_bytes(page), db.grid(), below, (*item)[cut],
+                      table + std::to_string(page))) {
+          item_voids = true;
+          break;
+        }
       }
     } catch (...) {
       error = std::current_exception();
     }
+    // In page order: what stops the cut (a void triangle, the budget, an error) is the first
+    // one in page order, whatever the threads.
     turns.run(k, [&] {
+      if (!go) return;  // an earlier item stopped the cut: this one is not needed
       if (error) std::rethrow_exception(error);
-      for (std::size_t i = 0; i < item->size() && whole; ++i) {
+      if (item_voids) {
+        voids = true;
+        go = false;  // the caller takes the general path
+        return;
+      }
+      for (std::size_t i = 0; i < cut && go; ++i) {
         merge((*item)[i]);
-        if (options.max_triangles != 0 && mesh.triangles.size() > options.max_triangles)
-          whole = false;
+        if (options.max_triangles != 0 && mesh.triangles.size() > options.max_triangles) go = false;
       }
     });
+    if (!item) return;
     std::lock_guard lock(spare_mu);
     spare.push_back(std::move(item));
   });
   s.voids = voids;
-  s.over_budget = !whole && !voids;
+  s.over_budget = !go && !voids;
   s.triangles = mesh.triangles.size();
   if (stats != nullptr) *stats = s;
-  if (!whole) return std::nullopt;
+  if (!go) return std::nullopt;
   return mesh;
 }
 

@@ -2,13 +2,15 @@
 // resolution, what a user asks for as "the model at error e" and what martini's getMesh(maxError)
 // gives), straight from the data pages, without AddToList's traversal or the ops' decoding.
 //
-// With a constant level L, IsFiner and IsCompletelyFiner (Rcf) depend on resolutions alone: a
-// triangle meets the RCF at resolution r iff meets_level(r, L). birth_res is non-decreasing from
-// parent to child (DESIGN.md section 8), every parent gives its child a PreF triangle that the
-// child kills at the child's birth_res, so, with no void triangle, AddToList's fixed point (Brown
-// 5.1.1, Fig. 5.2) is X = R^0 and the ops that do not meet L; by induction on the ids: a parent
-// of such an op does not meet L either, is in X, and is not finer, so the op is reached and is
-// not completely finer; and neither rule adds an op that meets L. The set formula (Lemma 5.1.1)
+// With a constant level L (no culling), IsFiner and IsCompletelyFiner (Rcf) depend on
+// resolutions alone: a triangle meets the RCF at resolution r iff meets_level(r, L). The CRMR's
+// invariants (DESIGN.md section 4; check_crmr) give: birth_res is non-decreasing from parent to
+// child; every op but R^0 has a non-empty PreF, and each of its parents gives it a PreF triangle;
+// a triangle's death_res is its killer's (a child's) birth_res. So, with no void triangle,
+// AddToList's fixed point (Brown 5.1.1, Fig. 5.2) is X = R^0 and the ops that do not meet L; by
+// induction on the ids: a parent of such an op does not meet L either, is in X, and is not finer
+// (the PreF triangle it gives dies below L), so the op is reached and is not completely finer;
+// and neither rule adds an op that meets L. The set formula (Lemma 5.1.1)
 // then keeps the fragment triangles of X whose killer is not in X: one pass over the pages that
 // hold an op of X, each read alone, on every core, merged in page order.
 #pragma once
@@ -29,7 +31,7 @@ struct LevelCutOptions {
 
 struct LevelCutStats {
   std::uint64_t x = 0;          // |X| (of the pages merged)
-  std::uint64_t pages = 0;      // data pages merged (those with an op of X)
+  std::uint64_t pages = 0;      // data pages merged: those the R-tree says may hold an op of X
   std::uint64_t triangles = 0;  // output triangles
   bool voids = false;           // stopped at a page with a void triangle
   bool over_budget = false;     // stopped past max_triangles

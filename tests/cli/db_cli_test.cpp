@@ -438,9 +438,9 @@ using smr::test::kSanitized;
 // (ExpansionOptions::max_held_bytes): with none held beyond the first page the mesh is the same,
 // and fewer bytes were held.
 TEST_F(DbCli, HeldMbChangesTheReadsNotTheMesh) {
-  // --verify: the general path (a constant level alone otherwise takes the level cut, which holds
-  // no op).
-  const std::string e = "extract " + db() + " --floor 1 -q --json --verify ";
+  // --order fronts: the general path (a constant level alone otherwise takes the level cut, which
+  // holds no op).
+  const std::string e = "extract " + db() + " --floor 1 -q --json --order fronts ";
   const CliRun none = smrdb(e + "--held-mb 0 -o " + path("none.obj"));
   ASSERT_EQ(none.code, 0) << none.out;
   const CliRun held = smrdb(e + "-o " + path("held.obj"));
@@ -472,15 +472,20 @@ std::vector<std::array<std::string, 3>> obj_faces(const std::string& obj) {
   return tris;
 }
 
-// A constant --floor alone takes the level cut (smr/query/level_cut.h): the general path's mesh
-// (--verify takes that one) up to the order of its triangles, the same |X|, at several levels.
+// A constant --floor alone takes the level cut (smr/query/level_cut.h), --order pages too, and
+// --verify checks it against the set formula: the general path's mesh (--order fronts takes that
+// one) up to the order of its triangles, the same |X|, at several levels.
 TEST_F(DbCli, AConstantFloorTakesTheLevelCutAndGivesTheSameMesh) {
   for (const char* level : {"0", "0.3", "0.7", "1"}) {
     SCOPED_TRACE(level);
     const std::string e = "extract " + db() + " --floor " + level + " -q --json ";
-    const CliRun cut = smrdb(e + "-o " + path("cut.obj"));
+    const CliRun cut = smrdb(e + "--verify -o " + path("cut.obj"));
     ASSERT_EQ(cut.code, 0) << cut.out;
-    const CliRun general = smrdb(e + "--verify -o " + path("general.obj"));
+    const CliRun pages = smrdb(e + "--order pages -o " + path("pages.obj"));
+    ASSERT_EQ(pages.code, 0) << pages.out;
+    EXPECT_EQ(read_file(path("pages.obj")), read_file(path("cut.obj")));
+    EXPECT_EQ(nlohmann::json::parse(pages.out)["extraction"]["order"], "level cut (pages)");
+    const CliRun general = smrdb(e + "--order fronts -o " + path("general.obj"));
     ASSERT_EQ(general.code, 0) << general.out;
     const auto c = nlohmann::json::parse(cut.out), g = nlohmann::json::parse(general.out);
     EXPECT_EQ(c["extraction"]["order"], "level cut (pages)");
@@ -500,7 +505,8 @@ TEST_F(DbCli, AConstantFloorTakesTheLevelCutAndGivesTheSameMesh) {
 // --order pages: the same mesh up to the order of its triangles (its vertices are numbered by
 // first use, so they are compared as sets too), the same |X|, no fans; only for minimal surface.
 TEST_F(DbCli, OrderPagesGivesTheSameMesh) {
-  const std::string e = "extract " + db() + " --floor 0.7 -q --json --verify ";
+  // An area of interest beside the floor: not a constant level, so not the level cut.
+  const std::string e = "extract " + db() + " --floor 0.5 --aoi 10,10,12,0.9 -q --json --verify ";
   const CliRun fronts = smrdb(e + "-o " + path("fronts.obj"));
   ASSERT_EQ(fronts.code, 0) << fronts.out;
   const CliRun pages = smrdb(e + "--order pages -o " + path("pages.obj"));

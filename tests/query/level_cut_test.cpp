@@ -142,10 +142,13 @@ TEST(LevelCut, ReadsOnlyThePagesOfX) {
 }
 
 TEST(LevelCut, TheThreadCountChangesNothing) {
-  const test::WrittenDatabase w(test::dataset("fbm129").crmr);
-  for (double level : {0.3, 1.0}) {
-    const std::optional<TriangleMesh> one = extract_level_cut(w.database(), level, {.threads = 1});
+  const test::WrittenDatabase w(test::dataset("jacksboro").crmr);
+  for (double level : {0.99, 1.0}) {
+    LevelCutStats stats;
+    const std::optional<TriangleMesh> one =
+        extract_level_cut(w.database(), level, {.threads = 1}, &stats);
     ASSERT_TRUE(one.has_value());
+    EXPECT_GT(stats.pages, 16u) << "more pages than two threads' first items";
     for (unsigned threads : {2u, 3u}) {
       const std::optional<TriangleMesh> more =
           extract_level_cut(w.database(), level, {.threads = threads});
@@ -189,9 +192,25 @@ TEST(LevelCut, OnlyAConstantLevelAloneIsOne) {
   spec.aois.push_back({});
   EXPECT_FALSE(constant_level(spec));
   spec.aois.clear();
-  spec.camera = Camera{};
-  spec.pixel_error = 1.0;
-  EXPECT_FALSE(constant_level(spec));
+  // Every other term of a spec makes it not a constant level.
+  const std::vector<void (*)(RcfSpec&)> terms = {
+      [](RcfSpec& s) { s.camera = Camera{}; },
+      [](RcfSpec& s) { s.pixel_error = 1.0; },
+      [](RcfSpec& s) { s.screen_aoi = ScreenAoi{}; },
+      [](RcfSpec& s) { s.discs.push_back({}); },
+      [](RcfSpec& s) { s.volumes.push_back({}); },
+      [](RcfSpec& s) { s.frustum_level = 0.5; },
+      [](RcfSpec& s) {
+        s.centre_cone = std::pair{10.0, 0.5};
+      },
+      [](RcfSpec& s) { s.critical_level = 0.5; },
+  };
+  for (const auto& add : terms) {
+    RcfSpec with = spec;
+    add(with);
+    EXPECT_FALSE(constant_level(with));
+  }
+  EXPECT_EQ(constant_level(spec), 0.4);
 }
 
 }  // namespace

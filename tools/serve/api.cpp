@@ -205,6 +205,14 @@ Response Api::info(const Db& db) const {
   return json_response(out);
 }
 
+namespace {
+std::string too_many(std::uint64_t cap) {
+  return "the mesh would pass " + std::to_string(cap) +
+         " triangles (the server's --max-triangles): give max_triangles for a budgeted mesh, or a "
+         "coarser px/floor";
+}
+}  // namespace
+
 Response Api::extract(const Db& db, const Request& request) {
   const auto t0 = Clock::now();
   const Params p(request.params);
@@ -223,11 +231,14 @@ Response Api::extract(const Db& db, const Request& request) {
     return r;
   };
   // A constant floor alone: the level cut, as smrdb extract takes it (the same mesh, byte for
-  // byte), when it fits the cap; otherwise the budgeted refinement below.
+  // byte), on this request's thread (the server serves requests on several), when it fits the
+  // cap; past the cap, a budgeted mesh when max_triangles was given (below), else 413.
   if (const std::optional<double> level = constant_level(spec)) {
+    LevelCutStats cut;
     const std::optional<TriangleMesh> mesh =
-        extract_level_cut(*db.db, *level, {.max_triangles = cap});
+        extract_level_cut(*db.db, *level, {.threads = 1, .max_triangles = cap}, &cut);
     if (mesh) return respond(*mesh, true);
+    if (cut.over_budget && !user_cap) fail(413, too_many(cap));
   }
   ExpansionOptions expansion;  // as smrdb extract's defaults
   const SessionBudget budget{.max_period_ms = options_.timeout_ms, .max_triangles = cap};
@@ -237,10 +248,7 @@ Response Api::extract(const Db& db, const Request& request) {
     if (ms_since(t0) >= options_.timeout_ms)
       fail(504, "the extraction did not finish within " + std::to_string(options_.timeout_ms) +
                     " ms (--timeout-ms)");
-    if (!user_cap)
-      fail(413, "the mesh would pass " + std::to_string(cap) +
-                    " triangles (the server's --max-triangles): give max_triangles for a "
-                    "budgeted mesh, or a coarser px/floor");
+    if (!user_cap) fail(413, too_many(cap));
   }
   const TriangleMesh mesh = to_mesh(*db.db, e.triangles);
   e = Extraction{};
