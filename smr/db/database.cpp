@@ -312,12 +312,12 @@ std::uint64_t Database::file_bytes() const {
   return env_->file_bytes();
 }
 
-void Database::maybe_release() const {
+void Database::maybe_release(bool trim) const {
   const std::uint64_t read = env_->bytes_read();
   std::uint64_t last = released_at_.load();
   if (read - last >= kReleaseEveryBytes && released_at_.compare_exchange_strong(last, read)) {
     env_->release_mapped_pages();
-    malloc_trim(0);
+    if (trim) malloc_trim(0);
   }
 }
 
@@ -365,7 +365,9 @@ Bytes Database::page_bytes(std::uint64_t page) const {
     return Bytes(payload.begin(), payload.end());
   });
   pages_read_.fetch_add(1);
-  maybe_release();  // the mapped file's pages, as reads through the cache let them go
+  // The mapped file's pages, as reads through the cache let them go; not the heap's (a reader
+  // past the cache holds no decoded page, and trimming every MiB cost the level cut ~20 %).
+  maybe_release(false);
   return out;
 }
 

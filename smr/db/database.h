@@ -109,7 +109,7 @@ class Database final : public OpSource {
   // Reads and decodes one value (the cache's loader).
   storage::PageCache<CacheItem>::Loaded load(Table table, std::uint64_t id) const;
   Locator locate(OpId id) const;
-  void maybe_release() const;
+  void maybe_release(bool trim = true) const;  // trim: malloc_trim the heap too
 
   class Prefetcher;
   void decode_ahead(std::uint64_t page) const;  // the prefetcher's work: into the cache

@@ -79,7 +79,7 @@ std::optional<TriangleMesh> extract_level_cut(const Database& db, double level,
   std::mutex spare_mu;
   std::vector<std::unique_ptr<Item>> spare;
   TriangleMesh mesh;
-  FlatMap<std::uint64_t, std::uint32_t, RunKeys> index_of(75);  // vertex id -> 1 + mesh index
+  FlatMap<std::uint64_t, std::uint32_t, RunKeys> index_of(85);  // vertex id -> 1 + mesh index
   if (below > 1.0) {  // every vertex is used: sized once (a surface has ~2 triangles a vertex)
     const std::uint64_t v = db.info().vertex_count;
     index_of.reserve(v);
