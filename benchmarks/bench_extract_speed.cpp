@@ -30,7 +30,6 @@
 #include <optional>
 #include <sstream>
 #include <string>
-#include <tuple>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -92,6 +91,17 @@ struct Run {
   std::string tiling;  // "ok" or the first failure; empty when not checked
 };
 
+// The output's counts, and the PLY written (`ply` non-empty), timed.
+void take_mesh(Run& r, const smr::TriangleMesh& mesh, const std::string& ply) {
+  r.vertices = mesh.positions.size();
+  r.triangles = mesh.triangles.size();
+  if (ply.empty()) return;
+  const std::uint64_t t0 = now_ns();
+  smr::write_mesh(ply, mesh);
+  r.write = seconds_since(t0);
+  r.ply_bytes = std::filesystem::file_size(ply);
+}
+
 // The level cut (smr/query/level_cut.h) of a constant-level case; `verify`: the same triangles as
 // the minimal surface's set formula.
 Run run_level_cut(const smr::Database& db, const smr::Rcf& rcf, double level,
@@ -104,23 +114,13 @@ Run run_level_cut(const smr::Database& db, const smr::Rcf& rcf, double level,
   r.extract = seconds_since(t0);
   if (!mesh) smr::throw_input(db.path() + ": void triangles: the level cut does not apply");
   r.io = io_delta(before, db.stats());
-  if (!ply.empty()) {
-    const std::uint64_t t1 = now_ns();
-    smr::write_mesh(ply, *mesh);
-    r.write = seconds_since(t1);
-    r.ply_bytes = std::filesystem::file_size(ply);
-  }
+  take_mesh(r, *mesh, ply);
   r.stats.x = r.stats.x_plus = cs.x;
   r.stats.triangles = cs.triangles;
   r.stats.extract_seconds = r.extract;
-  r.vertices = mesh->positions.size();
-  r.triangles = mesh->triangles.size();
   if (verify) {
-    const smr::IndexedSource source(db);
-    const smr::Extraction e = smr::extract_minimal_surface(source, rcf, {.fronts = false});
-    r.tiling = smr::same_triangles(*mesh, smr::to_mesh(db, e.triangles))
-                   ? "ok"
-                   : "the level cut differs from the minimal surface's set formula";
+    const std::string differs = smr::check_level_cut(db, rcf, *mesh, cs);
+    r.tiling = differs.empty() ? "ok" : differs;
   }
   return r;
 }
@@ -140,15 +140,8 @@ Run run_once(const smr::Database& db, const smr::Rcf& rcf, const std::string& al
   const smr::TriangleMesh mesh = smr::to_mesh(db, e.triangles);
   r.to_mesh = seconds_since(t0);
   r.io = io_delta(before, db.stats());
-  if (!ply.empty()) {
-    t0 = now_ns();
-    smr::write_mesh(ply, mesh);
-    r.write = seconds_since(t0);
-    r.ply_bytes = std::filesystem::file_size(ply);
-  }
+  take_mesh(r, mesh, ply);
   r.stats = e.stats;
-  r.vertices = mesh.positions.size();
-  r.triangles = mesh.triangles.size();
   if (verify && db.info().kind == smr::ModelKind::kTerrain) {
     const smr::InvariantReport tiling = smr::check_tiling(db, e.triangles);
     r.tiling = tiling.ok() ? "ok" : tiling.summary();

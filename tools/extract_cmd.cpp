@@ -233,15 +233,14 @@ void verify_output(const Database& db, std::span<const TriRef> triangles) {
   }
 }
 
-// --verify of a level cut: the minimal surface's set formula gives the same triangles (and |X|),
-// and they pass verify_output.
+// --verify of a level cut: the minimal surface's set formula gives the same triangles and |X|
+// (check_level_cut), and they pass verify_output.
 void verify_level_cut(const Database& db, const Rcf& rcf, const TriangleMesh& mesh,
                       const LevelCutStats& cut) {
-  const IndexedSource source(db);
-  const Extraction e = extract_minimal_surface(source, rcf, {.fronts = false});
-  verify_output(db, e.triangles);
-  if (e.x.size() != cut.x || !same_triangles(mesh, to_mesh(db, e.triangles)))
-    throw_internal("the level cut differs from the minimal surface's set formula");
+  Extraction general;
+  const std::string differs = check_level_cut(db, rcf, mesh, cut, &general);
+  if (!differs.empty()) throw_internal(differs);
+  verify_output(db, general.triangles);
 }
 
 }  // namespace

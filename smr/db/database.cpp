@@ -346,36 +346,35 @@ const Database::CacheItem& Database::memoized(std::uint64_t kind, Table table,
   return *m.item;
 }
 
-Bytes Database::read_value(Table table, std::uint64_t id) const {
-  Bytes raw;
+void Database::with_value(Table table, std::uint64_t id,
+                          const std::function<void(ByteView)>& f) const {
   const storage::ReadTxn txn = env_->read();
   const auto value = txn.get(table, id);
   if (!value)
     throw Error(ErrorKind::kCorrupt, path() + ": " + std::string(table_name(table)) + "/" +
                                          key_text(id) + " is missing");
-  raw.assign(value->begin(), value->end());
-  return raw;
+  f(*value);
 }
 
-Bytes Database::page_bytes(std::uint64_t page) const {
-  Bytes out = naming_file(path(), [&] {
-    const Bytes raw = read_value(Table::kPages, page);
-    page_bytes_read_.fetch_add(raw.size());
-    const ByteView payload = storage::unseal(raw, table_name(Table::kPages), key_text(page));
-    return Bytes(payload.begin(), payload.end());
+void Database::with_page_bytes(std::uint64_t page, const std::function<void(ByteView)>& f) const {
+  naming_file(path(), [&] {
+    with_value(Table::kPages, page, [&](ByteView raw) {
+      page_bytes_read_.fetch_add(raw.size());
+      f(storage::unseal(raw, table_name(Table::kPages), key_text(page)));
+    });
   });
   pages_read_.fetch_add(1);
   // The mapped file's pages, as reads through the cache let them go; not the heap's (a reader
   // past the cache holds no decoded page, and trimming every MiB cost the level cut ~20 %).
   maybe_release(false);
-  return out;
 }
 
 storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table,
                                                                std::uint64_t id) const {
   storage::PageCache<CacheItem>::Loaded loaded;
   const std::string name = std::string(table_name(table)) + "/" + key_text(id);
-  Bytes raw = read_value(table, id);
+  Bytes raw;
+  with_value(table, id, [&](ByteView v) { raw.assign(v.begin(), v.end()); });
   loaded.bytes_read = raw.size();
   if (table == Table::kRtree) {
     loaded.charged_bytes = kCacheItemOverhead + heap_block_bytes(raw.capacity());

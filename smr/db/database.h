@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <span>
 #include <string>
@@ -76,9 +77,10 @@ class Database final : public OpSource {
   DatabaseStats stats() const;
   /// Decoded ops of data page `page` (through the cache).
   std::shared_ptr<const DecodedPage> page(std::uint64_t page) const;
-  /// The stored bytes of data page `page`, unsealed (checksum checked), read past the cache: for
-  /// readers that take only part of a page (cut_page). Counted in stats() as a page read.
-  storage::Bytes page_bytes(std::uint64_t page) const;
+  /// Calls f with the stored bytes of data page `page`, unsealed (checksum checked), read past the
+  /// cache and valid only during the call (LMDB's own mapped memory, not copied): for readers that
+  /// take only part of a page (cut_page). Counted in stats() as a page read.
+  void with_page_bytes(std::uint64_t page, const std::function<void(storage::ByteView)>& f) const;
   /// Where the op locators say op `id` is: its data page and slot. Reads no page.
   std::pair<std::uint64_t, std::uint32_t> locator(OpId id) const {
     const Locator l = locate(id);
@@ -104,8 +106,10 @@ class Database final : public OpSource {
   const CacheItem& memoized(std::uint64_t kind, Table table, std::uint64_t id) const;
   struct Memo;
   static Memo& memo(std::uint64_t kind);
-  // A value as stored (sealed); throws kCorrupt naming it when it is missing.
-  storage::Bytes read_value(Table table, std::uint64_t id) const;
+  // f(a value as stored, sealed) while its read transaction lasts; throws kCorrupt naming it
+  // when it is missing.
+  void with_value(Table table, std::uint64_t id,
+                  const std::function<void(storage::ByteView)>& f) const;
   // Reads and decodes one value (the cache's loader).
   storage::PageCache<CacheItem>::Loaded load(Table table, std::uint64_t id) const;
   Locator locate(OpId id) const;

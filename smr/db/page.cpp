@@ -409,10 +409,7 @@ class PageDecoder {
   }
 
   std::shared_ptr<const DecodedPage> run() {
-    records_ = storage::zstd_decompress(packed_, kMaxRecordBytes, context_);
-    geometry_ = storage::decode_geometry(codec_, geo_bytes_, context_);
-    open_streams();
-    check_totals();
+    unpack();
     auto page = std::shared_ptr<DecodedPage>(new DecodedPage());
     allocate(*page);
     read_vertices();
@@ -434,10 +431,7 @@ class PageDecoder {
 
   // The cut of the page below `below` (page.h, cut_page); false if it has a void triangle.
   bool cut(double below, PageCut& out) {
-    records_ = storage::zstd_decompress(packed_, kMaxRecordBytes, context_);
-    geometry_ = storage::decode_geometry(codec_, geo_bytes_, context_);
-    open_streams();
-    check_totals();
+    unpack();
     out.vertex_ids.clear();
     out.positions.clear();
     out.triangles.clear();
@@ -520,6 +514,14 @@ class PageDecoder {
  private:
   [[noreturn]] void fail(const std::string& what) const {
     ByteReader(ByteView{}, context_).fail(what);
+  }
+
+  // The records and the geometry decompressed, the streams opened, the totals checked.
+  void unpack() {
+    records_ = storage::zstd_decompress(packed_, kMaxRecordBytes, context_);
+    geometry_ = storage::decode_geometry(codec_, geo_bytes_, context_);
+    open_streams();
+    check_totals();
   }
 
   void open_streams() {

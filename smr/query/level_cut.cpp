@@ -8,6 +8,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "index/rtree.h"
@@ -15,6 +16,7 @@
 #include "smr/core/parallel.h"
 #include "smr/db/page.h"
 #include "smr/db/tables.h"
+#include "smr/query/indexed_source.h"
 #include "smr/rcf/rcf.h"
 
 namespace smr {
@@ -129,11 +131,11 @@ std::optional<TriangleMesh> extract_level_cut(const Database& db, double level,
       item->resize(std::min(kPagesPerItem, pages.size() - first));
       for (; cut < item->size() && go; ++cut) {
         const std::uint64_t page = pages[first + cut];
-        if (!cut_page(db.page_bytes(page), db.grid(), below, (*item)[cut],
-                      table + std::to_string(page))) {
-          item_voids = true;
-          break;
-        }
+        db.with_page_bytes(page, [&](storage::ByteView bytes) {
+          item_voids =
+              !cut_page(bytes, db.grid(), below, (*item)[cut], table + std::to_string(page));
+        });
+        if (item_voids) break;
       }
     } catch (...) {
       error = std::current_exception();
@@ -163,6 +165,21 @@ std::optional<TriangleMesh> extract_level_cut(const Database& db, double level,
   if (stats != nullptr) *stats = s;
   if (!go) return std::nullopt;
   return mesh;
+}
+
+std::string check_level_cut(const Database& db, const Rcf& rcf, const TriangleMesh& mesh,
+                            const LevelCutStats& stats, Extraction* general) {
+  const IndexedSource source(db);
+  Extraction e = extract_minimal_surface(source, rcf, {.fronts = false});
+  std::string differs;
+  if (e.x.size() != stats.x) {
+    differs = "the level cut's |X| is " + std::to_string(stats.x) + ", the minimal surface's " +
+              std::to_string(e.x.size());
+  } else if (!same_triangles(mesh, to_mesh(db, e.triangles))) {
+    differs = "the level cut's triangles differ from the minimal surface's set formula";
+  }
+  if (general != nullptr) *general = std::move(e);
+  return differs;
 }
 
 }  // namespace smr

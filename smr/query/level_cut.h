@@ -17,9 +17,12 @@
 
 #include <cstdint>
 #include <optional>
+#include <string>
 
 #include "smr/core/mesh.h"
 #include "smr/db/database.h"
+#include "smr/extract/extract.h"
+#include "smr/rcf/rcf.h"
 #include "smr/rcf/spec.h"
 
 namespace smr {
@@ -50,5 +53,12 @@ std::optional<double> constant_level(const RcfSpec& spec);
 std::optional<TriangleMesh> extract_level_cut(const Database& db, double level,
                                               const LevelCutOptions& options = {},
                                               LevelCutStats* stats = nullptr);
+
+/// The check behind --verify: the general path (AddToList and the set formula through the
+/// R-tree, extract_minimal_surface, then to_mesh) gives `mesh`'s triangles and `stats.x` ops for
+/// `rcf`, the cut's constant level. Returns what differs, or "" if nothing; `general` (if given)
+/// receives the general path's extraction.
+std::string check_level_cut(const Database& db, const Rcf& rcf, const TriangleMesh& mesh,
+                            const LevelCutStats& stats, Extraction* general = nullptr);
 
 }  // namespace smr
