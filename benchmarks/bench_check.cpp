@@ -41,6 +41,7 @@ int main(int argc, char** argv) {
       const auto db = smr::Database::open(db_path, {});
       smr::Crmr crmr;
       crmr.header = db->info();
+      db->need_links();  // to_op reads them
       for (std::uint64_t i = 0; i < db->op_count(); ++i)
         crmr.ops.push_back(smr::to_op(*db->op(smr::OpId(i))));
       mesh = smr::bench::finest_mesh(crmr, dem);

@@ -88,6 +88,7 @@ class RecordingSource final : public smr::OpSource, public smr::RcfIndexedSource
     ops.push_back(id.value);
     return db_.op(id);
   }
+  void need_links() const override { db_.need_links(); }
   std::vector<smr::OpId> not_completely_finer(const smr::RcfOracle& rcf) const override {
     for (const smr::index::Hit& h : db_.rcf_hits(rcf)) {
       if (leaves.empty() || leaves.back() != h.leaf) leaves.push_back(h.leaf);

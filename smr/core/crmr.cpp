@@ -43,7 +43,15 @@ OpView::OpView(const Op& op)
       roi(op.roi),
       subtree_cone(op.subtree_cone) {}
 
+void OpView::require_links() const {
+  if (!links)
+    throw_internal("op " + std::to_string(id.value) +
+                   ": its page was decoded without Hypermesh links (the reader did not call "
+                   "OpSource::need_links first)");
+}
+
 const CoarserLink* OpView::coarser_link(std::uint32_t tri, std::uint8_t edge) const {
+  require_links();
   return find_link(coarser, tri, edge);
 }
 
@@ -54,6 +62,7 @@ const FragmentTriangle& OpView::triangle(std::uint32_t i) const {
 }
 
 Op to_op(const OpView& view) {
+  view.require_links();
   Op op;
   op.id = view.id;
   op.birth_res = view.birth_res;

@@ -117,10 +117,14 @@ struct OpView {
   std::span<const Vertex> vertices;            // what corners index
   std::span<const std::uint32_t> vertex_list;  // the op's vertices in `vertices`; empty: all
   std::uint32_t new_vertex_count = 0;
+  /// False when the op's page was decoded without its Hypermesh links (`coarser` is then empty):
+  /// only the advancing front reads them, so a database decodes them once a reader asks
+  /// (OpSource::need_links). coarser_link() and to_op() throw on such a view.
+  bool links = true;
   std::span<const FragmentTriangle> fragment;
   std::span<const TriRef> pre;
   std::span<const PreTriangle> pre_tris;
-  std::span<const CoarserLink> coarser;  // sorted by (tri, edge)
+  std::span<const CoarserLink> coarser;  // sorted by (tri, edge); see `links`
   std::span<const OpId> parents;
   std::span<const OpId> children;
   Box3 box;
@@ -144,14 +148,17 @@ struct OpView {
   const Vertex& own_vertex(std::size_t i) const {
     return vertex_list.empty() ? vertices[i] : vertices[vertex_list[i]];
   }
-  /// The link of boundary edge `edge` of triangle `tri`, or nullptr (model boundary).
+  /// The link of boundary edge `edge` of triangle `tri`, or nullptr (model boundary). Throws
+  /// smr::Error (kInternal) if the view has no links (`links`).
   const CoarserLink* coarser_link(std::uint32_t tri, std::uint8_t edge) const;
+  void require_links() const;  // throws as coarser_link() does
   /// Fragment triangle i; throws smr::Error (kInvalidInput) if there is none.
   const FragmentTriangle& triangle(std::uint32_t i) const;
 };
 
 /// An Op with the view's contents (corners renumbered to the op's own vertex list, neighbours and
-/// the normal cone derived): equal to the Op the view was written from.
+/// the normal cone derived): equal to the Op the view was written from. Throws smr::Error
+/// (kInternal) on a view without its links (OpView::links).
 Op to_op(const OpView& view);
 
 }  // namespace smr

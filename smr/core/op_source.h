@@ -127,6 +127,10 @@ class OpSource {
   /// its cache holds; replaces the previous hint. Returns how many of `places` the hint took (0:
   /// the source reads nothing ahead). Never needed for correctness.
   virtual std::size_t prefetch(std::span<const std::uint64_t> /*places*/) const { return 0; }
+  /// The reader will read ops' Hypermesh links (OpView::coarser: the advancing front does): from
+  /// now on every op read has them. smr/db decodes pages without them until asked, since the
+  /// set formula, the level cut and every query do without (a sixth of a decoded page).
+  virtual void need_links() const {}
 
   /// Triangle `t`; throws smr::Error if it does not exist.
   FragmentTriangle triangle(TriRef t) const;

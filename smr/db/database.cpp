@@ -135,8 +135,9 @@ struct Database::Memo {
 };
 
 Database::Memo& Database::memo(std::uint64_t kind) {
-  thread_local std::array<Memo, 2> memos;  // kind 1: pages, kind 2: locator blocks
-  return memos[kind - 1];
+  // Kind 1 or 4: pages (without or with links: the key tells them apart), 2: locator blocks.
+  thread_local std::array<Memo, 2> memos;
+  return memos[kind == 2 ? 1 : 0];
 }
 
 // Decodes hinted pages into the cache on a thread of its own, the latest hint first come first
@@ -228,7 +229,8 @@ std::size_t Database::prefetch(std::span<const std::uint64_t> pages) const {
   const std::size_t most = std::min<std::uint64_t>(pages.size(), cache_->budget() / 4 / page_bytes);
   // The first page is the reader's next: it reads it itself.
   if (most <= 1) return most;
-  std::vector<std::uint64_t> missing = uncached(1, pages.subspan(1, most - 1), page_count_);
+  std::vector<std::uint64_t> missing =
+      uncached(page_kind(), pages.subspan(1, most - 1), page_count_);
   if (!missing.empty()) prefetcher_->want(std::move(missing));
   return most;
 }
@@ -248,14 +250,15 @@ std::vector<std::uint64_t> Database::uncached(std::uint64_t kind,
 }
 
 void Database::will_need(std::span<const std::uint64_t> pages) const {
-  const std::vector<std::uint64_t> missing = uncached(1, pages, page_count_);
+  const std::vector<std::uint64_t> missing = uncached(page_kind(), pages, page_count_);
   if (!missing.empty())
     naming_file(path(), [&] { env_->read().will_need(Table::kPages, missing); });
 }
 
 void Database::decode_ahead(std::uint64_t page) const {
-  if (cache_->contains((std::uint64_t{1} << 60) | page)) return;
-  fetch(1, Table::kPages, page);
+  const std::uint64_t kind = page_kind();
+  if (cache_->contains((kind << 60) | page)) return;
+  fetch(kind, Table::kPages, page);
   pages_prefetched_.fetch_add(1, std::memory_order_relaxed);
 }
 
@@ -323,13 +326,14 @@ void Database::maybe_release(bool trim) const {
 
 std::shared_ptr<const Database::CacheItem> Database::fetch(std::uint64_t kind, Table table,
                                                            std::uint64_t id) const {
-  return cache_->get((kind << 60) | id,
-                     [&]() { return naming_file(path(), [&] { return load(table, id); }); });
+  return cache_->get((kind << 60) | id, [&]() {
+    return naming_file(path(), [&] { return load(table, id, kind == kLinkedPages); });
+  });
 }
 
 std::shared_ptr<const Database::CacheItem> Database::cached(std::uint64_t kind, Table table,
                                                             std::uint64_t id) const {
-  if (kind != 1 && kind != 2) return fetch(kind, table, id);
+  if (kind == 3) return fetch(kind, table, id);  // R-tree nodes
   memoized(kind, table, id);
   return memo(kind).slot(id).item;
 }
@@ -340,7 +344,7 @@ const Database::CacheItem& Database::memoized(std::uint64_t kind, Table table,
   Memo::Slot& m = memo(kind).slot(id);
   const std::uint64_t instance = instance_.load(std::memory_order_relaxed);
   if (m.instance != instance || m.key != key) {
-    const Prefetcher::Reading reading(kind == 1 ? prefetcher_.get() : nullptr, id);
+    const Prefetcher::Reading reading(kind != 2 ? prefetcher_.get() : nullptr, id);
     m = Memo::Slot{instance, key, fetch(kind, table, id)};
   }
   return *m.item;
@@ -369,8 +373,8 @@ void Database::with_page_bytes(std::uint64_t page, const std::function<void(Byte
   maybe_release(false);
 }
 
-storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table,
-                                                               std::uint64_t id) const {
+storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table, std::uint64_t id,
+                                                               bool links) const {
   storage::PageCache<CacheItem>::Loaded loaded;
   const std::string name = std::string(table_name(table)) + "/" + key_text(id);
   Bytes raw;
@@ -384,7 +388,7 @@ storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table,
   } else if (table == Table::kPages) {
     const ByteView payload = storage::unseal(raw, table_name(table), key_text(id));
     std::shared_ptr<const DecodedPage> ops =
-        decode_page(payload, grid_, info_, path() + ": " + name);
+        decode_page(payload, grid_, info_, path() + ": " + name, links);
     loaded.charged_bytes = kCacheItemOverhead + ops->memory_bytes();
     loaded.value = std::make_shared<const CacheItem>(std::move(ops));
     pages_read_.fetch_add(1);
@@ -426,7 +430,7 @@ Database::Locator Database::locate(OpId id) const {
 
 std::shared_ptr<const DecodedPage> Database::page(std::uint64_t page) const {
   if (page >= page_count_) throw_input(path() + ": page " + key_text(page) + " does not exist");
-  return std::get<std::shared_ptr<const DecodedPage>>(*cached(1, Table::kPages, page));
+  return std::get<std::shared_ptr<const DecodedPage>>(*cached(page_kind(), Table::kPages, page));
 }
 
 std::uint64_t Database::locality_bytes(std::uint64_t p) const {

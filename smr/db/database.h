@@ -62,6 +62,10 @@ class Database final : public OpSource {
   }
   OpBatch batch(std::uint64_t page) const override;
   std::size_t prefetch(std::span<const std::uint64_t> pages) const override;
+  /// Pages are decoded without their Hypermesh links until a reader asks for them (the advancing
+  /// front does): from then on, with them (pages decoded before stay cached as they are, under a
+  /// key of their own, until the cache lets them go).
+  void need_links() const override { links_.store(true, std::memory_order_relaxed); }
   /// Asks the OS to read the data pages not in the cache ahead (storage::ReadTxn::will_need): a
   /// cold start then waits on many reads at once instead of one after another.
   void will_need(std::span<const std::uint64_t> pages) const;
@@ -110,8 +114,14 @@ class Database final : public OpSource {
   // when it is missing.
   void with_value(Table table, std::uint64_t id,
                   const std::function<void(storage::ByteView)>& f) const;
-  // Reads and decodes one value (the cache's loader).
-  storage::PageCache<CacheItem>::Loaded load(Table table, std::uint64_t id) const;
+  // Reads and decodes one value (the cache's loader); a data page with its links or not.
+  storage::PageCache<CacheItem>::Loaded load(Table table, std::uint64_t id, bool links) const;
+  // Cache keys are (kind << 60) | id. Kinds: 1 data pages decoded without their links, 2 locator
+  // blocks, 3 R-tree nodes, 4 data pages with their links.
+  static constexpr std::uint64_t kLinkedPages = 4;
+  std::uint64_t page_kind() const {
+    return links_.load(std::memory_order_relaxed) ? kLinkedPages : 1;
+  }
   Locator locate(OpId id) const;
   void maybe_release(bool trim = true) const;  // trim: malloc_trim the heap too
 
@@ -128,6 +138,7 @@ class Database final : public OpSource {
   mutable std::atomic<std::uint64_t> pages_read_{0}, page_bytes_read_{0}, nodes_read_{0};
   mutable std::atomic<std::uint64_t> rtree_bytes_read_{0}, locator_bytes_read_{0};
   mutable std::atomic<std::uint64_t> pages_prefetched_{0};
+  mutable std::atomic<bool> links_{false};  // need_links() was called
   mutable std::atomic<std::uint64_t> released_at_{0};
   // Names this database (and its cache's contents) in each thread's memo of the last page and
   // locator block it read (cached()): a new number after clear_cache().

@@ -391,8 +391,8 @@ PageSections page_sections(ByteView page, const std::string& context) {
 class PageDecoder {
  public:
   PageDecoder(ByteView page, const QuantGrid& grid, const CrmrInfo& info,
-              const std::string& context)
-      : grid_(grid), info_(info), context_(context) {
+              const std::string& context, bool links = true)
+      : grid_(grid), info_(info), context_(context), links_(links) {
     const PageSections s = page_sections(page, context);
     if (s.format != kPageFormat)
       ByteReader(page, context)
@@ -416,13 +416,14 @@ class PageDecoder {
     read_heads();
     for (std::size_t o = 0; o < op_count_; ++o) read_op(ops_[o], heads_[o]);
     for (std::size_t i = 0; i < kStreamCount; ++i) {
-      if (!in_[i].at_end()) in_[i].fail("bytes no op reads");
+      if ((links_ || (i != kEdges && i != kLinks)) && !in_[i].at_end())
+        in_[i].fail("bytes no op reads");
     }
     if (fresh_ != totals_.vertices) fail("vertices no op lists");
     for (const auto& [n, used] : {std::pair{totals_.list, list_used_},
                                   {totals_.triangles, face_},
                                   {totals_.pre, pre_used_},
-                                  {totals_.links, links_used_},
+                                  {links_ ? totals_.links : 0, links_used_},
                                   {totals_.parents + totals_.children, ids_used_}}) {
       if (n != used) fail("the page's totals disagree with its records");
     }
@@ -571,7 +572,7 @@ class PageDecoder {
       vertices_ = carve<Vertex>(at, totals_.vertices);
       triangles_ = carve<FragmentTriangle>(at, totals_.triangles);
       pre_ = carve<TriRef>(at, totals_.pre);
-      links_ = carve<CoarserLink>(at, totals_.links);
+      links_block_ = carve<CoarserLink>(at, links_ ? totals_.links : 0);
       ids_ = carve<OpId>(at, totals_.parents + totals_.children);
       pre_tris_ = carve<PreTriangle>(at, totals_.pre);
       list_ = carve<std::uint32_t>(at, totals_.list);
@@ -586,7 +587,7 @@ class PageDecoder {
     std::uninitialized_default_construct_n(vertices_, totals_.vertices);
     std::uninitialized_default_construct_n(triangles_, totals_.triangles);
     std::uninitialized_default_construct_n(pre_, totals_.pre);
-    std::uninitialized_default_construct_n(links_, totals_.links);
+    std::uninitialized_default_construct_n(links_block_, links_ ? totals_.links : 0);
     std::uninitialized_default_construct_n(ids_, totals_.parents + totals_.children);
     std::uninitialized_default_construct_n(pre_tris_, totals_.pre);
     page.ops_ = ops_;
@@ -681,7 +682,10 @@ class PageDecoder {
     op.new_vertex_count = std::uint32_t(h.fresh);
     read_children_and_fragment(op, h);
     read_parents_and_pre(op, h);
-    read_links(op);
+    if (links_)
+      read_links(op);
+    else
+      op.links = false;
     if (op.fragment.empty() && op.pre.empty()) fail("an op without triangles");
     if (op.vertex_list.empty()) fail("an op without vertices");
     read_roi_and_cone(op, set_box_and_sphere(op));
@@ -798,7 +802,7 @@ class PageDecoder {
 
   // Hypermesh links, one code per boundary edge of F (page.h).
   void read_links(OpView& op) {
-    CoarserLink* links = links_ + links_used_;
+    CoarserLink* links = links_block_ + links_used_;
     ByteReader& er = in_[kEdges];
     ByteReader& lr = in_[kLinks];
     pre_edge_keys(op.pre_tris, pre_keys_);
@@ -808,7 +812,7 @@ class PageDecoder {
                              if (code == kModelBoundary) return;
                              if (links_used_ == totals_.links)
                                er.fail("more coarser links than the page's total");
-                             CoarserLink& l = links_[links_used_++];
+                             CoarserLink& l = links_block_[links_used_++];
                              l.tri = tri;
                              l.edge = edge;
                              if (code == kInside) {
@@ -826,7 +830,7 @@ class PageDecoder {
                              l.coarser.edge = lr.u8();
                              if (l.coarser.edge > 2) lr.fail("coarser link out of range");
                            });
-    op.coarser = {links, std::size_t(links_ + links_used_ - links)};
+    op.coarser = {links, std::size_t(links_block_ + links_used_ - links)};
   }
 
   // op_bounds' box and sphere, from the op's own vertices: they are exactly the corners of F
@@ -888,6 +892,7 @@ class PageDecoder {
   const QuantGrid& grid_;
   const CrmrInfo& info_;
   const std::string& context_;
+  bool links_ = true;  // decode the Hypermesh links (decode_page)
   storage::CodecId codec_ = storage::CodecId::kRaw;
   std::uint64_t op_count_ = 0;
   Totals totals_;
@@ -899,7 +904,7 @@ class PageDecoder {
   Vertex* vertices_ = nullptr;
   FragmentTriangle* triangles_ = nullptr;
   TriRef* pre_ = nullptr;
-  CoarserLink* links_ = nullptr;
+  CoarserLink* links_block_ = nullptr;
   OpId* ids_ = nullptr;  // parents and children
   PreTriangle* pre_tris_ = nullptr;
   std::uint32_t* list_ = nullptr;
@@ -921,8 +926,9 @@ class PageDecoder {
 };
 
 std::shared_ptr<const DecodedPage> decode_page(ByteView page, const QuantGrid& grid,
-                                               const CrmrInfo& info, const std::string& context) {
-  return PageDecoder(page, grid, info, context).run();
+                                               const CrmrInfo& info, const std::string& context,
+                                               bool links) {
+  return PageDecoder(page, grid, info, context, links).run();
 }
 
 bool cut_page(ByteView page, const QuantGrid& grid, double below, PageCut& out,

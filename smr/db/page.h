@@ -72,9 +72,11 @@ storage::Bytes encode_page(std::span<const Op* const> ops, const QuantGrid& grid
 
 /// Decodes a page of the model `info` (its errors are derived: stored_op_error); `context` (e.g.
 /// "pages/12") names it in every error. Malformed input throws smr::Error (kCorrupt), never
-/// crashes.
+/// crashes. Without `links` the Hypermesh links are neither decoded nor checked: every op's
+/// `coarser` is empty and its `links` false (OpView::links), and the page is smaller by them.
 std::shared_ptr<const DecodedPage> decode_page(storage::ByteView page, const QuantGrid& grid,
-                                               const CrmrInfo& info, const std::string& context);
+                                               const CrmrInfo& info, const std::string& context,
+                                               bool links = true);
 
 /// What a cut at one level takes from a data page (smr/query/level_cut.h): X is R^0 and the ops
 /// whose birth_res is below `below`, and the page's triangles in it are those of its ops in X whose

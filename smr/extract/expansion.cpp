@@ -486,6 +486,7 @@ class Expander {
 
 Extraction run_expansion(const OpSource& source, std::span<const OpId> x, bool reduced,
                          const ExpansionOptions& options) {
+  source.need_links();  // the fans walk the Hypermesh (Op::coarser)
   Extraction out;
   {
     Expander e(source, reduced, options);  // its front and maps are freed before the shrink

@@ -24,6 +24,8 @@ Extraction expand(const OpSource& source, std::span<const OpId> x,
 
 Extraction extract_minimal_surface(const OpSource& source, const RcfOracle& rcf,
                                    const ExpansionOptions& options) {
+  // The front reads the links: asked before AddToList reads the pages, which it then reads once.
+  if (options.runs_front()) source.need_links();
   const auto t0 = Clock::now();
   const std::vector<OpId> x = add_to_list(source, rcf);
   return expand_minimal(source, x, options, seconds_since(t0));
@@ -32,9 +34,8 @@ Extraction extract_minimal_surface(const OpSource& source, const RcfOracle& rcf,
 Extraction expand_minimal(const OpSource& source, std::span<const OpId> x,
                           const ExpansionOptions& options, double extract_seconds) {
   const auto t0 = Clock::now();
-  Extraction e = options.fronts || options.max_triangles != 0
-                     ? run_expansion(source, x, false, options)
-                     : extract_set_formula(source, x);
+  Extraction e = options.runs_front() ? run_expansion(source, x, false, options)
+                                     : extract_set_formula(source, x);
   e.stats.expand_seconds = seconds_since(t0);
   e.stats.extract_seconds = extract_seconds;
   return e;
@@ -107,6 +108,7 @@ Extraction extract_reduced(const OpSource& source, const RcfOracle& rcf,
         "reduced extraction is defined for 2.5-D terrains (Brown 5.2); use the minimal "
         "surface algorithm for 3-D meshes");
   }
+  source.need_links();  // as extract_minimal_surface: before the pages are read
   auto t0 = Clock::now();
   const std::vector<OpId> x = add_to_list_reduced(source, rcf);
   const double t_extract = seconds_since(t0);

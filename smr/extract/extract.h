@@ -50,6 +50,8 @@ struct ExpansionOptions {
   /// advancing front: no fans, in page order, several times faster. Ignored (the front runs) when
   /// max_triangles is set or for reduced extraction, whose X+ grows during the expansion.
   bool fronts = true;
+  /// Whether the advancing front runs (it reads the ops' links: OpSource::need_links).
+  bool runs_front() const { return fronts || max_triangles != 0; }
 };
 
 /// An index's conservative answer to "which ops may be not completely finer than the RCF".

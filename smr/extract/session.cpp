@@ -782,6 +782,7 @@ std::vector<OpId> add_to_list_budgeted(const OpSource& source, const RcfOracle& 
 Extraction extract_budgeted(const OpSource& source, const RcfOracle& rcf,
                             const SessionBudget& budget, const ExpansionOptions& options,
                             FrameStats* frame_stats) {
+  if (options.runs_front()) source.need_links();  // before the session reads the pages
   const auto t0 = Clock::now();
   const std::vector<OpId> x = add_to_list_budgeted(source, rcf, budget, frame_stats);
   return expand_minimal(source, x, options, seconds_since(t0));

@@ -34,6 +34,7 @@ class IndexedSource final : public OpSource, public RcfIndexedSource {
   std::size_t prefetch(std::span<const std::uint64_t> pages) const override {
     return db_.prefetch(pages);
   }
+  void need_links() const override { db_.need_links(); }
 
   /// Reduced extraction's X from the R-tree: every op not completely finer than `rcf`. Reads
   /// the R-tree nodes the query enters and the data pages of the entries it accepts.

@@ -49,6 +49,7 @@ struct TempDir : test::TempDir {
 void expect_same_ops(const Crmr& m, const Database& db) {
   ASSERT_EQ(db.op_count(), m.ops.size());
   EXPECT_EQ(db.info(), m.header);
+  db.need_links();  // to_op reads them
   for (const Op& op : m.ops) {
     const OpRef got = db.op(op.id);
     ASSERT_EQ(to_op(*got), op) << "op " << op.id.value << " differs after the round trip";
@@ -178,6 +179,64 @@ TEST(Database, PrefetchingChangesNothingAndDecodesEachPageOnce) {
     // without prefetching (a lookahead past the cache would thrash: twice as many or more).
     EXPECT_LE(small_on.stats.pages_read * 10, small_off.stats.pages_read * 11);
   }
+}
+
+TEST(Database, PagesAreDecodedWithoutTheirLinksUntilAReaderNeedsThem) {
+  // Only the advancing front reads the Hypermesh links, so pages are decoded without them (and
+  // take less memory) until a reader calls need_links, as run_expansion does: the set formula
+  // reads no link, a view without links refuses to give any, and after the front ran every op
+  // read has its links, equal to the op built.
+  const test::Dataset& d = test::dataset(test::dataset_names().front());
+  TempDir dir;
+  const std::string path = dir.file("model.smrdb");
+  Crmr m = d.crmr;  // write_database quantizes it
+  write_database(m, path, {});
+  const auto linked = std::find_if(m.ops.begin(), m.ops.end(),
+                                   [](const Op& op) { return !op.coarser.empty(); });
+  ASSERT_NE(linked, m.ops.end());
+  const RcfSpec spec = test::rcf_spread(m.header).back().spec;
+  const Rcf rcf = make_rcf(spec, ModelKind::kTerrain, &d.dem);
+  const auto db = Database::open(path, {std::size_t{1} << 30});
+  const IndexedSource source(*db);
+  const std::uint64_t page = db->locality(linked->id);
+
+  const OpRef lean = db->op(linked->id);
+  EXPECT_FALSE(lean->links);
+  EXPECT_TRUE(lean->coarser.empty());
+  const auto internal = [](const auto& f) {
+    try {
+      f();
+    } catch (const Error& e) {
+      return e.kind() == ErrorKind::kInternal;
+    }
+    return false;
+  };
+  EXPECT_TRUE(internal([&] { to_op(*lean); }));
+  EXPECT_TRUE(internal([&] { lean->coarser_link(0, 0); }));
+  const std::size_t lean_bytes = db->page(page)->memory_bytes();
+
+  ExpansionOptions pages;
+  pages.fronts = false;
+  const auto sorted = [](std::vector<TriRef> t) {
+    std::sort(t.begin(), t.end());
+    return t;
+  };
+  const Extraction set = extract_minimal_surface(source, rcf, pages);
+  const Extraction mem = extract_minimal_surface(m, rcf);
+  EXPECT_EQ(set.x, mem.x);
+  EXPECT_EQ(sorted(set.triangles), sorted(mem.triangles));  // page order: not the front's
+  EXPECT_FALSE(db->op(linked->id)->links);                  // the set formula asked for none
+
+  const Extraction front = extract_minimal_surface(source, rcf);
+  EXPECT_EQ(front.triangles, mem.triangles);
+  EXPECT_EQ(front.fan_starts, mem.fan_starts);
+  const OpRef full = db->op(linked->id);
+  EXPECT_TRUE(full->links);
+  EXPECT_EQ(to_op(*full), *linked);
+  // Every link of the page took memory the lean page does not (at least a CoarserLink each).
+  std::size_t links = 0;
+  for (const OpView& op : db->page(page)->ops()) links += op.coarser.size();
+  EXPECT_GE(db->page(page)->memory_bytes(), lean_bytes + links * sizeof(CoarserLink));
 }
 
 TEST(Database, ViewsReadAheadOnlyTheIndexsCandidatePages) {

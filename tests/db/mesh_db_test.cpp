@@ -47,6 +47,7 @@ TEST_P(MeshDb, ExtractionFromDiskEqualsExtractionInMemory) {
     const auto whole = Database::open(path, {std::size_t{1} << 30});
     ASSERT_EQ(whole->op_count(), m.ops.size());
     EXPECT_EQ(whole->info(), m.header);
+    whole->need_links();  // to_op reads them
     for (const Op& op : m.ops) ASSERT_EQ(to_op(*whole->op(op.id)), op) << "op " << op.id.value;
     decoded = whole->stats().cache.bytes_decoded;
   }

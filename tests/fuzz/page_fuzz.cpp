@@ -435,10 +435,47 @@ std::shared_ptr<const DecodedPage> decode_page_checked(ByteView bytes, const Mod
   return page;
 }
 
+// Empty when `lean` (decoded without links) is `full` but for the links, else what differs.
+std::string same_but_links(const DecodedPage& full, const DecodedPage& lean) {
+  if (full.size() != lean.size()) return "op counts";
+  const auto same = [](auto a, auto b) { return std::ranges::equal(a, b); };
+  for (std::size_t i = 0; i < full.size(); ++i) {
+    const OpView& f = full[i];
+    const OpView& l = lean[i];
+    if (!f.links || l.links || !l.coarser.empty()) return "the links flag";
+    if (f.id != l.id || f.birth_res != l.birth_res || f.error != l.error ||
+        f.new_vertex_count != l.new_vertex_count || !same(f.vertices, l.vertices) ||
+        !same(f.vertex_list, l.vertex_list) || !same(f.fragment, l.fragment) ||
+        !same(f.pre, l.pre) || !same(f.pre_tris, l.pre_tris) || !same(f.parents, l.parents) ||
+        !same(f.children, l.children) || f.box != l.box || f.sphere != l.sphere || f.roi != l.roi ||
+        !(f.subtree_cone == l.subtree_cone))
+      return "op " + std::to_string(i);
+  }
+  if (lean.memory_bytes() >= full.memory_bytes() && full.size() > 0 &&
+      std::ranges::any_of(full.ops(), [](const OpView& o) { return !o.coarser.empty(); }))
+    return "memory: the page without links is not smaller";
+  return {};
+}
+
 // Decodes `bytes` as a page of `model`: an smr::Error must be kCorrupt and name the page; a page
-// must pass check_page. Returns the page, or nullptr when rejected. Cuts it too (cut()).
+// must pass check_page. Returns the page, or nullptr when rejected. Decodes it without its links
+// too (Database's default until need_links): accepted whenever the whole page is, and equal to
+// it but for the links. Cuts it too (cut()).
 std::shared_ptr<const DecodedPage> decode(ByteView bytes, const Model& model, Tally& tally) {
   const auto page = decode_page_checked(bytes, model, tally);
+  std::shared_ptr<const DecodedPage> lean;
+  if (accepted("decode_page without links", [&] {
+        lean = decode_page(bytes, model.grid, model.info, g_case.page, false);
+      })) {
+    if (auto bad = check_page(*lean, model.info); !bad.empty())
+      fail("an inconsistent page without links: " + bad);
+    if (page != nullptr) {
+      if (auto bad = same_but_links(*page, *lean); !bad.empty())
+        fail("decoded without links, the page differs: " + bad);
+    }
+  } else if (page != nullptr) {
+    fail("a page decoded with its links but not without");
+  }
   cut(bytes, model, page.get());
   return page;
 }
@@ -484,6 +521,7 @@ std::vector<Source> build_sources(const fs::path& dir) {
   for (const fs::path& p : paths) {
     Source s;
     s.db = Database::open(p.string(), {});
+    s.db->need_links();  // its pages are compared with decode_page's, links and all
     s.model = {p.filename().string(), s.db->grid(), s.db->info()};
     s.path = p;
     sources.push_back(std::move(s));
