@@ -62,7 +62,7 @@ class Fingerprint {
       }
       add(std::uint64_t(op.fragment.size()));
       for (const smr::FragmentTriangle& t : op.fragment) {
-        for (int k = 0; k < 3; ++k) add((std::uint64_t(t.v[k]) << 32) | std::uint32_t(t.nbr[k]));
+        for (int k = 0; k < 3; ++k) add(std::uint64_t(t.v[k]));
         add(t.death_res);
         add(t.killer.value);
         add(std::uint64_t(t.flags));

@@ -624,6 +624,7 @@ struct DecodeArgs {
   std::uint64_t stride = 1;
   double min_seconds = 1.0;
   bool keep = false;  // every page of a pass held until its end: each decoded into fresh memory
+  bool links = false;  // decode the Hypermesh links too (as after OpSource::need_links)
 };
 
 json mode_decode(const DecodeArgs& a) {
@@ -645,7 +646,7 @@ json mode_decode(const DecodeArgs& a) {
     payloads.push_back(smr::storage::unseal(pages[i], "pages", std::to_string(i)));
     const smr::PageSections parts = smr::page_sections(payloads.back(), "page");
     for (std::size_t k = 0; k < totals.size(); ++k) totals[k] += parts.totals[k];
-    const auto page = smr::decode_page(payloads.back(), db->grid(), db->info(), "page");
+    const auto page = smr::decode_page(payloads.back(), db->grid(), db->info(), "page", a.links);
     ops += page->size();
     bytes += pages[i].size();
     decoded_bytes += page->memory_bytes();
@@ -654,7 +655,7 @@ json mode_decode(const DecodeArgs& a) {
   const double s = time_passes(a.min_seconds, [&] {
     std::vector<std::shared_ptr<const smr::DecodedPage>> keep;
     for (const auto& p : payloads) {
-      keep.push_back(smr::decode_page(p, db->grid(), db->info(), "page"));
+      keep.push_back(smr::decode_page(p, db->grid(), db->info(), "page", a.links));
       sink += keep.back()->size();
       if (!a.keep) keep.clear();
     }
@@ -678,6 +679,8 @@ json mode_decode(const DecodeArgs& a) {
           {"us_per_page", 1e6 * s / double(pages.size())},
           {"ns_per_op", 1e9 * s / double(ops)},
           {"pages_kept", a.keep},
+          {"links", a.links},
+          {"pages_per_mib", double(pages.size()) * 1048576.0 / double(decoded_bytes)},
           {"input_mb_per_s", double(bytes) / 1e6 / s}};
 }
 
@@ -731,6 +734,8 @@ int main(int argc, char** argv) {
   de->add_option("--min-seconds", da.min_seconds, "Minimum measuring time")->capture_default_str();
   de->add_flag("--keep", da.keep,
                "Hold every decoded page to the end of a pass (fresh memory, as a first view has)");
+  de->add_flag("--links", da.links,
+               "Decode the Hypermesh links too (a database does once a reader needs them)");
   CLI11_PARSE(app, argc, argv);
   try {
     json out;

@@ -380,7 +380,6 @@ class OpMaker {
         op.children.push_back(ft.killer);
       }
     }
-    derive_fragment_neighbours(op);
   }
 
   // Op `id` (not R^0) from its record: F, the error, PreF and its parents, the links. `vs` and

@@ -120,15 +120,13 @@ std::vector<std::vector<std::uint32_t>> coalesce(const PmHistory& h,
 // fill_fragment()'s buffers: one per thread making ops.
 struct FragmentScratch {
   std::vector<std::uint32_t> local;
-  std::vector<std::pair<std::uint64_t, std::uint32_t>> edges;
 };
 
 // Fills an op's vertices (the new ones first, then every other corner of `frag`) and its
-// fragment triangles with in-fragment neighbours. Reads the history only: runs on any thread.
+// fragment triangles. Reads the history only: runs on any thread.
 void fill_fragment(const PmHistory& h, Op& op, std::span<const std::uint32_t> frag,
                    const std::vector<std::uint32_t>& new_vertices, FragmentScratch& s) {
   std::vector<std::uint32_t>& local = s.local;
-  std::vector<std::pair<std::uint64_t, std::uint32_t>>& edges = s.edges;
   local.clear();
   for (std::uint32_t v : new_vertices) local.push_back(v);
   for (std::uint32_t id : frag) {
@@ -157,25 +155,9 @@ void fill_fragment(const PmHistory& h, Op& op, std::span<const std::uint32_t> fr
     return static_cast<std::uint32_t>(std::lower_bound(first, local.end(), v) - local.begin());
   };
   op.fragment.assign(frag.size(), FragmentTriangle{});
-  // Neighbours across directed edges: (edge, triangle) sorted by edge, the first holder of an
-  // edge being the one found.
-  edges.clear();
   for (std::uint32_t i = 0; i < frag.size(); ++i) {
     const Tri& t = h.tris[frag[i]];
-    for (int k = 0; k < 3; ++k) {
-      op.fragment[i].v[k] = index_of(t.v[k]);
-      edges.push_back({edge_key(t.v[k], t.v[(k + 1) % 3]), i});
-    }
-  }
-  std::sort(edges.begin(), edges.end());
-  for (std::uint32_t i = 0; i < frag.size(); ++i) {
-    const Tri& t = h.tris[frag[i]];
-    for (int k = 0; k < 3; ++k) {
-      const std::uint64_t key = edge_key(t.v[(k + 1) % 3], t.v[k]);
-      const auto it = std::lower_bound(edges.begin(), edges.end(), std::pair{key, 0u});
-      if (it != edges.end() && it->first == key)
-        op.fragment[i].nbr[k] = static_cast<std::int32_t>(it->second);
-    }
+    for (int k = 0; k < 3; ++k) op.fragment[i].v[k] = index_of(t.v[k]);
   }
 }
 
@@ -295,10 +277,12 @@ void link_op(const PmHistory& h, Replay& r, const std::vector<std::uint32_t>& gr
   }
   std::sort(op.pre.begin(), op.pre.end());
   op.coarser.clear();
+  thread_local std::vector<std::array<std::int32_t, 3>> nbr;  // in-fragment neighbours
+  fragment_neighbours(op.fragment, nbr);
   for (std::uint32_t k = 0; k < frag.size(); ++k) {
     const Tri& t = h.tris[frag[k]];
     for (std::uint8_t e = 0; e < 3; ++e) {
-      if (op.fragment[k].nbr[e] != FragmentTriangle::kNoNeighbour) continue;
+      if (nbr[k][e] != FragmentTriangle::kNoNeighbour) continue;
       const std::uint32_t a = t.v[e], b = t.v[(e + 1) % 3];
       const std::uint32_t* out = r.edges.find(edge_key(b, a));
       if (out == nullptr) continue;  // model boundary

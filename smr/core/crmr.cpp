@@ -88,7 +88,6 @@ Op to_op(const OpView& view) {
   op.coarser.assign(view.coarser.begin(), view.coarser.end());
   op.parents.assign(view.parents.begin(), view.parents.end());
   op.children.assign(view.children.begin(), view.children.end());
-  derive_fragment_neighbours(op);  // views from pages do not carry them
   op.box = view.box;
   op.sphere = view.sphere;
   op.cone = op_bounds(view).cone;  // nor their own normal cone
@@ -128,16 +127,6 @@ Crmr CrmrCollector::take() {
 // In-fragment neighbours: the triangle across each edge that has the reversed edge. Fragments
 // are small (a few triangles), so a quadratic scan beats a hash map (and a sort); R^0 may be
 // large and is hashed.
-void derive_fragment_neighbours(Op& op) {
-  derive_fragment_neighbours(std::span<FragmentTriangle>(op.fragment));
-}
-
-void derive_fragment_neighbours(std::span<FragmentTriangle> fragment) {
-  // Only corners are read and only nbr written: filling in place is safe.
-  for_each_neighbour(std::span<const FragmentTriangle>(fragment),
-                     [&](std::size_t i, int k, std::int32_t j) { fragment[i].nbr[k] = j; });
-}
-
 void fragment_neighbours(std::span<const FragmentTriangle> fragment,
                          std::vector<std::array<std::int32_t, 3>>& nbr) {
   nbr.resize(fragment.size());

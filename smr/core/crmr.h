@@ -75,12 +75,9 @@ struct OpBounds {
 /// compute_op_bounds' values for any op, an Op or a paged one.
 OpBounds op_bounds(const OpView& op);
 
-/// Sets every fragment triangle's `nbr` from the fragment itself: across edge k, the triangle that
-/// has the reversed edge (kNoNeighbour if none).
-void derive_fragment_neighbours(Op& op);
-void derive_fragment_neighbours(std::span<FragmentTriangle> fragment);
-/// The same neighbours into `nbr` (one entry per triangle), for fragments that do not keep them
-/// (a paged op's view).
+/// A fragment's in-fragment neighbours, into `nbr` (one entry per triangle): across edge k of
+/// triangle i, the triangle that has the reversed edge (FragmentTriangle::kNoNeighbour if none).
+/// Fragments do not keep them: every reader that needs them derives them.
 void fragment_neighbours(std::span<const FragmentTriangle> fragment,
                          std::vector<std::array<std::int32_t, 3>>& nbr);
 

@@ -147,15 +147,20 @@ bool vertex_index_out_of_range(const Op& op, const FragmentTriangle& t, std::siz
   return false;
 }
 
-// Neighbour links within F are symmetric and share the reversed edge a-b of triangle i's edge k.
-void check_neighbour_link(const Op& op, const FragmentTriangle& t, std::size_t i, int k,
+using Neighbours = std::vector<std::array<std::int32_t, 3>>;  // fragment_neighbours (crmr.h)
+
+// Neighbour links within F are symmetric and share the reversed edge a-b of triangle i's edge k
+// (a directed edge used twice breaks the symmetry).
+void check_neighbour_link(const Op& op, const Neighbours& nbr, std::size_t i, int k,
                           const std::string& name, InvariantReport& r) {
+  const FragmentTriangle& t = op.fragment[i];
   const VertexId a = op.vertex_id(t, k), b = op.vertex_id(t, (k + 1) % 3);
-  const auto& n = op.fragment.at(static_cast<std::size_t>(t.nbr[k]));
+  const auto m = static_cast<std::size_t>(nbr[i][k]);
+  const auto& n = op.fragment.at(m);
   bool found = false;
   for (int j = 0; j < 3; ++j) {
     found |= op.vertex_id(n, j) == b && op.vertex_id(n, (j + 1) % 3) == a &&
-             n.nbr[j] == static_cast<std::int32_t>(i);
+             nbr[m][j] == static_cast<std::int32_t>(i);
   }
   if (!found) r.fail(name + ": asymmetric neighbour link at triangle " + std::to_string(i));
 }
@@ -217,16 +222,20 @@ bool check_terrain_fragment(const Crmr& crmr, const Op& op, const std::string& n
                             InvariantReport& r, std::vector<GridTri>& f) {
   const CrmrInfo& info = crmr.header;
   for (std::size_t i = 0; i < op.fragment.size(); ++i) {
+    if (vertex_index_out_of_range(op, op.fragment[i], i, name, r)) return false;
+  }
+  Neighbours nbr;
+  fragment_neighbours(op.fragment, nbr);
+  for (std::size_t i = 0; i < op.fragment.size(); ++i) {
     const FragmentTriangle& t = op.fragment[i];
     ++r.checked;
-    if (vertex_index_out_of_range(op, t, i, name, r)) return false;
     f.push_back(grid_tri(info, op, t));
     if (orient(f.back().p[0], f.back().p[1], f.back().p[2]) <= 0) {
       r.fail(name + ": triangle " + std::to_string(i) + " is not counter-clockwise");
     }
     for (int k = 0; k < 3; ++k) {
-      if (t.nbr[k] >= 0) {
-        check_neighbour_link(op, t, i, k, name, r);
+      if (nbr[i][k] >= 0) {
+        check_neighbour_link(op, nbr, i, k, name, r);
         continue;
       }
       const CoarserLink* link =
@@ -345,16 +354,20 @@ void check_mesh_op_local(const Crmr& crmr, const Op& op, InvariantReport& r,
   std::vector<std::size_t> linked_triangle;  // the F triangle of each
   Components pieces(op.fragment.size());
   for (std::size_t i = 0; i < op.fragment.size(); ++i) {
+    if (vertex_index_out_of_range(op, op.fragment[i], i, name, r)) return;
+  }
+  Neighbours nbr;
+  fragment_neighbours(op.fragment, nbr);
+  for (std::size_t i = 0; i < op.fragment.size(); ++i) {
     const FragmentTriangle& t = op.fragment[i];
     ++r.checked;
-    if (vertex_index_out_of_range(op, t, i, name, r)) return;
     for (int k = 0; k < 3; ++k) {
       const VertexId a = op.vertex_id(t, k), b = op.vertex_id(t, (k + 1) % 3);
       if (!f_edges.insert({a.value, b.value}).second)
         r.fail(name + ": directed edge used twice in F");
-      if (t.nbr[k] >= 0) {
-        check_neighbour_link(op, t, i, k, name, r);
-        pieces.join(i, static_cast<std::size_t>(t.nbr[k]));
+      if (nbr[i][k] >= 0) {
+        check_neighbour_link(op, nbr, i, k, name, r);
+        pieces.join(i, static_cast<std::size_t>(nbr[i][k]));
         continue;
       }
       const CoarserLink* link =

@@ -41,20 +41,21 @@ struct CoarserLink {
   friend bool operator==(const CoarserLink&, const CoarserLink&) = default;
 };
 
-/// A triangle of a fragment F(R).
+/// A triangle of a fragment F(R): 32 bytes (a decoded page holds thousands). Its neighbours in F
+/// are not kept: fragment_neighbours (crmr.h) derives them for the readers that need them.
 struct FragmentTriangle {
-  static constexpr std::int32_t kNoNeighbour = -1;
-  static constexpr std::uint8_t kVoid = 1;  // covers only "no data": never output
+  static constexpr std::int32_t kNoNeighbour = -1;  // fragment_neighbours: no triangle across
+  static constexpr std::uint8_t kVoid = 1;          // covers only "no data": never output
 
   std::array<std::uint32_t, 3> v{};  // indices into Op::vertices, counter-clockwise
-  double death_res = 1.0;            // resolution at which it is replaced (1 if never)
-  OpId killer;                       // op whose PreF contains it; invalid if never replaced
-  std::array<std::int32_t, 3> nbr{kNoNeighbour, kNoNeighbour, kNoNeighbour};  // across edge k, in F
   std::uint8_t flags = 0;
+  double death_res = 1.0;  // resolution at which it is replaced (1 if never)
+  OpId killer;             // op whose PreF contains it; invalid if never replaced
 
   bool is_void() const { return (flags & kVoid) != 0; }
   friend bool operator==(const FragmentTriangle&, const FragmentTriangle&) = default;
 };
+static_assert(sizeof(FragmentTriangle) == 32);
 
 /// A triangle of PreF(R) as R sees it: its corners as indices into R's own `vertices` (no vertex
 /// disappears in a refinement, so every corner of PreF is a vertex of F) and its flags. With it an
@@ -131,9 +132,8 @@ struct OpView {
   Sphere sphere;
   Box3 roi;
   NormalCone subtree_cone;
-  // Not here, though Op has them, since pages derive them only on demand: each fragment
-  // triangle's `nbr` (fragment_neighbours, crmr.h; a paged op's are kNoNeighbour) and the op's
-  // own normal cone (op_bounds(view).cone).
+  // Not here, though Op has it, since pages derive it only on demand: the op's own normal cone
+  // (op_bounds(view).cone).
 
   OpView() = default;
   OpView(const Op& op);  // NOLINT(google-explicit-constructor): an Op reads as its view

@@ -72,7 +72,6 @@ void spool_op(const Op& op, const QuantGrid& grid, Bytes& out) {
   w.varint(op.fragment.size());
   for (const FragmentTriangle& t : op.fragment) {
     for (std::uint32_t v : t.v) w.varint(v);
-    for (std::int32_t n : t.nbr) w.varint(std::uint64_t(std::int64_t(n) + 1));
     w.svarint(t.killer.valid() ? std::int64_t(t.killer.value - id) : 0);
     w.f64(t.death_res);
     w.u8(t.flags);
@@ -126,10 +125,9 @@ Op unspool_op(ByteView in, std::uint64_t id, const QuantGrid& grid) {
     for (int k = 0; k < 3; ++k) q[k] = static_cast<std::int32_t>(q[k] + r.svarint());
     v.p = grid.dequantize(q);
   }
-  op.fragment.resize(count(15));
+  op.fragment.resize(count(13));  // 3 corners, killer, f64 death_res, flags
   for (FragmentTriangle& t : op.fragment) {
     for (std::uint32_t& v : t.v) v = static_cast<std::uint32_t>(r.varint());
-    for (std::int32_t& n : t.nbr) n = static_cast<std::int32_t>(std::int64_t(r.varint()) - 1);
     const std::int64_t killer = r.svarint();
     if (killer != 0) t.killer = OpId(id + static_cast<std::uint64_t>(killer));
     t.death_res = r.f64();

@@ -273,13 +273,15 @@ void expect_links_of_a_replay(const Crmr& m) {
   };
   for (std::uint32_t i = 0; i < m.ops[0].fragment.size(); ++i) enter(m.ops[0], i);
   std::uint64_t links = 0, wrong = 0;
+  std::vector<std::array<std::int32_t, 3>> nbr;  // the op's neighbours in F
   for (std::size_t n = 1; n < m.ops.size(); ++n) {
     const Op& op = m.ops[n];
     std::vector<CoarserLink> expected;
+    fragment_neighbours(op.fragment, nbr);
     for (std::uint32_t i = 0; i < op.fragment.size(); ++i) {
       const FragmentTriangle& t = op.fragment[i];
       for (std::uint8_t k = 0; k < 3; ++k) {
-        if (t.nbr[k] != FragmentTriangle::kNoNeighbour) continue;
+        if (nbr[i][k] != FragmentTriangle::kNoNeighbour) continue;
         const std::uint64_t a = op.vertex_id(t, k).value, b = op.vertex_id(t, (k + 1) % 3).value;
         const auto out = live.find({b, a});
         if (out == live.end()) continue;

@@ -671,10 +671,7 @@ class Builder {
         const FaceHandle nf = t.face->neighbor((k + 2) % 3);
         const FaceInfo& n = nf->info();
         if (n.id == kNone) continue;  // infinite face: model boundary, no coarser version
-        if (n.op == op_.index) {
-          ft.nbr[k] = static_cast<std::int32_t>(tris_[n.id].local);
-          continue;
-        }
+        if (n.op == op_.index) continue;  // inside the fragment
         // Fragment boundary edge. Its versions are the fragments of the triangles that have had
         // it on either side; the closest coarser one is the newer of the replaced triangle inside
         // (from PreF) and the surviving triangle outside.
