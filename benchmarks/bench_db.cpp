@@ -623,7 +623,7 @@ struct DecodeArgs {
   std::string db;
   std::uint64_t stride = 1;
   double min_seconds = 1.0;
-  bool keep = false;  // every page of a pass held until its end: each decoded into fresh memory
+  bool keep = false;   // every page of a pass held until its end: each decoded into fresh memory
   bool links = false;  // decode the Hypermesh links too (as after OpSource::need_links)
 };
 

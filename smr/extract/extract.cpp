@@ -35,7 +35,7 @@ Extraction expand_minimal(const OpSource& source, std::span<const OpId> x,
                           const ExpansionOptions& options, double extract_seconds) {
   const auto t0 = Clock::now();
   Extraction e = options.runs_front() ? run_expansion(source, x, false, options)
-                                     : extract_set_formula(source, x);
+                                      : extract_set_formula(source, x);
   e.stats.expand_seconds = seconds_since(t0);
   e.stats.extract_seconds = extract_seconds;
   return e;

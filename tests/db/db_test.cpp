@@ -191,8 +191,8 @@ TEST(Database, PagesAreDecodedWithoutTheirLinksUntilAReaderNeedsThem) {
   const std::string path = dir.file("model.smrdb");
   Crmr m = d.crmr;  // write_database quantizes it
   write_database(m, path, {});
-  const auto linked = std::find_if(m.ops.begin(), m.ops.end(),
-                                   [](const Op& op) { return !op.coarser.empty(); });
+  const auto linked =
+      std::find_if(m.ops.begin(), m.ops.end(), [](const Op& op) { return !op.coarser.empty(); });
   ASSERT_NE(linked, m.ops.end());
   const RcfSpec spec = test::rcf_spread(m.header).back().spec;
   const Rcf rcf = make_rcf(spec, ModelKind::kTerrain, &d.dem);

@@ -464,9 +464,8 @@ std::string same_but_links(const DecodedPage& full, const DecodedPage& lean) {
 std::shared_ptr<const DecodedPage> decode(ByteView bytes, const Model& model, Tally& tally) {
   const auto page = decode_page_checked(bytes, model, tally);
   std::shared_ptr<const DecodedPage> lean;
-  if (accepted("decode_page without links", [&] {
-        lean = decode_page(bytes, model.grid, model.info, g_case.page, false);
-      })) {
+  if (accepted("decode_page without links",
+               [&] { lean = decode_page(bytes, model.grid, model.info, g_case.page, false); })) {
     if (auto bad = check_page(*lean, model.info); !bad.empty())
       fail("an inconsistent page without links: " + bad);
     if (page != nullptr) {

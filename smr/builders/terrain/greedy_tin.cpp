@@ -670,7 +670,7 @@ class Builder {
         // Our edge k joins v[k], v[k+1]: CGAL's edge opposite vertex k+2.
         const FaceHandle nf = t.face->neighbor((k + 2) % 3);
         const FaceInfo& n = nf->info();
-        if (n.id == kNone) continue;  // infinite face: model boundary, no coarser version
+        if (n.id == kNone) continue;      // infinite face: model boundary, no coarser version
         if (n.op == op_.index) continue;  // inside the fragment
         // Fragment boundary edge. Its versions are the fragments of the triangles that have had
         // it on either side; the closest coarser one is the newer of the replaced triangle inside
