@@ -205,7 +205,8 @@ void to_json(json& j, const VerifyReport& r) {
        {"faults", r.faults},
        {"pages", r.pages},
        {"ops", r.ops},
-       {"triangles", r.triangles}};
+       {"triangles", r.triangles},
+       {"links", r.links}};
 }
 
 namespace tools {

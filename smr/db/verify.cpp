@@ -100,6 +100,7 @@ void read_pages(const Database& db, Gathered& g, VerifyReport& rep, Faults& faul
       for (const FragmentTriangle& t : op.fragment) f.killers.push_back(t.killer);
       ++rep.ops;
       rep.triangles += op.fragment.size();
+      rep.links += op.coarser.size();
       for (OpId c : op.children) g.down.push_back({op.id.value, c.value});
       for (OpId q : op.parents) g.up.push_back({q.value, op.id.value});
       for (const TriRef& t : op.pre) g.pre.push_back({t, op.id});
@@ -269,6 +270,7 @@ VerifyReport verify_database(const std::string& path, const std::function<void(d
     fault(e.what());
     return rep;
   }
+  db->need_links();  // the links are checked too (each names an existing coarser triangle)
   Gathered g(db->op_count());
   read_pages(*db, g, rep, fault, progress);
   const bool every_page = rep.pages == db->page_count();

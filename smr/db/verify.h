@@ -14,7 +14,7 @@ namespace smr {
 /// conservative box, in the page of its leaf.
 struct VerifyReport {
   std::vector<std::string> faults;  // empty = clean
-  std::uint64_t pages = 0, ops = 0, triangles = 0, rtree_nodes = 0;
+  std::uint64_t pages = 0, ops = 0, triangles = 0, links = 0, rtree_nodes = 0;
   bool ok() const { return faults.empty(); }
 };
 

@@ -313,6 +313,9 @@ TEST(Database, EveryCodecRoundTripsAndFilesAreByteIdentical) {
     const VerifyReport v = verify_database(pa, nullptr);
     EXPECT_TRUE(v.ok()) << v.faults.front();
     EXPECT_EQ(v.ops, a.ops.size());
+    std::uint64_t links = 0;  // every Hypermesh link is read and checked
+    for (const Op& op : a.ops) links += op.coarser.size();
+    EXPECT_EQ(v.links, links);
   }
   EXPECT_LT(sizes[2], sizes[0]);  // Draco beats raw
   EXPECT_LT(sizes[1], sizes[0]);  // and so does zstd
