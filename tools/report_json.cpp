@@ -201,12 +201,8 @@ void to_json(json& j, const DatabaseStats& s) {
 }
 
 void to_json(json& j, const VerifyReport& r) {
-  j = {{"ok", r.ok()},
-       {"faults", r.faults},
-       {"pages", r.pages},
-       {"ops", r.ops},
-       {"triangles", r.triangles},
-       {"links", r.links}};
+  j = {{"ok", r.ok()}, {"faults", r.faults},       {"pages", r.pages},
+       {"ops", r.ops}, {"triangles", r.triangles}, {"links", r.links}};
 }
 
 namespace tools {
