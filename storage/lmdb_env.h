@@ -98,6 +98,9 @@ class ReadTxn {
   // Asks the OS to start reading the values of `keys` (those stored on pages of their own) without
   // waiting for them: get() on them later finds them read, or in flight together.
   void will_need(Table table, std::span<const std::uint64_t> keys) const;
+  // The same for values kept in their tree's leaf pages (small ones): asks for the keys' leaves,
+  // reading only branch pages meanwhile.
+  void will_need_leaves(Table table, std::span<const std::uint64_t> keys) const;
   // Every entry of `table` in key order.
   void for_each(Table table, const std::function<void(ByteView key, ByteView value)>& visit) const;
   std::uint64_t count(Table table) const;

@@ -255,6 +255,18 @@ void Database::will_need(std::span<const std::uint64_t> pages) const {
     naming_file(path(), [&] { env_->read().will_need(Table::kPages, missing); });
 }
 
+void Database::will_need_locators(std::span<const OpId> ids) const {
+  std::vector<std::uint64_t> blocks;
+  blocks.reserve(ids.size());
+  for (OpId id : ids) blocks.push_back(id.value / kOpsPerLocatorBlock);
+  std::sort(blocks.begin(), blocks.end());
+  blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
+  const std::vector<std::uint64_t> missing =
+      uncached(2, blocks, (op_count_ + kOpsPerLocatorBlock - 1) / kOpsPerLocatorBlock);
+  if (!missing.empty())
+    naming_file(path(), [&] { env_->read().will_need_leaves(Table::kOpLocators, missing); });
+}
+
 void Database::decode_ahead(std::uint64_t page) const {
   const std::uint64_t kind = page_kind();
   if (cache_->contains((kind << 60) | page)) return;

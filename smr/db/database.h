@@ -69,6 +69,8 @@ class Database final : public OpSource {
   /// Asks the OS to read the data pages not in the cache ahead (storage::ReadTxn::will_need): a
   /// cold start then waits on many reads at once instead of one after another.
   void will_need(std::span<const std::uint64_t> pages) const;
+  /// The same for the op locators of `ids` (any order), waiting for none of them.
+  void will_need_locators(std::span<const OpId> ids) const;
   /// The entries of the R-tree that `visitor` accepts, grouped by leaf (= data page); reads the
   /// nodes the query enters (through the cache) and no page. Errors name the file.
   std::vector<index::Hit> rtree_query(index::Visitor& visitor) const;
