@@ -97,6 +97,22 @@ class PageCache {
     return index_.size();
   }
 
+  // Drops the cached values whose key satisfies `drop` (counters are kept; not counted as
+  // evictions). Readers holding one keep it.
+  template <class Pred>
+  void erase_if(Pred&& drop) {
+    std::lock_guard lock(mutex_);
+    for (auto it = lru_.begin(); it != lru_.end();) {
+      if (!drop(it->key)) {
+        ++it;
+        continue;
+      }
+      stats_.held_bytes -= it->charged_bytes;
+      index_.erase(it->key);
+      it = lru_.erase(it);
+    }
+  }
+
   // Drops every cached value (counters are kept; held_bytes becomes 0).
   void clear() {
     std::lock_guard lock(mutex_);

@@ -156,8 +156,8 @@ struct OpView {
   const FragmentTriangle& triangle(std::uint32_t i) const;
 };
 
-/// An Op with the view's contents (corners renumbered to the op's own vertex list, neighbours and
-/// the normal cone derived): equal to the Op the view was written from. Throws smr::Error
+/// An Op with the view's contents (corners renumbered to the op's own vertex list, the normal cone
+/// derived): equal to the Op the view was written from. Throws smr::Error
 /// (kInternal) on a view without its links (OpView::links).
 Op to_op(const OpView& view);
 

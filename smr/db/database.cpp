@@ -255,10 +255,19 @@ void Database::will_need(std::span<const std::uint64_t> pages) const {
     naming_file(path(), [&] { env_->read().will_need(Table::kPages, missing); });
 }
 
+void Database::need_links() const {
+  if (links_.load(std::memory_order_acquire) || links_.exchange(true)) return;
+  // The first reader to ask: from now on pages are read whole (page_kind), and the copies without
+  // links would only hold cache space until the LRU let them go.
+  cache_->erase_if([](std::uint64_t key) { return key >> 60 == 1; });
+}
+
 void Database::will_need_locators(std::span<const OpId> ids) const {
   std::vector<std::uint64_t> blocks;
-  blocks.reserve(ids.size());
-  for (OpId id : ids) blocks.push_back(id.value / kOpsPerLocatorBlock);
+  for (OpId id : ids) {  // grouped by page, so neighbours often share a block
+    const std::uint64_t b = id.value / kOpsPerLocatorBlock;
+    if (blocks.empty() || blocks.back() != b) blocks.push_back(b);
+  }
   std::sort(blocks.begin(), blocks.end());
   blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
   const std::vector<std::uint64_t> missing =

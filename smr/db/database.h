@@ -63,13 +63,14 @@ class Database final : public OpSource {
   OpBatch batch(std::uint64_t page) const override;
   std::size_t prefetch(std::span<const std::uint64_t> pages) const override;
   /// Pages are decoded without their Hypermesh links until a reader asks for them (the advancing
-  /// front does): from then on, with them (pages decoded before stay cached as they are, under a
-  /// key of their own, until the cache lets them go).
-  void need_links() const override { links_.store(true, std::memory_order_relaxed); }
+  /// front does): from then on, for every reader of this database, with them. The pages decoded
+  /// without are dropped from the cache then (readers holding one keep it).
+  void need_links() const override;
   /// Asks the OS to read the data pages not in the cache ahead (storage::ReadTxn::will_need): a
   /// cold start then waits on many reads at once instead of one after another.
   void will_need(std::span<const std::uint64_t> pages) const;
-  /// The same for the op locators of `ids` (any order), waiting for none of them.
+  /// The same for the op locators of `ids` (any order): reads the locator tree's branch pages and
+  /// asks for the leaves that hold them, without waiting for those.
   void will_need_locators(std::span<const OpId> ids) const;
   /// The entries of the R-tree that `visitor` accepts, grouped by leaf (= data page); reads the
   /// nodes the query enters (through the cache) and no page. Errors name the file.

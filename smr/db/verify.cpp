@@ -104,6 +104,7 @@ void read_pages(const Database& db, Gathered& g, VerifyReport& rep, Faults& faul
       for (OpId c : op.children) g.down.push_back({op.id.value, c.value});
       for (OpId q : op.parents) g.up.push_back({q.value, op.id.value});
       for (const TriRef& t : op.pre) g.pre.push_back({t, op.id});
+      op.require_links();  // verify_database asked for them
       for (const CoarserLink& l : op.coarser) g.links.push_back({op.id, l.coarser});
       if (!contains(op.roi, op.box)) fault(name + ": its ROI does not contain its box");
       if (!cone_contains(op.subtree_cone, op_bounds(op).cone))

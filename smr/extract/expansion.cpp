@@ -261,7 +261,7 @@ class Expander {
       stacks_.erase(id.value);
     }
     expanded_.assign(op.fragment.size(), 0);
-    fragment_neighbours(op.fragment, nbr_);  // a paged op's view does not carry them
+    fragment_neighbours(op.fragment, nbr_);  // fragments do not keep them
     bool on_front = false;
     for (const FrontKey& k : stack) on_front |= front_.contains(k);
     bool starting = !on_front;

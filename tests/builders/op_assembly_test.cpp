@@ -395,9 +395,9 @@ std::vector<std::array<std::int32_t, 3>> brute_neighbours(const Op& op) {
       for (int k = 0; k < 3; ++k) {
         for (int l = 0; l < 3; ++l) {
           const FragmentTriangle &a = op.fragment[i], &b = op.fragment[j];
-          if (op.vertex_id(a, k) == op.vertex_id(b, (l + 1) % 3) &&
+          if (nbr[i][k] < 0 && op.vertex_id(a, k) == op.vertex_id(b, (l + 1) % 3) &&
               op.vertex_id(a, (k + 1) % 3) == op.vertex_id(b, l))
-            nbr[i][k] = int(j);
+            nbr[i][k] = int(j);  // the first, as fragment_neighbours' scan
         }
       }
     }
