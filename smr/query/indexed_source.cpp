@@ -70,7 +70,7 @@ CandidateOps IndexedSource::maybe_not_completely_finer(const RcfOracle& rcf,
     c.ids.push_back(OpId{h.id});
     if (c.places.empty() || c.places.back() != h.leaf) c.places.push_back(h.leaf);
   }
-  db_.will_need(c.places);  // the pages the candidates are on, read ahead if not in the cache
+  db_.will_need(c.places);        // the pages the candidates are on, read ahead if not in the cache
   db_.will_need_locators(c.ids);  // and where they are (the traversal locates what it visits)
   return c;
 }

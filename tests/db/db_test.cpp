@@ -196,7 +196,8 @@ TEST(Database, PagesAreDecodedWithoutTheirLinksUntilAReaderNeedsThem) {
   ASSERT_NE(linked, m.ops.end());
   const RcfSpec spec = test::rcf_spread(m.header).back().spec;
   const Rcf rcf = make_rcf(spec, ModelKind::kTerrain, &d.dem);
-  const auto db = Database::open(path, {std::size_t{1} << 30});
+  // Without the prefetch thread: no page decoded behind the test's back between its checks.
+  const auto db = Database::open(path, {std::size_t{1} << 30, false});
   const IndexedSource source(*db);
   const std::uint64_t page = db->locality(linked->id);
 
