@@ -421,65 +421,65 @@ struct EnvState {
     owner[pgno].store(mine, std::memory_order_release);
   }
 
+  // Where LMDB's search for a key ends: the leaf page that would hold it, and the keys bounding
+  // that page in its parent (for check_page). The bounds point into the mapped file.
+  struct LeafAt {
+    std::uint64_t pgno = kNoPage;
+    ByteView lo, hi;
+    bool has_lo = false, has_hi = false;
+  };
+
+  // Follows LMDB's search for `key` down `table`'s branch pages, checking each, to the leaf that
+  // would hold it (not read); pgno kNoPage for an empty tree.
+  LeafAt descend(Table table, ByteView key, const std::string& key_text) const {
+    const Tree& tree = trees[index(table)];
+    LeafAt at;
+    if (tree.root == kNoPage) return at;
+    at.pgno = tree.root;
+    for (std::uint64_t depth = 1; depth < tree.depth; ++depth) {
+      check_page(table, at.pgno, at.has_lo ? &at.lo : nullptr, at.has_hi ? &at.hi : nullptr);
+      const std::uint8_t* p = page(at.pgno);
+      if (!is_branch(p)) not_deep(table, key_text, at.pgno);
+      const std::size_t i = child_index(p, key);
+      if (i > 0) at.lo = node_at(p, i).key, at.has_lo = true;
+      if (i + 1 < node_count(p)) at.hi = node_at(p, i + 1).key, at.has_hi = true;
+      at.pgno = node_at(p, i).child;
+    }
+    return at;
+  }
+
+  // The key's node in the leaf `at` (descend's), checking the leaf, if there is one.
+  std::optional<Node> find_in(Table table, const LeafAt& at, ByteView key,
+                              const std::string& key_text) const {
+    if (at.pgno == kNoPage) return std::nullopt;
+    check_page(table, at.pgno, at.has_lo ? &at.lo : nullptr, at.has_hi ? &at.hi : nullptr);
+    const std::uint8_t* p = page(at.pgno);
+    if (is_branch(p)) not_deep(table, key_text, at.pgno);
+    std::size_t a = 0, b = node_count(p);
+    while (a < b) {
+      const std::size_t mid = (a + b) / 2;
+      const Node node = node_at(p, mid);
+      const int c = compare_keys(node.key, key);
+      if (c == 0) return node;
+      if (c < 0) {
+        a = mid + 1;
+      } else {
+        b = mid;
+      }
+    }
+    return std::nullopt;
+  }
+
   // Follows LMDB's search for `key` down `table`'s tree, checking each page on the way, and
   // returns the key's node, if there is one.
   std::optional<Node> find(Table table, ByteView key, const std::string& key_text) const {
-    const Tree& tree = trees[index(table)];
-    if (tree.root == kNoPage) return std::nullopt;
-    std::uint64_t pgno = tree.root;
-    ByteView lo_key, hi_key;
-    const ByteView *lo = nullptr, *hi = nullptr;
-    for (std::uint64_t depth = 1;; ++depth) {
-      check_page(table, pgno, lo, hi);
-      const std::uint8_t* p = page(pgno);
-      if (!is_branch(p)) {
-        if (depth != tree.depth) break;
-        std::size_t a = 0, b = node_count(p);
-        while (a < b) {
-          const std::size_t mid = (a + b) / 2;
-          const Node node = node_at(p, mid);
-          const int c = compare_keys(node.key, key);
-          if (c == 0) return node;
-          if (c < 0) {
-            a = mid + 1;
-          } else {
-            b = mid;
-          }
-        }
-        return std::nullopt;
-      }
-      if (depth >= tree.depth) break;
-      const std::size_t i = child_index(p, key);
-      if (i > 0) lo_key = node_at(p, i).key, lo = &lo_key;
-      if (i + 1 < node_count(p)) hi_key = node_at(p, i + 1).key, hi = &hi_key;
-      pgno = node_at(p, i).child;
-    }
-    throw_corrupt(where(table) + ", key " + key_text + ": damaged LMDB page " +
-                  std::to_string(pgno) + ": the tree is not " + std::to_string(tree.depth) +
-                  " pages deep there");
+    return find_in(table, descend(table, key, key_text), key, key_text);
   }
 
-  // The leaf page that would hold `key`, found through the branch pages alone (checked as find()
-  // checks them; the leaf is not touched), or kNoPage for an empty or one-page tree.
-  std::uint64_t leaf_of(Table table, ByteView key, const std::string& key_text) const {
-    const Tree& tree = trees[index(table)];
-    if (tree.root == kNoPage || tree.depth < 2) return kNoPage;
-    std::uint64_t pgno = tree.root;
-    ByteView lo_key, hi_key;
-    const ByteView *lo = nullptr, *hi = nullptr;
-    for (std::uint64_t depth = 1; depth < tree.depth; ++depth) {
-      check_page(table, pgno, lo, hi);
-      const std::uint8_t* p = page(pgno);
-      if (!is_branch(p))
-        throw_corrupt(where(table) + ", key " + key_text + ": damaged LMDB page " +
-                      std::to_string(pgno) + ": the tree is not " + std::to_string(tree.depth) +
-                      " pages deep there");
-      const std::size_t i = child_index(p, key);
-      if (i > 0) lo_key = node_at(p, i).key, lo = &lo_key;
-      if (i + 1 < node_count(p)) hi_key = node_at(p, i + 1).key, hi = &hi_key;
-      pgno = node_at(p, i).child;
-    }
-    return pgno < pages ? pgno : kNoPage;  // find() will say why
+  [[noreturn]] void not_deep(Table table, const std::string& key_text, std::uint64_t pgno) const {
+    throw_corrupt(where(table) + ", key " + key_text + ": damaged LMDB page " +
+                  std::to_string(pgno) + ": the tree is not " +
+                  std::to_string(trees[index(table)].depth) + " pages deep there");
   }
 
   // Checks every page of `table`'s tree (before a cursor walks it).
@@ -705,28 +705,41 @@ std::optional<ByteView> ReadTxn::get_bytes(Table table, ByteView key,
   return from_val(v);
 }
 
-void ReadTxn::will_need_leaves(Table table, std::span<const std::uint64_t> keys) const {
+namespace {
+
+// Finds the leaf of every key through the branch pages and asks for the leaves all at once:
+// finding a key reads its leaf, and with the file opened MDB_NORDAHEAD each would otherwise wait on
+// the disk after the one before. Returns the keys' leaves, in the keys' order.
+std::vector<detail::EnvState::LeafAt> advise_leaves(const detail::EnvState& env, Table table,
+                                                    std::span<const std::uint64_t> keys) {
+  std::vector<detail::EnvState::LeafAt> at;
+  at.reserve(keys.size());
   std::vector<std::uint64_t> leaves;
   leaves.reserve(keys.size());
   for (std::uint64_t key : keys) {
-    const std::uint64_t leaf = env_->leaf_of(table, key_u64(key), std::to_string(key));
-    if (leaf != kNoPage) leaves.push_back(leaf);
+    at.push_back(env.descend(table, key_u64(key), std::to_string(key)));
+    if (at.back().pgno != kNoPage) leaves.push_back(at.back().pgno);
   }
   std::sort(leaves.begin(), leaves.end());
   leaves.erase(std::unique(leaves.begin(), leaves.end()), leaves.end());
   for (std::uint64_t leaf : leaves) {
-    (void)::madvise(const_cast<std::uint8_t*>(env_->page(leaf)), env_->page_size,
+    (void)::madvise(const_cast<std::uint8_t*>(env.page(leaf)), env.page_size,
                     MADV_WILLNEED);  // advisory
   }
+  return at;
+}
+
+}  // namespace
+
+void ReadTxn::will_need_leaves(Table table, std::span<const std::uint64_t> keys) const {
+  advise_leaves(*env_, table, keys);
 }
 
 void ReadTxn::will_need(Table table, std::span<const std::uint64_t> keys) const {
-  // The keys' leaf pages first, all asked for at once: finding a key reads its leaf, and with the
-  // file opened MDB_NORDAHEAD each would otherwise wait on the disk after the one before.
-  will_need_leaves(table, keys);
-  for (std::uint64_t key : keys) {
-    const Bytes k = key_u64(key);
-    const std::optional<Node> node = env_->find(table, k, std::to_string(key));
+  const std::vector<detail::EnvState::LeafAt> at = advise_leaves(*env_, table, keys);
+  for (std::size_t i = 0; i < keys.size(); ++i) {
+    const std::optional<Node> node =
+        env_->find_in(table, at[i], key_u64(keys[i]), std::to_string(keys[i]));
     if (!node || node->flags != kBigData) continue;  // absent, or in the leaf page just read
     const std::uint64_t first = read_le(node->data, 8);
     const std::uint64_t count = (kPageHeader - 1 + node->size) / env_->page_size + 1;

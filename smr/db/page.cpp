@@ -423,7 +423,7 @@ class PageDecoder {
     for (const auto& [n, used] : {std::pair{totals_.list, list_used_},
                                   {totals_.triangles, face_},
                                   {totals_.pre, pre_used_},
-                                  {links_ ? totals_.links : 0, links_used_},
+                                  {links_kept(), links_used_},
                                   {totals_.parents + totals_.children, ids_used_}}) {
       if (n != used) fail("the page's totals disagree with its records");
     }
@@ -563,6 +563,9 @@ class PageDecoder {
     return p;
   }
 
+  // The links the page's block holds: none when decode_page was asked for none.
+  std::uint64_t links_kept() const { return links_ ? totals_.links : 0; }
+
   // One block for every array of the page (the first pass sizes it, the second places them).
   void allocate(DecodedPage& page) {
     std::size_t size = 0;
@@ -572,7 +575,7 @@ class PageDecoder {
       vertices_ = carve<Vertex>(at, totals_.vertices);
       triangles_ = carve<FragmentTriangle>(at, totals_.triangles);
       pre_ = carve<TriRef>(at, totals_.pre);
-      links_block_ = carve<CoarserLink>(at, links_ ? totals_.links : 0);
+      links_block_ = carve<CoarserLink>(at, links_kept());
       ids_ = carve<OpId>(at, totals_.parents + totals_.children);
       pre_tris_ = carve<PreTriangle>(at, totals_.pre);
       list_ = carve<std::uint32_t>(at, totals_.list);
@@ -587,7 +590,7 @@ class PageDecoder {
     std::uninitialized_default_construct_n(vertices_, totals_.vertices);
     std::uninitialized_default_construct_n(triangles_, totals_.triangles);
     std::uninitialized_default_construct_n(pre_, totals_.pre);
-    std::uninitialized_default_construct_n(links_block_, links_ ? totals_.links : 0);
+    std::uninitialized_default_construct_n(links_block_, links_kept());
     std::uninitialized_default_construct_n(ids_, totals_.parents + totals_.children);
     std::uninitialized_default_construct_n(pre_tris_, totals_.pre);
     page.ops_ = ops_;
