@@ -145,9 +145,11 @@ std::vector<std::uint32_t> SplitMesh::neighbours(std::uint32_t v) const {
 // ---- SelectiveRefinement
 
 SelectiveRefinement::SelectiveRefinement(const OpSource& source,
-                                         std::shared_ptr<const SelectiveIndex> index)
+                                         std::shared_ptr<const SelectiveIndex> index,
+                                         SplitScheme scheme)
     : source_(source),
       index_(std::move(index)),
+      scheme_(scheme),
       mesh_(index_->vertex_count()),
       node_of_(index_->vertex_count(), kNone),
       pos_(index_->vertex_count()),
@@ -202,7 +204,11 @@ void SelectiveRefinement::refine_if(const Select& select) {
     ++stats_.evaluated;
     if (!select(sp.node, *read(sp.op))) continue;
     ++stats_.selected;
-    split(sp.vs);
+    if (scheme_ == SplitScheme::kHoppe97) {
+      split_with_dependencies(sp.vs);
+    } else {
+      split(sp.vs);
+    }
   }
   stats_.seconds += seconds_since(t0);
 }
@@ -212,8 +218,9 @@ SelectiveRefinement::Select SelectiveRefinement::select_by(const NodeCriterion& 
     const SelectiveIndex::Node& n = index_->nodes()[node];
     const Sphere sphere{pos_[n.vertex], double(n.radius)};
     if (c.frustum && sphere_outside(c.camera, sphere)) return false;
-    if (c.backface &&
-        backfacing(c.camera, c.backface_over_sphere ? sphere : Sphere{sphere.center, 0.0}, n.cone))
+    if (c.backface && backfacing(c.camera,
+                                 c.backface_over_sphere ? sphere : Sphere{sphere.center, 0.0},
+                                 c.vertex_normal_cones ? n.vertex_cone : n.cone))
       return false;
     const double d = std::max(glm::length(sphere.center - c.camera.eye) - sphere.radius, 1e-12);
     return op.error * c.camera.focal_px() / d > c.pixel_error;
@@ -271,6 +278,39 @@ void SelectiveRefinement::split(std::uint32_t v, bool forced) {
   if (forced) ++stats_.forced_splits;
   activate(sp.child_t);
   activate(sp.child_u);
+}
+
+void SelectiveRefinement::split_with_dependencies(std::uint32_t v) {
+  if (v >= node_of_.size() || node_of_[v] == kNone) throw_input(vertex_name(v) + " is not active");
+  const SelectiveIndex& ix = *index_;
+  const std::uint32_t first = ix.nodes()[node_of_[v]].split;
+  if (first == kNone) throw_input(vertex_name(v) + " has no split left (it is a source vertex)");
+  // Every split pushed comes earlier in the PM's sequence than the one that pushed it (a parent's
+  // split, or the maker of a face there when it was made), so the stack empties.
+  std::vector<std::uint32_t> stack{first};
+  while (!stack.empty()) {
+    const std::uint32_t s = stack.back();
+    const SelectiveIndex::Split& sp = ix.splits()[s];
+    if (made_[s] != 0) {
+      stack.pop_back();
+      continue;
+    }
+    if (node_of_[sp.vs] != sp.node) {  // an ancestor is active: its splits first
+      stack.push_back(ix.nodes()[ix.nodes()[sp.node].parent].split);
+      continue;
+    }
+    bool ready = true;
+    for (std::uint32_t f : sp.around) {
+      const std::uint32_t maker = f == kNone ? kNone : ix.face_split(f);
+      if (maker != kNone && made_[maker] == 0) {
+        stack.push_back(maker);
+        ready = false;
+      }
+    }
+    if (!ready) continue;
+    stack.pop_back();
+    split(sp.vs, s != first);
+  }
 }
 
 bool SelectiveRefinement::collapse(std::uint32_t s) {
@@ -352,9 +392,9 @@ namespace {
 template <class Criterion>
 SelectiveExtraction extract_with(const OpSource& source,
                                  std::shared_ptr<const SelectiveIndex> index,
-                                 const Criterion& criterion) {
+                                 const Criterion& criterion, SplitScheme scheme) {
   const auto t0 = Clock::now();
-  SelectiveRefinement r(source, std::move(index));
+  SelectiveRefinement r(source, std::move(index), scheme);
   r.refine(criterion);
   SelectiveExtraction out;
   out.mesh = r.to_mesh(&out.vertex_ids);
@@ -367,14 +407,14 @@ SelectiveExtraction extract_with(const OpSource& source,
 
 SelectiveExtraction extract_selective(const OpSource& source,
                                       std::shared_ptr<const SelectiveIndex> index,
-                                      const RcfOracle& rcf) {
-  return extract_with(source, std::move(index), rcf);
+                                      const RcfOracle& rcf, SplitScheme scheme) {
+  return extract_with(source, std::move(index), rcf, scheme);
 }
 
 SelectiveExtraction extract_selective(const OpSource& source,
                                       std::shared_ptr<const SelectiveIndex> index,
-                                      const NodeCriterion& criterion) {
-  return extract_with(source, std::move(index), criterion);
+                                      const NodeCriterion& criterion, SplitScheme scheme) {
+  return extract_with(source, std::move(index), criterion, scheme);
 }
 
 }  // namespace smr

@@ -63,6 +63,11 @@ class SelectiveIndex {
     std::uint32_t vs = kNone, vu = kNone;
     std::uint32_t cut_l = kNone, cut_r = kNone;
     std::uint32_t node = kNone, child_t = kNone, child_u = kNone;
+    /// Hoppe 1997's fn0..fn3 (section 3, Fig. 3): the faces across the edges (v_u, v_l),
+    /// (v_l, v_s), (v_s, v_r) and (v_r, v_u) of the split's new faces, where the split is made in
+    /// the PM's own sequence (face ids as source_faces(); kNone on the model boundary or for a
+    /// missing side). What Hoppe's scheme requires to be active before the split.
+    std::array<std::uint32_t, 4> around{kNone, kNone, kNone, kNone};
   };
   struct Node {
     std::uint32_t vertex = kNone;  // the vertex id it stands for
@@ -73,6 +78,10 @@ class SelectiveIndex {
     std::uint32_t size = 1;       // nodes in its subtree (its own included)
     float radius = 0.0f;          // r(n): max |p(vertex) - p(x)| over source vertices x below
     NormalCone cone;              // holds the normal of every source triangle at those x
+    /// Holds the vertex normal (the normalized sum of its triangles' unit normals) of every
+    /// source vertex x below: the cone OpenMesh's Analyzer gives its VDPM nodes. Narrower than
+    /// `cone`, and no bound on the triangles' normals.
+    NormalCone vertex_cone;
   };
   struct Stats {
     std::uint64_t splits = 0, roots = 0, spawned_components = 0;
@@ -112,6 +121,11 @@ class SelectiveIndex {
   const std::vector<std::array<std::uint32_t, 3>>& source_faces() const { return faces_; }
   std::uint32_t split_face(std::uint32_t split, int side) const {
     return static_cast<std::uint32_t>(base_.size()) + 2 * split + static_cast<std::uint32_t>(side);
+  }
+  /// The split that makes face f (kNone: a base triangle, always there).
+  std::uint32_t face_split(std::uint32_t f) const {
+    const auto base = static_cast<std::uint32_t>(base_.size());
+    return f < base ? kNone : (f - base) / 2;
   }
   std::uint32_t vertex_count() const { return static_cast<std::uint32_t>(leaf_.size()); }
   /// Source vertex positions, for measurements (flipped triangles) and checks, not for
@@ -186,6 +200,25 @@ struct NodeCriterion {
   /// and OpenMesh's VDPM make it (false: not conservative; a vertex near the silhouette can be
   /// judged facing away while part of its dual piece faces the eye).
   bool backface_over_sphere = true;
+  /// Which normal cone the back-face test reads: that of every source triangle's normal below
+  /// the node (false: Hoppe 1997 section 4.2's bound, Node::cone), or that of the source vertex
+  /// normals below it (true: Node::vertex_cone, what OpenMesh's Analyzer computes for VDPM;
+  /// narrower, and not conservative: a triangle can face the eye while every vertex normal
+  /// below faces away).
+  bool vertex_normal_cones = false;
+};
+
+/// How a selected vertex's split gets the neighbourhood it needs: Kim & Lee's Table 2 compares
+/// the two on the same hierarchy and criterion.
+enum class SplitScheme {
+  /// Kim & Lee 2001: any active vertex splits, its cut vertices found on the fly; only the
+  /// degenerate case (section 4.4) forces a split first.
+  kTrulySelective,
+  /// Hoppe 1997 (section 4.3, force_vsplit): a split is made only when its `around` faces
+  /// (fn0..fn3) are all active; the splits that make them, and the ancestors' splits that make
+  /// those vertices active, are forced first, recursively. Its wings are then the cut vertices
+  /// Kim & Lee's search finds (they are the vertices the fn faces meet at).
+  kHoppe97,
 };
 
 struct SelectiveStats {
@@ -206,7 +239,8 @@ class SelectiveRefinement {
  public:
   static constexpr std::uint32_t kNone = SelectiveIndex::kNone;
   /// The selective base mesh, positions read from `source` (R^0 and the spawning ops).
-  SelectiveRefinement(const OpSource& source, std::shared_ptr<const SelectiveIndex> index);
+  SelectiveRefinement(const OpSource& source, std::shared_ptr<const SelectiveIndex> index,
+                      SplitScheme scheme = SplitScheme::kTrulySelective);
 
   /// Refines every selected active vertex, coarsest split first, until none is selected.
   void refine(const RcfOracle& rcf);
@@ -214,6 +248,9 @@ class SelectiveRefinement {
   /// vsplit_new (section 4.1): splits the active vertex v (it must have a split left), after
   /// the additional splits of a degenerate case. `forced` marks it as one of those.
   void split(std::uint32_t v, bool forced = false);
+  /// Hoppe 1997's force_vsplit: splits active vertex v after every split its `around` faces
+  /// need, recursively (those are counted as forced).
+  void split_with_dependencies(std::uint32_t v);
   /// ecol_new: collapses the active edge (v_t, v_u) of split `s` when both are active leaves of
   /// it (v_u not split since). Returns false, postponing it (section 4.4), when v_t and v_u have
   /// a common neighbour other than the edge's two opposite vertices.
@@ -228,6 +265,7 @@ class SelectiveRefinement {
   bool selected(std::uint32_t v, const NodeCriterion& criterion) const;
   const SplitMesh& mesh() const { return mesh_; }
   const SelectiveIndex& index() const { return *index_; }
+  SplitScheme scheme() const { return scheme_; }
   /// Vertex ids of the output and the indexed mesh (positions of the active vertices).
   std::vector<std::uint32_t> active_vertices() const;
   TriangleMesh to_mesh(std::vector<std::uint32_t>* vertex_ids = nullptr) const;
@@ -248,6 +286,7 @@ class SelectiveRefinement {
 
   const OpSource& source_;
   std::shared_ptr<const SelectiveIndex> index_;
+  SplitScheme scheme_;
   SplitMesh mesh_;
   std::vector<std::uint32_t> node_of_;
   std::vector<Vec3> pos_;
@@ -266,9 +305,11 @@ struct SelectiveExtraction {
 /// Truly selective extraction from the base mesh: SelectiveRefinement::refine, then the mesh.
 SelectiveExtraction extract_selective(const OpSource& source,
                                       std::shared_ptr<const SelectiveIndex> index,
-                                      const RcfOracle& rcf);
+                                      const RcfOracle& rcf,
+                                      SplitScheme scheme = SplitScheme::kTrulySelective);
 SelectiveExtraction extract_selective(const OpSource& source,
                                       std::shared_ptr<const SelectiveIndex> index,
-                                      const NodeCriterion& criterion);
+                                      const NodeCriterion& criterion,
+                                      SplitScheme scheme = SplitScheme::kTrulySelective);
 
 }  // namespace smr

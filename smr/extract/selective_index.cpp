@@ -45,6 +45,7 @@ struct SelectiveIndexBuilder {
   std::vector<Vec3> pos;
   std::vector<std::uint32_t> base_tri;                  // replay triangle per base triangle
   std::vector<std::array<std::uint32_t, 2>> split_tri;  // replay triangles (v,u,l), (u,v,r)
+  std::vector<std::array<std::uint32_t, 4>> split_around;  // replay triangles fn0..fn3
   std::vector<std::uint32_t> roots;
   std::vector<std::uint32_t> preorder;  // every node, each tree in preorder (number())
 
@@ -160,6 +161,17 @@ struct SelectiveIndexBuilder {
       }
     }
     const auto made = mesh.split(v, u, l, r, 0, 0);
+    // Hoppe's fn0..fn3: the triangles across the new faces' other edges, as they are now.
+    const auto across = [&](std::uint32_t t, std::uint32_t a, std::uint32_t b) {
+      if (t == kNone) return kNone;
+      for (std::uint32_t x : mesh.star(a)) {
+        const Triple& c = mesh.triangle(x);
+        if (x != t && std::count(c.begin(), c.end(), b) != 0) return x;
+      }
+      return kNone;
+    };
+    split_around.push_back(
+        {across(made[0], u, l), across(made[0], l, v), across(made[1], v, r), across(made[1], r, u)});
     // The replay must make exactly F: u's star is the op's fragment.
     std::vector<Triple> now;
     for (std::uint32_t t : mesh.star(u)) now.push_back(mesh.triangle(t));
@@ -227,31 +239,47 @@ struct SelectiveIndexBuilder {
   // found from its whole range (O(triangles x depth), as radii()), or is the union of its
   // children's cones when that is narrower. The union alone widens a little at every level: with
   // it alone the selective mode kept 1.2-1.4x VDPM's faces on the back-face rows of Kim & Lee's
-  // Table 2 (benchmarks/vdpm/README.md).
+  // Table 2 (benchmarks/vdpm/README.md). The vertex cones are found the same way from one vertex
+  // normal per source vertex (OpenMesh's Analyzer: the leaves' vertex normals).
   void cones() {
     std::vector<std::uint32_t> source_vertex(ix.nodes_.size(), kNone);
     for (std::uint32_t v = 0; v < node_of.size(); ++v) source_vertex[node_of[v]] = v;
-    std::vector<Vec3> normals;
-    std::vector<std::size_t> start(preorder.size() + 1);
+    std::vector<Vec3> normals, vertex_normals;
+    std::vector<std::size_t> start(preorder.size() + 1), vertex_start(preorder.size() + 1);
     for (std::size_t at = 0; at < preorder.size(); ++at) {
       start[at] = normals.size();
+      vertex_start[at] = vertex_normals.size();
       const std::uint32_t v = source_vertex[preorder[at]];
       if (v == kNone) continue;
+      Vec3 sum{0.0};
       for (std::uint32_t t : mesh.star(v)) {
         const Triple& c = mesh.triangle(t);
         normals.push_back(triangle_normal(pos[c[0]], pos[c[1]], pos[c[2]]));
+        sum += normals.back();
       }
+      if (glm::length(sum) > 1e-12) vertex_normals.push_back(glm::normalize(sum));
     }
     start[preorder.size()] = normals.size();
+    vertex_start[preorder.size()] = vertex_normals.size();
+    const auto cone_of = [&](const std::vector<Vec3>& all, const std::vector<std::size_t>& from,
+                             std::size_t at, std::uint32_t size, NormalCone SelectiveIndex::Node::*
+                                                                     member) {
+      const std::span<const Vec3> below(all.data() + from[at], from[at + size] - from[at]);
+      NormalCone c = below.empty() ? NormalCone{.half_angle = M_PI} : normal_cone(below);
+      const SelectiveIndex::Node& node = ix.nodes_[preorder[at]];
+      if (node.split != kNone) {
+        const SelectiveIndex::Split& s = ix.splits_[node.split];
+        const NormalCone joined =
+            cone_union(ix.nodes_[s.child_t].*member, ix.nodes_[s.child_u].*member);
+        if (joined.half_angle < c.half_angle) c = joined;
+      }
+      return c;
+    };
     for (std::size_t at = preorder.size(); at-- > 0;) {  // children before their parents
       SelectiveIndex::Node& node = ix.nodes_[preorder[at]];
-      const std::span<const Vec3> below(normals.data() + start[at],
-                                        start[at + node.size] - start[at]);
-      node.cone = below.empty() ? NormalCone{.half_angle = M_PI} : normal_cone(below);
-      if (node.split == kNone) continue;
-      const SelectiveIndex::Split& s = ix.splits_[node.split];
-      const NormalCone joined = cone_union(ix.nodes_[s.child_t].cone, ix.nodes_[s.child_u].cone);
-      if (joined.half_angle < node.cone.half_angle) node.cone = joined;
+      node.cone = cone_of(normals, start, at, node.size, &SelectiveIndex::Node::cone);
+      node.vertex_cone =
+          cone_of(vertex_normals, vertex_start, at, node.size, &SelectiveIndex::Node::vertex_cone);
     }
   }
 
@@ -266,6 +294,20 @@ struct SelectiveIndexBuilder {
       }
       ix.splits_[s].cut_l = ix.faces_[ix.faces_.size() - 2][2];
       ix.splits_[s].cut_r = ix.faces_.back()[2];
+    }
+    std::vector<std::uint32_t> face_of(mesh.capacity(), kNone);  // replay triangle -> face id
+    for (std::uint32_t b = 0; b < base_tri.size(); ++b) face_of[base_tri[b]] = b;
+    for (std::uint32_t s = 0; s < split_tri.size(); ++s) {
+      for (int side = 0; side < 2; ++side) {
+        const std::uint32_t t = split_tri[s][static_cast<std::size_t>(side)];
+        if (t != kNone) face_of[t] = ix.split_face(s, side);
+      }
+    }
+    for (std::size_t s = 0; s < ix.splits_.size(); ++s) {
+      for (std::size_t k = 0; k < 4; ++k) {
+        const std::uint32_t t = split_around[s][k];
+        ix.splits_[s].around[k] = t == kNone ? kNone : face_of[t];
+      }
     }
     ix.leaf_ = node_of;
     ix.pos_ = pos;

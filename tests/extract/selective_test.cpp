@@ -285,6 +285,75 @@ TEST_P(SelectiveMeshTest, ViewDependentCutsAreManifoldDualPieceMeshesThatMeetThe
   RecordProperty("forced_splits", std::to_string(forced));
 }
 
+// Whether every split made has its Hoppe 1997 neighbourhood (the makers of its fn0..fn3 made).
+std::uint64_t splits_without_their_neighbourhood(const SelectiveRefinement& r) {
+  const SelectiveIndex& ix = r.index();
+  std::uint64_t n = 0;
+  for (std::uint32_t s = 0; s < r.split_made().size(); ++s) {
+    if (r.split_made()[s] == 0) continue;
+    for (std::uint32_t f : ix.splits()[s].around) {
+      const std::uint32_t maker = f == SelectiveIndex::kNone ? f : ix.face_split(f);
+      if (maker != SelectiveIndex::kNone && r.split_made()[maker] == 0) {
+        ++n;
+        break;
+      }
+    }
+  }
+  return n;
+}
+
+// Kim & Lee's Table 2 on one hierarchy and criterion: Hoppe 1997's scheme (a split waits for
+// its fn0..fn3, forcing their splits) gives a valid cut that splits everything the truly
+// selective one selects through selected ancestors, and more: the truly selective scheme splits
+// vertices without that neighbourhood, and gives fewer triangles.
+TEST_P(SelectiveMeshTest, Hoppe97SchemeForcesNeighbourhoodsTheTrulySelectiveSchemeDoesWithout) {
+  const Built& b = built(GetParam());
+  const SelectiveIndex& ix = *b.index;
+  std::uint64_t hoppe_triangles = 0, selective_triangles = 0, hoppe_forced = 0,
+                selective_forced = 0, without = 0;
+  for (const Vec3 dir : {Vec3{1, 0.3, 0.2}, Vec3{-0.4, 1, -0.5}}) {
+    for (double px : {0.5, 4.0}) {
+      for (bool vertex_cones : {false, true}) {
+        SCOPED_TRACE("px " + std::to_string(px) + (vertex_cones ? " vertex cones" : ""));
+        NodeCriterion node{*camera_spec(b.crmr.info(), dir, 1.5, px).camera, true, true, px};
+        node.vertex_normal_cones = vertex_cones;
+        SelectiveRefinement h(b.crmr, b.index, SplitScheme::kHoppe97);
+        h.refine(node);
+        const SelectiveStats sh =
+            check_cut(b, h, [&](std::uint32_t v) { return h.selected(v, node); }, {});
+        EXPECT_EQ(sh.degenerate_cases, 0u);
+        EXPECT_EQ(splits_without_their_neighbourhood(h), 0u);
+        SelectiveRefinement k(b.crmr, b.index);
+        k.refine(node);
+        const SelectiveStats sk =
+            check_cut(b, k, [&](std::uint32_t v) { return k.selected(v, node); }, {});
+        // A split selected through selected ancestors only is one either scheme must make.
+        for (std::uint32_t s = 0; s < k.split_made().size(); ++s) {
+          bool chain = true;
+          for (std::uint32_t n = ix.splits()[s].node; chain && n != SelectiveIndex::kNone;
+               n = ix.nodes()[n].parent) {
+            chain = k.split_made()[ix.nodes()[n].split] == 1;
+          }
+          if (chain) {
+            EXPECT_NE(h.split_made()[s], 0) << "split " << s;
+          }
+        }
+        hoppe_triangles += sh.triangles;
+        selective_triangles += sk.triangles;
+        hoppe_forced += sh.forced_splits;
+        selective_forced += sk.forced_splits;
+        without += splits_without_their_neighbourhood(k);
+      }
+    }
+  }
+  EXPECT_GT(without, 0u);
+  EXPECT_GT(hoppe_forced, selective_forced);
+  EXPECT_GT(hoppe_triangles, selective_triangles);
+  RecordProperty("hoppe97_over_selective_triangles",
+                 std::to_string(double(hoppe_triangles) / double(selective_triangles)));
+  RecordProperty("hoppe97_forced_splits", std::to_string(hoppe_forced));
+}
+
 TEST_P(SelectiveMeshTest, NormalConesHoldEverySourceNormalBelowThemAndBeatTheUnion) {
   // Hoppe 1997 section 4.2: a node's cone bounds the normals of the source triangles at the
   // source vertices below it (what the back-face test may cull on), checked for every triangle,
@@ -310,6 +379,31 @@ TEST_P(SelectiveMeshTest, NormalConesHoldEverySourceNormalBelowThemAndBeatTheUni
     }
   }
   EXPECT_GT(checked, 3 * b.source.triangles.size());
+  // The vertex cones (OpenMesh's Analyzer's kind) hold every source vertex normal below them.
+  std::vector<Vec3> vertex_normal(pos.size(), Vec3{0.0});
+  for (const Tri& t : b.source.triangles) {
+    const Vec3 n = triangle_normal(pos[t[0]], pos[t[1]], pos[t[2]]);
+    if (glm::length(n) > 0.5) {
+      for (std::uint32_t x : t) vertex_normal[x] += n;
+    }
+  }
+  std::uint64_t vertex_checked = 0, vertex_narrower = 0;
+  for (std::uint32_t x = 0; x < pos.size(); ++x) {
+    if (!(glm::length(vertex_normal[x]) > 1e-9)) continue;
+    const Vec3 n = glm::normalize(vertex_normal[x]);
+    for (std::uint32_t node = ix.leaf(x); node != SelectiveIndex::kNone;
+         node = ix.nodes()[node].parent) {
+      const NormalCone& c = ix.nodes()[node].vertex_cone;
+      ASSERT_LE(std::acos(std::clamp(glm::dot(n, c.axis), -1.0, 1.0)), c.half_angle + 1e-6)
+          << "vertex cone of node " << node << " above vertex " << x;
+      ++vertex_checked;
+    }
+  }
+  EXPECT_GT(vertex_checked, pos.size());
+  for (const SelectiveIndex::Node& n : ix.nodes()) {
+    vertex_narrower += n.vertex_cone.half_angle < n.cone.half_angle - 1e-6;
+  }
+  EXPECT_GT(vertex_narrower, ix.nodes().size() / 2);
   std::uint64_t narrower = 0;
   for (const SelectiveIndex::Split& s : ix.splits()) {
     const NormalCone joined = cone_union(ix.nodes()[s.child_t].cone, ix.nodes()[s.child_u].cone);
