@@ -64,6 +64,8 @@ struct ExtractArgs {
   // level alone (smr/query/level_cut.h)
   std::string order;
   std::string compress;  // glTF outputs: "draco" or "meshopt" (empty: none)
+  // --algorithm selective: "truly-selective" or "hoppe97" (SplitScheme; empty: truly-selective)
+  std::string split_scheme;
   std::uint64_t cache_mb = 64;
   std::uint64_t held_mb = 512;      // ExpansionOptions::max_held_bytes, in MiB
   std::uint64_t max_triangles = 0;  // SessionBudget (smr/extract/session.h); 0 = none

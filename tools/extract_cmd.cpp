@@ -112,6 +112,10 @@ void ExtractArgs::add_to(CLI::App& app, bool with_budgets) {
                  "minimal (Brown 5.1), reduced (Brown 5.2) or selective (Kim & Lee 2001: truly "
                  "selective vertex splits; meshes ingested with --coalesce 0)")
       ->capture_default_str();
+  app.add_option("--split-scheme", split_scheme,
+                 "With --algorithm selective: truly-selective (Kim & Lee: a split needs nothing "
+                 "of its neighbourhood; the default) or hoppe97 (Hoppe 1997: a split waits for "
+                 "the four faces around its new ones, forcing their splits first)");
   app.add_option("--order", order,
                  "fronts: triangles as the advancing front emits them, in fans (Brown 5.1.2); "
                  "pages: the same triangles from the set formula, page by page (minimal only; "
@@ -140,6 +144,11 @@ void ExtractArgs::add_to(CLI::App& app, bool with_budgets) {
 void ExtractArgs::validate() const {
   if (algorithm != "minimal" && algorithm != "reduced" && algorithm != "selective")
     throw_input("--algorithm must be 'minimal', 'reduced' or 'selective', got '" + algorithm + "'");
+  if (!split_scheme.empty() && split_scheme != "truly-selective" && split_scheme != "hoppe97")
+    throw_input("--split-scheme must be 'truly-selective' or 'hoppe97', got '" + split_scheme +
+                "'");
+  if (!split_scheme.empty() && algorithm != "selective")
+    throw_input("--split-scheme needs --algorithm selective");
   if (!order.empty() && order != "fronts" && order != "pages")
     throw_input("--order must be 'fronts' or 'pages', got '" + order + "'");
   if (order == "pages" && algorithm != "minimal")

@@ -12,9 +12,12 @@ nlohmann::json run_selective(const Database& db, const Rcf& rcf, const ExtractAr
   nlohmann::json report;
   // The hierarchy and the fundamental cut vertices: one pass over every op (selective.h).
   const std::shared_ptr<const SelectiveIndex> index = SelectiveIndex::build(db);
-  const SelectiveExtraction e = extract_selective(db, index, rcf);
+  const bool hoppe = a.split_scheme == "hoppe97";
+  const SelectiveExtraction e = extract_selective(
+      db, index, rcf, hoppe ? SplitScheme::kHoppe97 : SplitScheme::kTrulySelective);
   report["rcf"] = rcf.describe();
   report["selective"] = e.stats;
+  report["selective"]["scheme"] = hoppe ? "hoppe97" : "truly-selective";
   report["selective"]["index"] = index->stats();
   report["selective"]["error_bound"] =
       "each output triangle is a source triangle with its corners moved to their active "

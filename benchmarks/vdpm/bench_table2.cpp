@@ -9,13 +9,18 @@
 //   (c) smrdb's truly selective refinement (smr/extract/selective.h) over the same ops, with
 //       Hoppe's per-vertex tests over the dual pieces (NodeCriterion: the back-face test at the
 //       vertex, as VDPM makes it; "selective_sphere": that test over the vertex's sphere, which
-//       is conservative; "selective_rcf": the minimal surface's IsCompletelyFiner of each split
-//       op instead),
+//       is conservative; "selective_vdpm_criteria": at the vertex on the cone of the vertex
+//       normals below, OpenMesh's Analyzer's cone, so VDPM's criteria exactly; "selective_rcf":
+//       the minimal surface's IsCompletelyFiner of each split op instead),
+//   (d) Hoppe 1997's own scheme (SplitScheme::kHoppe97: a split waits for its fn0..fn3, forcing
+//       their splits) on the same hierarchy with VDPM's criteria: Kim & Lee's Table 2 compares
+//       their scheme with it on one PM. OpenMesh's VDPM is not it: VDPM implements Kim & Lee's
+//       scheme (its documentation says so; its cut-vertex search is theirs),
 // at equal selection criteria (the same frustum and back-face tests and a tolerance of 1e-3 px:
 // refine everything visible, Kim & Lee's criteria) and at equal measured error (VDPM at
-// --tau px; ours, with the sphere back-face test, at the largest tau of a ladder whose measured
-// two-sided p99 -- and, separately, max -- is within VDPM's, screen_error.h). Prints one JSON
-// object.
+// --tau px; ours, with the sphere back-face test, at the largest tau whose measured two-sided
+// p99 -- and, separately, max -- is within VDPM's, found on a ladder and bisected,
+// screen_error.h). Prints one JSON object.
 #include <cmath>
 #include <cstdint>
 #include <fstream>
@@ -153,17 +158,22 @@ Cut minimal_cut(const Subject& s, const smr::Camera& cam, double tau, bool backf
 }
 
 // How the truly selective mode selects: Hoppe's per-vertex tests over dual pieces (VDPM's kind of
-// criterion) with the back-face test at the vertex (VDPM's own) or over its sphere, or the RCF's
-// IsCompletelyFiner of each split op (the minimal surface's).
-enum class Select { kVertex, kSphere, kRcf };
+// criterion) with the back-face test at the vertex (VDPM's own) or over its sphere, on the cone
+// of the face normals below the node (Hoppe 1997's bound) or of the vertex normals (OpenMesh's
+// Analyzer's); or the RCF's IsCompletelyFiner of each split op (the minimal surface's). And which
+// scheme makes a split's neighbourhood: Kim & Lee's or Hoppe 1997's force_vsplit.
+struct Select {
+  bool rcf = false, sphere = false, vertex_cones = false;
+  smr::SplitScheme scheme = smr::SplitScheme::kTrulySelective;
+};
 
 Cut selective_cut(const Subject& s, const smr::Camera& cam, double tau, bool backface,
-                  Select by = Select::kVertex) {
+                  Select by = {}) {
+  smr::NodeCriterion node{cam, true, backface, tau, by.sphere};
+  node.vertex_normal_cones = by.vertex_cones;
   const smr::SelectiveExtraction e =
-      by == Select::kRcf ? smr::extract_selective(s.crmr, s.index, criterion(cam, tau, backface))
-                         : smr::extract_selective(
-                               s.crmr, s.index,
-                               smr::NodeCriterion{cam, true, backface, tau, by == Select::kSphere});
+      by.rcf ? smr::extract_selective(s.crmr, s.index, criterion(cam, tau, backface), by.scheme)
+             : smr::extract_selective(s.crmr, s.index, node, by.scheme);
   return finish({{"tau_px", tau},
                  {"V", e.mesh.positions.size()},
                  {"DC", e.stats.degenerate_cases},
@@ -176,24 +186,51 @@ Cut selective_cut(const Subject& s, const smr::Camera& cam, double tau, bool bac
                 triangles_of(e.mesh), s, cam);
 }
 
-// Ours at VDPM's measured error: the largest tau of the ladder whose measured p99 (max) is within
-// VDPM's; the ladder runs down from 64 px by sqrt(2) until both are found.
+// Ours at VDPM's measured error: the largest tau whose measured p99 (max) is within VDPM's. A
+// ladder runs down from 64 px by sqrt(2) until both are found; then each is bisected (kBisect
+// steps) between the tau found and the one above it that was not within, so the answer is
+// within 2^-kBisect of a ladder step of the largest such tau, not up to a whole step (~1.4x in
+// faces) below it.
+constexpr int kBisect = 6;
+
 template <class Extract>
 json at_vdpm_error(const Extract& extract, const Cut& vdpm) {
   json out = {{"p99", {{"found", false}}}, {"max", {{"found", false}}}};
+  const auto within = [&](const Cut& c, bool p99) {
+    return p99 ? c.err.p99_px() <= vdpm.err.p99_px() : c.err.max_px() <= vdpm.err.max_px();
+  };
+  const auto keep = [&](const char* what, const Cut& c, double above) {
+    out[what] = c.j;
+    out[what]["found"] = true;
+    out[what]["F_over_vdpm"] = double(c.faces) / double(std::max<std::uint64_t>(1, vdpm.faces));
+    out[what]["tau_not_within"] = above;
+  };
   for (double tau = 64.0; tau >= 1.0 / 64.0; tau /= std::sqrt(2.0)) {
     if (out["p99"]["found"] && out["max"]["found"]) break;
     const Cut c = extract(tau);
     for (const char* what : {"p99", "max"}) {
-      const bool p99 = std::string(what) == "p99";
-      const double mine = p99 ? c.err.p99_px() : c.err.max_px();
-      const double theirs = p99 ? vdpm.err.p99_px() : vdpm.err.max_px();
-      if (!out[what]["found"] && mine <= theirs) {
-        out[what] = c.j;
-        out[what]["found"] = true;
-        out[what]["F_over_vdpm"] = double(c.faces) / double(std::max<std::uint64_t>(1, vdpm.faces));
+      if (out[what]["found"]) continue;
+      if (within(c, std::string(what) == "p99")) keep(what, c, tau * std::sqrt(2.0));
+    }
+  }
+  for (const char* what : {"p99", "max"}) {
+    if (!out[what]["found"]) continue;
+    const bool p99 = std::string(what) == "p99";
+    double lo = out[what]["tau_px"], hi = out[what]["tau_not_within"];
+    const json ladder = {{"tau_px", lo}, {"F", out[what]["F"]}};
+    out[what]["ladder"] = ladder;
+    if (lo >= 64.0) continue;  // the top of the ladder was within
+    for (int i = 0; i < kBisect; ++i) {
+      const double mid = std::sqrt(lo * hi);
+      const Cut c = extract(mid);
+      if (within(c, p99)) {
+        keep(what, c, hi);
+        lo = mid;
+      } else {
+        hi = mid;
       }
     }
+    out[what]["ladder"] = ladder;  // keep() replaced the object
   }
   return out;
 }
@@ -227,19 +264,25 @@ json row(const Subject& s, const smr::Camera& cam, bool backface, double tau) {
              {{"eye", smr::bench::vec3_json(cam.eye)},
               {"target", smr::bench::vec3_json(cam.target)},
               {"fov_y_deg", cam.fov_y_deg}}}};
+  const Select vdpm_criteria{.vertex_cones = true};
   r["equal_criteria"] = {
       {"vdpm", vdpm_cut(s, cam, kAllVisible, backface).j},
       {"minimal", minimal_cut(s, cam, kAllVisible, backface).j},
       {"selective", selective_cut(s, cam, kAllVisible, backface).j},
-      {"selective_sphere", selective_cut(s, cam, kAllVisible, backface, Select::kSphere).j},
-      {"selective_rcf", selective_cut(s, cam, kAllVisible, backface, Select::kRcf).j}};
+      {"selective_vdpm_criteria", selective_cut(s, cam, kAllVisible, backface, vdpm_criteria).j},
+      {"hoppe97_vdpm_criteria",
+       selective_cut(s, cam, kAllVisible, backface,
+                     {.vertex_cones = true, .scheme = smr::SplitScheme::kHoppe97})
+           .j},
+      {"selective_sphere", selective_cut(s, cam, kAllVisible, backface, {.sphere = true}).j},
+      {"selective_rcf", selective_cut(s, cam, kAllVisible, backface, {.rcf = true}).j}};
   const Cut v = vdpm_cut(s, cam, tau, backface);
   r["equal_error"] = {
       {"vdpm", v.j},
       {"minimal", at_vdpm_error([&](double t) { return minimal_cut(s, cam, t, backface); }, v)},
       // Our own, conservative back-face test here: VDPM's point test lets silhouettes through.
       {"selective",
-       at_vdpm_error([&](double t) { return selective_cut(s, cam, t, backface, Select::kSphere); },
+       at_vdpm_error([&](double t) { return selective_cut(s, cam, t, backface, {.sphere = true}); },
                      v)}};
   return r;
 }

@@ -59,7 +59,7 @@ jq -s --arg date "$(date -u +%Y-%m-%dT%H:%M:%SZ)" \
     machine: (.[0].machine + {loadavg_before: $la0, loadavg_after: $la1}),
     setup: {vdpm_tau_px_equal_error: ($tau | tonumber), all_visible_tau_px: 0.001,
             cameras: "3-D: the three directions of bench_vdpm at 1.5 radii, 30 deg fov; terrain: above three corners at 20 deg elevation looking at the centre, 45 deg fov; 1024x768",
-            ours: "build_qem_pm one split per op; minimal = extract_minimal_surface(RCF); selective = extract_selective(NodeCriterion); selective_rcf = extract_selective(RCF)"},
+            ours: "build_qem_pm one split per op; minimal = extract_minimal_surface(RCF); selective = extract_selective(NodeCriterion); selective_vdpm_criteria = the same with vertex_normal_cones; hoppe97_vdpm_criteria = the same with SplitScheme::kHoppe97; selective_rcf = extract_selective(RCF)"},
     meshes: [.[] | del(.machine)]}' "${results[@]}" >"$OUT"
 log "wrote $OUT"
 "$here/table2.sh" "$OUT"

@@ -4,12 +4,16 @@
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 file="${1:-$here/../results/vdpm_table2.json}"
-echo "Equal criteria (everything the culling keeps refined; #V / #F / #DC):"
+echo "Equal criteria (everything the culling keeps refined). On our hierarchy with VDPM's criteria (the"
+echo "back-face test at the vertex, on the cone of the vertex normals below it): Hoppe 1997's scheme and"
+echo "Kim & Lee's truly selective one; beside them OpenMesh's VDPM on its own hierarchy. #V / #F /"
+echo "forced splits (Hoppe 97) or degenerate cases (#DC):"
 echo
-echo "| mesh | dir | criteria | VDPM | minimal | selective | selective F / VDPM F | selective (sphere) F | selective (RCF) F | flipped |"
-echo "|---|---|---|---|---|---|---|---|---|---|"
-jq -r '.meshes[] | .name as $n | .rows[] | .equal_criteria as $e |
-  "| \($n) | \(.direction) | \(.criteria) | \($e.vdpm.V) / \($e.vdpm.F) / \($e.vdpm.DC) | \($e.minimal.V) / \($e.minimal.F) | \($e.selective.V) / \($e.selective.F) / \($e.selective.DC) | \(($e.selective.F / $e.vdpm.F * 100 | round) / 100) | \($e.selective_sphere.F) | \($e.selective_rcf.F) | \($e.selective.flipped_triangles) |"' "$file"
+echo "| mesh | dir | criteria | VDPM | minimal | Hoppe 97 | selective | selective F / Hoppe 97 F | selective F / VDPM F | selective, face cones F | (sphere) F | (RCF) F | flipped |"
+echo "|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+jq -r 'def r2(x): (x * 100 | round) / 100;
+  .meshes[] | .name as $n | .rows[] | .equal_criteria as $e | $e.selective_vdpm_criteria as $k | $e.hoppe97_vdpm_criteria as $h |
+  "| \($n) | \(.direction) | \(.criteria) | \($e.vdpm.V) / \($e.vdpm.F) / \($e.vdpm.DC) | \($e.minimal.V) / \($e.minimal.F) | \($h.V) / \($h.F) / \($h.forced_splits) | \($k.V) / \($k.F) / \($k.DC) | \(r2($k.F / $h.F)) | \(r2($k.F / $e.vdpm.F)) | \($e.selective.F) | \($e.selective_sphere.F) | \($e.selective_rcf.F) | \($k.flipped_triangles) |"' "$file"
 echo
 echo "Equal measured error (VDPM at tau = 1 px; ours at the largest tau whose two-sided p99 / max is within VDPM's; F and F / VDPM's F):"
 echo

@@ -21,6 +21,7 @@
 #include <fstream>
 #include <future>
 #include <iterator>
+#include <map>
 #include <random>
 #include <sstream>
 #include <string>
@@ -727,6 +728,39 @@ TEST_F(DbCli, MeshIngestExtractInfoVerify) {
   write_file(broken, "OFF\n3 1 0\n0 0 0\n1 0 0\nnan 1 0\n3 0 1 2\n");
   expect_user_error("ingest " + broken + " -o " + path("z.smrdb"), "broken.off");
   EXPECT_FALSE(fs::exists(path("z.smrdb")));
+}
+
+// --algorithm selective from the command line, with either split scheme: the full refinement is
+// the source's triangles; a camera view under Hoppe 1997's scheme forces splits the truly
+// selective one does without, so it has at least as many triangles and no degenerate case.
+TEST_F(DbCli, SelectiveExtractionWithEitherSplitScheme) {
+  const std::string mesh = smr::test::data_path("meshes/blobby_3cc.off");
+  const std::string db = path("splits.smrdb");
+  ASSERT_EQ(smrdb("ingest " + mesh + " -q --coalesce 0 -o " + db).code, 0);
+  const std::string view = " --eye 2,0.6,0.4 --target 0,0,0 --pixel-error 1 --json -q";
+  std::map<std::string, nlohmann::json> by;
+  for (const std::string scheme : {"truly-selective", "hoppe97"}) {
+    CliRun r = smrdb("extract " + db + " --algorithm selective --split-scheme " + scheme +
+                     " --floor 1 --json -q -o " + path("full.ply"));
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_EQ(nlohmann::json::parse(r.out)["selective"]["triangles"], 3417) << r.out;
+    r = smrdb("extract " + db + " --algorithm selective --split-scheme " + scheme + view +
+              " -o " + path(scheme + ".ply"));
+    ASSERT_EQ(r.code, 0) << r.out;
+    by[scheme] = nlohmann::json::parse(r.out)["selective"];
+    EXPECT_EQ(by[scheme]["scheme"], scheme);
+  }
+  const nlohmann::json &k = by["truly-selective"], &h = by["hoppe97"];
+  EXPECT_GT(k["splits"].get<int>(), 0);
+  EXPECT_LT(k["triangles"].get<int>(), 3417);
+  EXPECT_EQ(h["degenerate_cases"], 0);
+  EXPECT_GE(h["triangles"].get<int>(), k["triangles"].get<int>());
+  EXPECT_GT(h["forced_splits"].get<int>(), k["forced_splits"].get<int>());
+  expect_user_error("extract " + db + " --algorithm selective --split-scheme hoppe -o " +
+                        path("x.ply"),
+                    "--split-scheme");
+  expect_user_error("extract " + db + " --split-scheme hoppe97 -o " + path("x.ply"),
+                    "--algorithm selective");
 }
 
 // Canonical triangles of `mesh` (each rotated to start at its smallest index, orientation kept),
