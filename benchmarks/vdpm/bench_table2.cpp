@@ -283,7 +283,12 @@ json row(const Subject& s, const smr::Camera& cam, bool backface, double tau) {
       // Our own, conservative back-face test here: VDPM's point test lets silhouettes through.
       {"selective",
        at_vdpm_error([&](double t) { return selective_cut(s, cam, t, backface, {.sphere = true}); },
-                     v)}};
+                     v)},
+      // VDPM's own criteria: the point test on the vertex-normal cones.
+      {"selective_vdpm_criteria",
+       at_vdpm_error(
+           [&](double t) { return selective_cut(s, cam, t, backface, {.vertex_cones = true}); },
+           v)}};
   return r;
 }
 
