@@ -13,6 +13,7 @@
 #include "smr/core/invariants.h"
 #include "smr/db/database.h"
 #include "smr/extract/extract.h"
+#include "smr/extract/selective.h"
 #include "smr/extract/session.h"
 #include "smr/io/dem_reader.h"
 #include "smr/io/gltf_writer.h"
@@ -144,9 +145,7 @@ void ExtractArgs::add_to(CLI::App& app, bool with_budgets) {
 void ExtractArgs::validate() const {
   if (algorithm != "minimal" && algorithm != "reduced" && algorithm != "selective")
     throw_input("--algorithm must be 'minimal', 'reduced' or 'selective', got '" + algorithm + "'");
-  if (!split_scheme.empty() && split_scheme != "truly-selective" && split_scheme != "hoppe97")
-    throw_input("--split-scheme must be 'truly-selective' or 'hoppe97', got '" + split_scheme +
-                "'");
+  if (!split_scheme.empty()) SelectiveRefinement::parse_scheme(split_scheme, "--split-scheme");
   if (!split_scheme.empty() && algorithm != "selective")
     throw_input("--split-scheme needs --algorithm selective");
   if (!order.empty() && order != "fronts" && order != "pages")

@@ -12,12 +12,13 @@ nlohmann::json run_selective(const Database& db, const Rcf& rcf, const ExtractAr
   nlohmann::json report;
   // The hierarchy and the fundamental cut vertices: one pass over every op (selective.h).
   const std::shared_ptr<const SelectiveIndex> index = SelectiveIndex::build(db);
-  const bool hoppe = a.split_scheme == "hoppe97";
-  const SelectiveExtraction e = extract_selective(
-      db, index, rcf, hoppe ? SplitScheme::kHoppe97 : SplitScheme::kTrulySelective);
+  const SplitScheme scheme =
+      a.split_scheme.empty() ? SplitScheme::kTrulySelective
+                             : SelectiveRefinement::parse_scheme(a.split_scheme, "--split-scheme");
+  const SelectiveExtraction e = extract_selective(db, index, rcf, scheme);
   report["rcf"] = rcf.describe();
   report["selective"] = e.stats;
-  report["selective"]["scheme"] = hoppe ? "hoppe97" : "truly-selective";
+  report["selective"]["scheme"] = SelectiveRefinement::scheme_name(scheme);
   report["selective"]["index"] = index->stats();
   report["selective"]["error_bound"] =
       "each output triangle is a source triangle with its corners moved to their active "

@@ -9,8 +9,9 @@
 //   (c) smrdb's truly selective refinement (smr/extract/selective.h) over the same ops, with
 //       Hoppe's per-vertex tests over the dual pieces (NodeCriterion: the back-face test at the
 //       vertex, as VDPM makes it; "selective_sphere": that test over the vertex's sphere, which
-//       is conservative; "selective_vdpm_criteria": at the vertex on the cone of the vertex
-//       normals below, OpenMesh's Analyzer's cone, so VDPM's criteria exactly; "selective_rcf":
+//       is conservative; "selective_vdpm_criteria": at the vertex on a cone of the vertex
+//       normals below, the kind of cone OpenMesh's Analyzer makes (fitted here; VDPM centres its
+//       own on the node's normal), so VDPM's frustum and back-face tests; "selective_rcf":
 //       the minimal surface's IsCompletelyFiner of each split op instead),
 //   (d) Hoppe 1997's own scheme (SplitScheme::kHoppe97: a split waits for its fn0..fn3, forcing
 //       their splits) on the same hierarchy with VDPM's criteria: Kim & Lee's Table 2 compares
@@ -18,9 +19,9 @@
 //       scheme (its documentation says so; its cut-vertex search is theirs),
 // at equal selection criteria (the same frustum and back-face tests and a tolerance of 1e-3 px:
 // refine everything visible, Kim & Lee's criteria) and at equal measured error (VDPM at
-// --tau px; ours, with the sphere back-face test, at the largest tau whose measured two-sided
-// p99 -- and, separately, max -- is within VDPM's, found on a ladder and bisected,
-// screen_error.h). Prints one JSON object.
+// --tau px; ours, with the sphere back-face test on face-normal cones and with VDPM's tests, at
+// the largest tau whose measured two-sided p99 -- and, separately, max -- is within VDPM's,
+// found on a ladder and bisected, screen_error.h). Prints one JSON object.
 #include <cmath>
 #include <cstdint>
 #include <fstream>
@@ -188,8 +189,9 @@ Cut selective_cut(const Subject& s, const smr::Camera& cam, double tau, bool bac
 
 // Ours at VDPM's measured error: the largest tau whose measured p99 (max) is within VDPM's. A
 // ladder runs down from 64 px by sqrt(2) until both are found; then each is bisected (kBisect
-// steps) between the tau found and the one above it that was not within, so the answer is
-// within 2^-kBisect of a ladder step of the largest such tau, not up to a whole step (~1.4x in
+// steps) between the tau found and the one above it that was not within. Measured error need not
+// grow with tau, so this is the largest within on the ladder and its bisection, which is within
+// 2^-kBisect of a ladder step of the crossing it brackets, not up to a whole step (~1.4x in
 // faces) below it.
 constexpr int kBisect = 6;
 
@@ -231,6 +233,7 @@ json at_vdpm_error(const Extract& extract, const Cut& vdpm) {
       }
     }
     out[what]["ladder"] = ladder;  // keep() replaced the object
+    out[what]["tau_not_within"] = hi;
   }
   return out;
 }
@@ -265,15 +268,14 @@ json row(const Subject& s, const smr::Camera& cam, bool backface, double tau) {
               {"target", smr::bench::vec3_json(cam.target)},
               {"fov_y_deg", cam.fov_y_deg}}}};
   const Select vdpm_criteria{.vertex_cones = true};
+  const Select hoppe97_vdpm_criteria{.vertex_cones = true, .scheme = smr::SplitScheme::kHoppe97};
   r["equal_criteria"] = {
       {"vdpm", vdpm_cut(s, cam, kAllVisible, backface).j},
       {"minimal", minimal_cut(s, cam, kAllVisible, backface).j},
       {"selective", selective_cut(s, cam, kAllVisible, backface).j},
       {"selective_vdpm_criteria", selective_cut(s, cam, kAllVisible, backface, vdpm_criteria).j},
       {"hoppe97_vdpm_criteria",
-       selective_cut(s, cam, kAllVisible, backface,
-                     {.vertex_cones = true, .scheme = smr::SplitScheme::kHoppe97})
-           .j},
+       selective_cut(s, cam, kAllVisible, backface, hoppe97_vdpm_criteria).j},
       {"selective_sphere", selective_cut(s, cam, kAllVisible, backface, {.sphere = true}).j},
       {"selective_rcf", selective_cut(s, cam, kAllVisible, backface, {.rcf = true}).j}};
   const Cut v = vdpm_cut(s, cam, tau, backface);
@@ -286,9 +288,8 @@ json row(const Subject& s, const smr::Camera& cam, bool backface, double tau) {
                      v)},
       // VDPM's own criteria: the point test on the vertex-normal cones.
       {"selective_vdpm_criteria",
-       at_vdpm_error(
-           [&](double t) { return selective_cut(s, cam, t, backface, {.vertex_cones = true}); },
-           v)}};
+       at_vdpm_error([&](double t) { return selective_cut(s, cam, t, backface, vdpm_criteria); },
+                     v)}};
   return r;
 }
 

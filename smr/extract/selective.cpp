@@ -218,9 +218,9 @@ SelectiveRefinement::Select SelectiveRefinement::select_by(const NodeCriterion& 
     const SelectiveIndex::Node& n = index_->nodes()[node];
     const Sphere sphere{pos_[n.vertex], double(n.radius)};
     if (c.frustum && sphere_outside(c.camera, sphere)) return false;
-    if (c.backface && backfacing(c.camera,
-                                 c.backface_over_sphere ? sphere : Sphere{sphere.center, 0.0},
-                                 c.vertex_normal_cones ? n.vertex_cone : n.cone))
+    if (c.backface &&
+        backfacing(c.camera, c.backface_over_sphere ? sphere : Sphere{sphere.center, 0.0},
+                   c.vertex_normal_cones ? n.vertex_cone : n.cone))
       return false;
     const double d = std::max(glm::length(sphere.center - c.camera.eye) - sphere.radius, 1e-12);
     return op.error * c.camera.focal_px() / d > c.pixel_error;
@@ -265,6 +265,9 @@ void SelectiveRefinement::split(std::uint32_t v, bool forced) {
     if (l == kNone || l != r) break;
     // Section 4.4: one vertex holds both cut vertices; splitting it first keeps the mesh simply
     // connected (until they part, which they do: they are distinct source vertices).
+    if (scheme_ == SplitScheme::kHoppe97)
+      throw_internal("selective: a degenerate case under Hoppe 1997's scheme, at " +
+                     vertex_name(v));
     ++stats_.degenerate_cases;
     split(l, true);
   }
@@ -296,21 +299,41 @@ void SelectiveRefinement::split_with_dependencies(std::uint32_t v) {
       continue;
     }
     if (node_of_[sp.vs] != sp.node) {  // an ancestor is active: its splits first
-      stack.push_back(ix.nodes()[ix.nodes()[sp.node].parent].split);
+      const std::uint32_t parent = ix.nodes()[sp.node].parent;
+      if (parent == kNone)
+        throw_internal("selective: an inactive root, split " + std::to_string(s));
+      stack.push_back(ix.nodes()[parent].split);
       continue;
     }
-    bool ready = true;
-    for (std::uint32_t f : sp.around) {
-      const std::uint32_t maker = f == kNone ? kNone : ix.face_split(f);
-      if (maker != kNone && made_[maker] == 0) {
-        stack.push_back(maker);
-        ready = false;
+    if (!neighbourhood_made(s)) {
+      for (std::uint32_t f : sp.around) {
+        const std::uint32_t maker = f == kNone ? kNone : ix.face_split(f);
+        if (maker != kNone && made_[maker] == 0) stack.push_back(maker);
       }
+      continue;
     }
-    if (!ready) continue;
     stack.pop_back();
     split(sp.vs, s != first);
   }
+}
+
+bool SelectiveRefinement::neighbourhood_made(std::uint32_t s) const {
+  for (std::uint32_t f : index_->splits().at(s).around) {
+    const std::uint32_t maker = f == kNone ? kNone : index_->face_split(f);
+    if (maker != kNone && made_[maker] == 0) return false;
+  }
+  return true;
+}
+
+const char* SelectiveRefinement::scheme_name(SplitScheme scheme) {
+  return scheme == SplitScheme::kHoppe97 ? "hoppe97" : "truly-selective";
+}
+
+SplitScheme SelectiveRefinement::parse_scheme(const std::string& name, const std::string& option) {
+  for (SplitScheme s : {SplitScheme::kTrulySelective, SplitScheme::kHoppe97}) {
+    if (name == scheme_name(s)) return s;
+  }
+  throw_input(option + " must be 'truly-selective' or 'hoppe97', got '" + name + "'");
 }
 
 bool SelectiveRefinement::collapse(std::uint32_t s) {

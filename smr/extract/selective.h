@@ -41,6 +41,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "smr/core/mesh.h"
@@ -79,8 +80,9 @@ class SelectiveIndex {
     float radius = 0.0f;          // r(n): max |p(vertex) - p(x)| over source vertices x below
     NormalCone cone;              // holds the normal of every source triangle at those x
     /// Holds the vertex normal (the normalized sum of its triangles' unit normals) of every
-    /// source vertex x below: the cone OpenMesh's Analyzer gives its VDPM nodes. Narrower than
-    /// `cone`, and no bound on the triangles' normals.
+    /// source vertex x below: the kind of cone OpenMesh's Analyzer gives its VDPM nodes (it
+    /// centres its own on the node vertex's normal; this one is fitted). Narrower than `cone`,
+    /// and no bound on the triangles' normals.
     NormalCone vertex_cone;
   };
   struct Stats {
@@ -214,7 +216,7 @@ enum class SplitScheme {
   /// Kim & Lee 2001: any active vertex splits, its cut vertices found on the fly; only the
   /// degenerate case (section 4.4) forces a split first.
   kTrulySelective,
-  /// Hoppe 1997 (section 4.3, force_vsplit): a split is made only when its `around` faces
+  /// Hoppe 1997 (its force_vsplit procedure): a split is made only when its `around` faces
   /// (fn0..fn3) are all active; the splits that make them, and the ancestors' splits that make
   /// those vertices active, are forced first, recursively. Its wings are then the cut vertices
   /// Kim & Lee's search finds (they are the vertices the fn faces meet at).
@@ -226,7 +228,8 @@ struct SelectiveStats {
   std::uint64_t selected = 0;          // of those, splits the criterion asked for
   std::uint64_t splits = 0;            // splits made: selected + forced
   std::uint64_t degenerate_cases = 0;  // section 4.4: both cut vertices were one vertex
-  std::uint64_t forced_splits = 0;     // the additional splits those needed
+  std::uint64_t forced_splits = 0;     // splits made first for another: a degenerate case's,
+                                       // or (SplitScheme::kHoppe97) a neighbourhood's
   std::uint64_t ops_read = 0;          // op reads through the source
   std::uint64_t vertices = 0, triangles = 0;
   std::uint64_t flipped_triangles = 0;  // normal against the source triangle's
@@ -246,11 +249,17 @@ class SelectiveRefinement {
   void refine(const RcfOracle& rcf);
   void refine(const NodeCriterion& criterion);
   /// vsplit_new (section 4.1): splits the active vertex v (it must have a split left), after
-  /// the additional splits of a degenerate case. `forced` marks it as one of those.
+  /// the additional splits of a degenerate case. `forced` marks it as one of those. Whatever
+  /// the scheme: refine() calls split_with_dependencies under kHoppe97; collapse() never checks
+  /// Hoppe's ecol conditions.
   void split(std::uint32_t v, bool forced = false);
   /// Hoppe 1997's force_vsplit: splits active vertex v after every split its `around` faces
-  /// need, recursively (those are counted as forced).
+  /// need, and those that make them active, recursively (counted as forced). Under this scheme
+  /// no degenerate case can arise (its wings are two edges of v with their faces present);
+  /// one throws smr::Error (kInternal).
   void split_with_dependencies(std::uint32_t v);
+  /// Whether split s's `around` faces are all in the mesh (Hoppe's condition for making it).
+  bool neighbourhood_made(std::uint32_t s) const;
   /// ecol_new: collapses the active edge (v_t, v_u) of split `s` when both are active leaves of
   /// it (v_u not split since). Returns false, postponing it (section 4.4), when v_t and v_u have
   /// a common neighbour other than the edge's two opposite vertices.
@@ -266,6 +275,9 @@ class SelectiveRefinement {
   const SplitMesh& mesh() const { return mesh_; }
   const SelectiveIndex& index() const { return *index_; }
   SplitScheme scheme() const { return scheme_; }
+  static const char* scheme_name(SplitScheme scheme);  // "truly-selective", "hoppe97"
+  /// The scheme of that name; throws smr::Error (kInvalidInput) naming `option` otherwise.
+  static SplitScheme parse_scheme(const std::string& name, const std::string& option);
   /// Vertex ids of the output and the indexed mesh (positions of the active vertices).
   std::vector<std::uint32_t> active_vertices() const;
   TriangleMesh to_mesh(std::vector<std::uint32_t>* vertex_ids = nullptr) const;

@@ -43,8 +43,8 @@ struct SelectiveIndexBuilder {
   SplitMesh mesh;
   std::vector<std::uint32_t> node_of;  // per vertex: its active node in the replay
   std::vector<Vec3> pos;
-  std::vector<std::uint32_t> base_tri;                  // replay triangle per base triangle
-  std::vector<std::array<std::uint32_t, 2>> split_tri;  // replay triangles (v,u,l), (u,v,r)
+  std::vector<std::uint32_t> base_tri;                     // replay triangle per base triangle
+  std::vector<std::array<std::uint32_t, 2>> split_tri;     // replay triangles (v,u,l), (u,v,r)
   std::vector<std::array<std::uint32_t, 4>> split_around;  // replay triangles fn0..fn3
   std::vector<std::uint32_t> roots;
   std::vector<std::uint32_t> preorder;  // every node, each tree in preorder (number())
@@ -170,8 +170,8 @@ struct SelectiveIndexBuilder {
       }
       return kNone;
     };
-    split_around.push_back(
-        {across(made[0], u, l), across(made[0], l, v), across(made[1], v, r), across(made[1], r, u)});
+    split_around.push_back({across(made[0], u, l), across(made[0], l, v), across(made[1], v, r),
+                            across(made[1], r, u)});
     // The replay must make exactly F: u's star is the op's fragment.
     std::vector<Triple> now;
     for (std::uint32_t t : mesh.star(u)) now.push_back(mesh.triangle(t));
@@ -262,8 +262,8 @@ struct SelectiveIndexBuilder {
     start[preorder.size()] = normals.size();
     vertex_start[preorder.size()] = vertex_normals.size();
     const auto cone_of = [&](const std::vector<Vec3>& all, const std::vector<std::size_t>& from,
-                             std::size_t at, std::uint32_t size, NormalCone SelectiveIndex::Node::*
-                                                                     member) {
+                             std::size_t at, std::uint32_t size,
+                             NormalCone SelectiveIndex::Node::*member) {
       const std::span<const Vec3> below(all.data() + from[at], from[at + size] - from[at]);
       NormalCone c = below.empty() ? NormalCone{.half_angle = M_PI} : normal_cone(below);
       const SelectiveIndex::Node& node = ix.nodes_[preorder[at]];

@@ -744,8 +744,8 @@ TEST_F(DbCli, SelectiveExtractionWithEitherSplitScheme) {
                      " --floor 1 --json -q -o " + path("full.ply"));
     ASSERT_EQ(r.code, 0) << r.out;
     EXPECT_EQ(nlohmann::json::parse(r.out)["selective"]["triangles"], 3417) << r.out;
-    r = smrdb("extract " + db + " --algorithm selective --split-scheme " + scheme + view +
-              " -o " + path(scheme + ".ply"));
+    r = smrdb("extract " + db + " --algorithm selective --split-scheme " + scheme + view + " -o " +
+              path(scheme + ".ply"));
     ASSERT_EQ(r.code, 0) << r.out;
     by[scheme] = nlohmann::json::parse(r.out)["selective"];
     EXPECT_EQ(by[scheme]["scheme"], scheme);
@@ -756,9 +756,9 @@ TEST_F(DbCli, SelectiveExtractionWithEitherSplitScheme) {
   EXPECT_EQ(h["degenerate_cases"], 0);
   EXPECT_GE(h["triangles"].get<int>(), k["triangles"].get<int>());
   EXPECT_GT(h["forced_splits"].get<int>(), k["forced_splits"].get<int>());
-  expect_user_error("extract " + db + " --algorithm selective --split-scheme hoppe -o " +
-                        path("x.ply"),
-                    "--split-scheme");
+  expect_user_error(
+      "extract " + db + " --algorithm selective --split-scheme hoppe -o " + path("x.ply"),
+      "--split-scheme");
   expect_user_error("extract " + db + " --split-scheme hoppe97 -o " + path("x.ply"),
                     "--algorithm selective");
 }
