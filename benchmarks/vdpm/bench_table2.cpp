@@ -325,7 +325,7 @@ int main(int argc, char** argv) {
     const std::uint64_t t0 = smr::bench::now_ns();
     s.crmr = smr::build_qem_pm(s.source, name, o);
     const double build_seconds = smr::bench::seconds_since(t0);
-    s.index = smr::SelectiveIndex::build(s.crmr);
+    s.index = smr::SelectiveIndex::build(s.crmr, {.vertex_cones = true});
     s.source_tris = triangles_of(s.source);
     s.distance = std::make_unique<SoupDistance>(s.source_tris);
     std::ifstream in(spm_path, std::ios::binary);

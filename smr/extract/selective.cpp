@@ -220,7 +220,7 @@ SelectiveRefinement::Select SelectiveRefinement::select_by(const NodeCriterion& 
     if (c.frustum && sphere_outside(c.camera, sphere)) return false;
     if (c.backface &&
         backfacing(c.camera, c.backface_over_sphere ? sphere : Sphere{sphere.center, 0.0},
-                   c.vertex_normal_cones ? n.vertex_cone : n.cone))
+                   c.vertex_normal_cones ? index_->vertex_cone(node) : n.cone))
       return false;
     const double d = std::max(glm::length(sphere.center - c.camera.eye) - sphere.radius, 1e-12);
     return op.error * c.camera.focal_px() / d > c.pixel_error;

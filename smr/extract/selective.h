@@ -51,6 +51,14 @@
 
 namespace smr {
 
+/// What SelectiveIndex::build makes beyond what extraction needs.
+struct SelectiveIndexOptions {
+  /// Also the nodes' vertex cones (SelectiveIndex::vertex_cone,
+  /// NodeCriterion::vertex_normal_cones): 32 bytes a node more, half again the nodes' memory, so
+  /// only when asked.
+  bool vertex_cones = false;
+};
+
 /// The vertex hierarchy of a PM-built CRMR with Kim & Lee's topological details.
 class SelectiveIndex {
  public:
@@ -79,11 +87,6 @@ class SelectiveIndex {
     std::uint32_t size = 1;       // nodes in its subtree (its own included)
     float radius = 0.0f;          // r(n): max |p(vertex) - p(x)| over source vertices x below
     NormalCone cone;              // holds the normal of every source triangle at those x
-    /// Holds the vertex normal (the normalized sum of its triangles' unit normals) of every
-    /// source vertex x below: the kind of cone OpenMesh's Analyzer gives its VDPM nodes (it
-    /// centres its own on the node vertex's normal; this one is fitted). Narrower than `cone`,
-    /// and no bound on the triangles' normals.
-    NormalCone vertex_cone;
   };
   struct Stats {
     std::uint64_t splits = 0, roots = 0, spawned_components = 0;
@@ -94,7 +97,8 @@ class SelectiveIndex {
   /// Reads every op of `source` once, in id order. Throws smr::Error (kInvalidInput) when the
   /// source is not a 3-D mesh or an op is not a single vertex split (a coalesced build: ingest
   /// with --coalesce 0), naming the op.
-  static std::shared_ptr<const SelectiveIndex> build(const OpSource& source);
+  static std::shared_ptr<const SelectiveIndex> build(const OpSource& source,
+                                                     const SelectiveIndexOptions& options = {});
 
   /// O(1) (section 4.3): whether node a is node b or an ancestor of it. The paper numbers nodes
   /// as in a heap and compares shifted node-ids, which needs root-to-leaf paths of at most 63
@@ -110,6 +114,13 @@ class SelectiveIndex {
 
   const std::vector<Split>& splits() const { return splits_; }
   const std::vector<Node>& nodes() const { return nodes_; }
+  /// Node n's vertex cone: it holds the vertex normal (the normalized sum of its triangles' unit
+  /// normals) of every source vertex below n, the kind of cone OpenMesh's Analyzer gives its VDPM
+  /// nodes (it centres its own on the node vertex's normal; this one is fitted). Narrower than
+  /// Node::cone, and no bound on the triangles' normals. Throws smr::Error (kInvalidInput) on an
+  /// index built without them (SelectiveIndexOptions::vertex_cones).
+  const NormalCone& vertex_cone(std::uint32_t n) const;
+  bool has_vertex_cones() const { return !vertex_cones_.empty(); }
   /// The leaf node of source vertex x.
   std::uint32_t leaf(std::uint32_t x) const { return leaf_[x]; }
   /// The selective base mesh: R^0's triangles, then every spawned component's.
@@ -144,6 +155,7 @@ class SelectiveIndex {
   friend struct SelectiveIndexBuilder;
   std::vector<Split> splits_;
   std::vector<Node> nodes_;
+  std::vector<NormalCone> vertex_cones_;  // per node, when built with them
   std::vector<std::uint32_t> leaf_, base_vertices_;
   std::vector<OpId> position_ops_;
   std::vector<std::array<std::uint32_t, 3>> base_, faces_;
@@ -204,7 +216,7 @@ struct NodeCriterion {
   bool backface_over_sphere = true;
   /// Which normal cone the back-face test reads: that of every source triangle's normal below
   /// the node (false: Hoppe 1997 section 4.2's bound, Node::cone), or that of the source vertex
-  /// normals below it (true: Node::vertex_cone, what OpenMesh's Analyzer computes for VDPM;
+  /// normals below it (true: SelectiveIndex::vertex_cone, the kind OpenMesh's Analyzer computes;
   /// narrower, and not conservative: a triangle can face the eye while every vertex normal
   /// below faces away).
   bool vertex_normal_cones = false;

@@ -241,7 +241,7 @@ struct SelectiveIndexBuilder {
   // it alone the selective mode kept 1.2-1.4x VDPM's faces on the back-face rows of Kim & Lee's
   // Table 2 (benchmarks/vdpm/README.md). The vertex cones are found the same way from one vertex
   // normal per source vertex (OpenMesh's Analyzer: the leaves' vertex normals).
-  void cones() {
+  void cones(bool vertex_cones) {
     std::vector<std::uint32_t> source_vertex(ix.nodes_.size(), kNone);
     for (std::uint32_t v = 0; v < node_of.size(); ++v) source_vertex[node_of[v]] = v;
     std::vector<Vec3> normals, vertex_normals;
@@ -257,34 +257,37 @@ struct SelectiveIndexBuilder {
         normals.push_back(triangle_normal(pos[c[0]], pos[c[1]], pos[c[2]]));
         sum += normals.back();
       }
-      if (glm::length(sum) > 1e-12) vertex_normals.push_back(glm::normalize(sum));
+      if (vertex_cones && glm::length(sum) > 1e-12) vertex_normals.push_back(glm::normalize(sum));
     }
     start[preorder.size()] = normals.size();
     vertex_start[preorder.size()] = vertex_normals.size();
+    // The cone of a node's range of `all`, or its children's union (`child(n)`: their cones).
     const auto cone_of = [&](const std::vector<Vec3>& all, const std::vector<std::size_t>& from,
-                             std::size_t at, std::uint32_t size,
-                             NormalCone SelectiveIndex::Node::*member) {
-      const std::span<const Vec3> below(all.data() + from[at], from[at + size] - from[at]);
-      NormalCone c = below.empty() ? NormalCone{.half_angle = M_PI} : normal_cone(below);
+                             std::size_t at, const auto& child) {
       const SelectiveIndex::Node& node = ix.nodes_[preorder[at]];
+      const std::span<const Vec3> below(all.data() + from[at], from[at + node.size] - from[at]);
+      NormalCone c = below.empty() ? NormalCone{.half_angle = M_PI} : normal_cone(below);
       if (node.split != kNone) {
         const SelectiveIndex::Split& s = ix.splits_[node.split];
-        const NormalCone joined =
-            cone_union(ix.nodes_[s.child_t].*member, ix.nodes_[s.child_u].*member);
+        const NormalCone joined = cone_union(child(s.child_t), child(s.child_u));
         if (joined.half_angle < c.half_angle) c = joined;
       }
       return c;
     };
+    if (vertex_cones) ix.vertex_cones_.resize(ix.nodes_.size());
     for (std::size_t at = preorder.size(); at-- > 0;) {  // children before their parents
-      SelectiveIndex::Node& node = ix.nodes_[preorder[at]];
-      node.cone = cone_of(normals, start, at, node.size, &SelectiveIndex::Node::cone);
-      node.vertex_cone =
-          cone_of(vertex_normals, vertex_start, at, node.size, &SelectiveIndex::Node::vertex_cone);
+      const std::uint32_t n = preorder[at];
+      ix.nodes_[n].cone =
+          cone_of(normals, start, at, [&](std::uint32_t c) { return ix.nodes_[c].cone; });
+      if (vertex_cones) {
+        ix.vertex_cones_[n] = cone_of(vertex_normals, vertex_start, at,
+                                      [&](std::uint32_t c) { return ix.vertex_cones_[c]; });
+      }
     }
   }
 
   // The source triangles: where the replay's triangles ended up; the cut vertices on them.
-  void faces() {
+  void faces(bool vertex_cones) {
     ix.faces_.reserve(ix.base_.size() + 2 * ix.splits_.size());
     for (std::uint32_t t : base_tri) ix.faces_.push_back(mesh.triangle(t));
     for (std::size_t s = 0; s < ix.splits_.size(); ++s) {
@@ -316,11 +319,18 @@ struct SelectiveIndexBuilder {
         throw_input("vertex " + std::to_string(v) + " is in no op of the database");
       }
     }
-    cones();
+    cones(vertex_cones);
   }
 };
 
-std::shared_ptr<const SelectiveIndex> SelectiveIndex::build(const OpSource& source) {
+const NormalCone& SelectiveIndex::vertex_cone(std::uint32_t n) const {
+  if (vertex_cones_.empty())
+    throw_input("selective refinement: the index was built without vertex cones");
+  return vertex_cones_.at(n);
+}
+
+std::shared_ptr<const SelectiveIndex> SelectiveIndex::build(const OpSource& source,
+                                                            const SelectiveIndexOptions& options) {
   const auto t0 = Clock::now();
   if (source.info().kind != ModelKind::kMesh3d) {
     throw_input("selective refinement needs a 3-D mesh database (a progressive mesh)");
@@ -334,7 +344,7 @@ std::shared_ptr<const SelectiveIndex> SelectiveIndex::build(const OpSource& sour
   for (std::uint64_t i = 1; i < source.op_count(); ++i) b.read_split(*source.op(OpId(i)));
   b.number();
   b.radii();
-  b.faces();
+  b.faces(options.vertex_cones);
   ix->stats_.splits = ix->splits_.size();
   ix->stats_.roots = b.roots.size();
   ix->stats_.seconds = seconds_since(t0);

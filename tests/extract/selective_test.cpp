@@ -48,7 +48,7 @@ const Built& built(const std::string& name) {
   QemPmOptions o;
   o.max_fragment_triangles = 0;
   b.crmr = build_qem_pm(b.source, name, o);
-  b.index = SelectiveIndex::build(b.crmr);
+  b.index = SelectiveIndex::build(b.crmr, {.vertex_cones = true});
   return cache.emplace(name, std::move(b)).first->second;
 }
 
@@ -439,17 +439,17 @@ TEST_P(SelectiveMeshTest, NormalConesHoldEverySourceNormalBelowThemAndBeatTheUni
     const Vec3 n = glm::normalize(vertex_normal[x]);
     for (std::uint32_t node = ix.leaf(x); node != SelectiveIndex::kNone;
          node = ix.nodes()[node].parent) {
-      const NormalCone& c = ix.nodes()[node].vertex_cone;
+      const NormalCone& c = ix.vertex_cone(node);
       ASSERT_LE(std::acos(std::clamp(glm::dot(n, c.axis), -1.0, 1.0)), c.half_angle + 1e-6)
           << "vertex cone of node " << node << " above vertex " << x;
       ++vertex_checked;
     }
   }
   EXPECT_GT(vertex_checked, pos.size());
-  for (const SelectiveIndex::Node& n : ix.nodes()) {  // a leaf's vertex cone is one normal
-    if (n.split == SelectiveIndex::kNone) continue;
+  for (std::uint32_t n = 0; n < ix.nodes().size(); ++n) {  // a leaf's vertex cone: one normal
+    if (ix.nodes()[n].split == SelectiveIndex::kNone) continue;
     ++internal;
-    vertex_narrower += n.vertex_cone.half_angle < n.cone.half_angle - 1e-6;
+    vertex_narrower += ix.vertex_cone(n).half_angle < ix.nodes()[n].cone.half_angle - 1e-6;
   }
   EXPECT_GT(vertex_narrower, internal / 2);
   std::uint64_t narrower = 0;
@@ -565,6 +565,30 @@ TEST(Selective, SameOutputsFromDiskAsInMemory) {
     EXPECT_EQ(a.vertex_ids, c.vertex_ids);
     EXPECT_EQ(a.stats.degenerate_cases, c.stats.degenerate_cases);
     EXPECT_GT(a.stats.splits, 0u);
+  }
+}
+
+// Vertex cones cost a third more memory a node and are built only when asked; without them the
+// index is otherwise the same, and a criterion that reads them is refused.
+TEST(Selective, VertexConesOnlyWhenAsked) {
+  const Built& b = built("fandisk.off");
+  const auto plain = SelectiveIndex::build(b.crmr);
+  EXPECT_FALSE(plain->has_vertex_cones());
+  EXPECT_TRUE(b.index->has_vertex_cones());
+  ASSERT_EQ(plain->nodes().size(), b.index->nodes().size());
+  for (std::uint32_t n = 0; n < plain->nodes().size(); ++n) {
+    EXPECT_EQ(plain->nodes()[n].cone, b.index->nodes()[n].cone) << "node " << n;
+  }
+  NodeCriterion node{*camera_spec(b.crmr.info(), Vec3{1, 0.3, 0.2}, 1.5, 1.0).camera, true, true,
+                     1.0};
+  EXPECT_GT(extract_selective(b.crmr, plain, node).stats.splits, 0u);
+  node.vertex_normal_cones = true;
+  try {
+    extract_selective(b.crmr, plain, node);
+    FAIL() << "vertex cones were read from an index without them";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::kInvalidInput);
+    EXPECT_NE(std::string(e.what()).find("vertex cones"), std::string::npos) << e.what();
   }
 }
 
