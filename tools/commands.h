@@ -66,6 +66,8 @@ struct ExtractArgs {
   std::string compress;  // glTF outputs: "draco" or "meshopt" (empty: none)
   // --algorithm selective: "truly-selective" or "hoppe97" (SplitScheme; empty: truly-selective)
   std::string split_scheme;
+  // --algorithm selective: what selects a vertex: "rcf" (empty), "vertex" or "vdpm"
+  std::string selective_criterion;
   std::uint64_t cache_mb = 64;
   std::uint64_t held_mb = 512;      // ExpansionOptions::max_held_bytes, in MiB
   std::uint64_t max_triangles = 0;  // SessionBudget (smr/extract/session.h); 0 = none
@@ -173,7 +175,8 @@ nlohmann::json run_extract(const Database& db, const Heightfield* dem, const Rcf
 
 /// --algorithm selective (extract_selective.cpp): Kim & Lee's truly selective refinement of
 /// `db` for `rcf` into a.out (and a.png); returns the report.
-nlohmann::json run_selective(const Database& db, const Rcf& rcf, const ExtractArgs& a);
+nlohmann::json run_selective(const Database& db, const RcfSpec& spec, const Rcf& rcf,
+                             const ExtractArgs& a);
 /// Writes `mesh` to a.out (and its picture to a.png) and adds "output" to the report.
 void write_output(const Database& db, const TriangleMesh& mesh, const ExtractArgs& a,
                   nlohmann::json& report);

@@ -117,6 +117,14 @@ void ExtractArgs::add_to(CLI::App& app, bool with_budgets) {
                  "With --algorithm selective: truly-selective (Kim & Lee: a split needs nothing "
                  "of its neighbourhood; the default) or hoppe97 (Hoppe 1997: a split waits for "
                  "the four faces around its new ones, forcing their splits first)");
+  app.add_option("--selective-criterion", selective_criterion,
+                 "With --algorithm selective, what selects a vertex: rcf (its split op is not "
+                 "completely finer than the RCF; the default), vertex (Hoppe 1997's per-vertex "
+                 "tests over its dual piece: its sphere against the frustum, its normal cone "
+                 "against the eye over that sphere, its split op's error at the sphere's nearest "
+                 "distance against --pixel-error; a camera only) or vdpm (the same with OpenMesh "
+                 "VDPM's back-face test: at the vertex, on the cone of the vertex normals below "
+                 "it; not conservative)");
   app.add_option("--order", order,
                  "fronts: triangles as the advancing front emits them, in fans (Brown 5.1.2); "
                  "pages: the same triangles from the set formula, page by page (minimal only; "
@@ -148,6 +156,12 @@ void ExtractArgs::validate() const {
   if (!split_scheme.empty()) SelectiveRefinement::parse_scheme(split_scheme, "--split-scheme");
   if (!split_scheme.empty() && algorithm != "selective")
     throw_input("--split-scheme needs --algorithm selective");
+  if (!selective_criterion.empty() && selective_criterion != "rcf" &&
+      selective_criterion != "vertex" && selective_criterion != "vdpm")
+    throw_input("--selective-criterion must be 'rcf', 'vertex' or 'vdpm', got '" +
+                selective_criterion + "'");
+  if (!selective_criterion.empty() && algorithm != "selective")
+    throw_input("--selective-criterion needs --algorithm selective");
   if (!order.empty() && order != "fronts" && order != "pages")
     throw_input("--order must be 'fronts' or 'pages', got '" + order + "'");
   if (order == "pages" && algorithm != "minimal")
@@ -259,7 +273,7 @@ nlohmann::json run_extract(const Database& db, const Heightfield* dem, const Rcf
   if (spec.critical_level && dem == nullptr)
     throw_input("--critical-lines needs the source DEM: pass --dem");
   const Rcf rcf = make_rcf(spec, db.info(), dem);
-  if (a.algorithm == "selective") return run_selective(db, rcf, a);
+  if (a.algorithm == "selective") return run_selective(db, spec, rcf, a);
   // A constant level alone (--floor): the level cut, from the pages (smr/query/level_cut.h),
   // unless the fronts' fans were asked for.
   const std::optional<double> level = constant_level(spec);

@@ -35,6 +35,7 @@
 #include "smr/db/tables.h"
 #include "smr/db/verify.h"
 #include "smr/extract/extract.h"
+#include "smr/extract/selective.h"
 #include "smr/io/gdal_raster.h"
 #include "smr/io/mesh_reader.h"
 #include "smr/io/mesh_writer.h"
@@ -760,6 +761,40 @@ TEST_F(DbCli, SelectiveExtractionWithEitherSplitScheme) {
       "extract " + db + " --algorithm selective --split-scheme hoppe -o " + path("x.ply"),
       "--split-scheme");
   expect_user_error("extract " + db + " --split-scheme hoppe97 -o " + path("x.ply"),
+                    "--algorithm selective");
+
+  // Hoppe 1997's per-vertex criterion from the command line: the library's cut for the CLI's
+  // camera (60 degrees, 1024x768, up +z), triangle for triangle.
+  const auto opened = smr::Database::open(db, {std::size_t{64} << 20});
+  smr::Camera cam;
+  cam.eye = {2, 0.6, 0.4};
+  cam.target = {0, 0, 0};
+  cam.up = {0, 0, 1};
+  for (const std::string criterion : {"vertex", "vdpm"}) {
+    const CliRun r = smrdb("extract " + db + " --algorithm selective --selective-criterion " +
+                           criterion + view + " -o " + path(criterion + ".ply"));
+    ASSERT_EQ(r.code, 0) << r.out;
+    const auto j = nlohmann::json::parse(r.out);
+    EXPECT_EQ(j["selective_criterion"], criterion);
+    smr::NodeCriterion node{cam, true, true, 1.0};
+    node.backface_over_sphere = criterion == "vertex";
+    node.vertex_normal_cones = criterion == "vdpm";
+    const auto index = smr::SelectiveIndex::build(*opened, {.vertex_cones = true});
+    const smr::SelectiveExtraction e = smr::extract_selective(*opened, index, node);
+    EXPECT_EQ(j["selective"]["triangles"], e.stats.triangles) << criterion;
+    EXPECT_EQ(smr::read_mesh(path(criterion + ".ply")).triangles, e.mesh.triangles) << criterion;
+    EXPECT_LT(e.stats.triangles, 3417u);
+  }
+  expect_user_error(
+      "extract " + db + " --algorithm selective --selective-criterion hoppe -o " + path("x.ply"),
+      "--selective-criterion");
+  expect_user_error(
+      "extract " + db + " --algorithm selective --selective-criterion vdpm -o " + path("x.ply"),
+      "needs a camera");
+  expect_user_error("extract " + db + " --algorithm selective --selective-criterion vertex" + view +
+                        " --floor 0.5 -o " + path("x.ply"),
+                    "reads only the camera");
+  expect_user_error("extract " + db + " --selective-criterion vertex -o " + path("x.ply"),
                     "--algorithm selective");
 }
 
