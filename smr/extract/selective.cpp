@@ -214,13 +214,16 @@ void SelectiveRefinement::refine_if(const Select& select) {
 }
 
 SelectiveRefinement::Select SelectiveRefinement::select_by(const NodeCriterion& c) const {
-  return [this, &c](std::uint32_t node, const OpView& op) {
+  // The vertex cones, asked for (and checked) once, not per vertex.
+  const std::span<const NormalCone> vertex_cones =
+      c.vertex_normal_cones ? index_->vertex_cones() : std::span<const NormalCone>{};
+  return [this, &c, vertex_cones](std::uint32_t node, const OpView& op) {
     const SelectiveIndex::Node& n = index_->nodes()[node];
     const Sphere sphere{pos_[n.vertex], double(n.radius)};
     if (c.frustum && sphere_outside(c.camera, sphere)) return false;
     if (c.backface &&
         backfacing(c.camera, c.backface_over_sphere ? sphere : Sphere{sphere.center, 0.0},
-                   c.vertex_normal_cones ? index_->vertex_cone(node) : n.cone))
+                   c.vertex_normal_cones ? vertex_cones[node] : n.cone))
       return false;
     const double d = std::max(glm::length(sphere.center - c.camera.eye) - sphere.radius, 1e-12);
     return op.error * c.camera.focal_px() / d > c.pixel_error;
@@ -305,13 +308,12 @@ void SelectiveRefinement::split_with_dependencies(std::uint32_t v) {
       stack.push_back(ix.nodes()[parent].split);
       continue;
     }
-    if (!neighbourhood_made(s)) {
-      for (std::uint32_t f : sp.around) {
-        const std::uint32_t maker = f == kNone ? kNone : ix.face_split(f);
-        if (maker != kNone && made_[maker] == 0) stack.push_back(maker);
-      }
-      continue;
+    const std::size_t waiting = stack.size();  // the makers of its fn faces not made yet first
+    for (std::uint32_t f : sp.around) {
+      const std::uint32_t maker = ix.face_split(f);
+      if (maker != kNone && made_[maker] == 0) stack.push_back(maker);
     }
+    if (stack.size() != waiting) continue;
     stack.pop_back();
     split(sp.vs, s != first);
   }
@@ -319,7 +321,7 @@ void SelectiveRefinement::split_with_dependencies(std::uint32_t v) {
 
 bool SelectiveRefinement::neighbourhood_made(std::uint32_t s) const {
   for (std::uint32_t f : index_->splits().at(s).around) {
-    const std::uint32_t maker = f == kNone ? kNone : index_->face_split(f);
+    const std::uint32_t maker = index_->face_split(f);
     if (maker != kNone && made_[maker] == 0) return false;
   }
   return true;

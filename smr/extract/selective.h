@@ -41,6 +41,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -119,7 +120,9 @@ class SelectiveIndex {
   /// nodes (it centres its own on the node vertex's normal; this one is fitted). Narrower than
   /// Node::cone, and no bound on the triangles' normals. Throws smr::Error (kInvalidInput) on an
   /// index built without them (SelectiveIndexOptions::vertex_cones).
-  const NormalCone& vertex_cone(std::uint32_t n) const;
+  const NormalCone& vertex_cone(std::uint32_t n) const { return vertex_cones()[n]; }
+  /// Every node's vertex cone, by node; throws as vertex_cone() does.
+  std::span<const NormalCone> vertex_cones() const;
   bool has_vertex_cones() const { return !vertex_cones_.empty(); }
   /// The leaf node of source vertex x.
   std::uint32_t leaf(std::uint32_t x) const { return leaf_[x]; }
@@ -135,10 +138,10 @@ class SelectiveIndex {
   std::uint32_t split_face(std::uint32_t split, int side) const {
     return static_cast<std::uint32_t>(base_.size()) + 2 * split + static_cast<std::uint32_t>(side);
   }
-  /// The split that makes face f (kNone: a base triangle, always there).
+  /// The split that makes face f (kNone: a base triangle, always there, or f is kNone).
   std::uint32_t face_split(std::uint32_t f) const {
     const auto base = static_cast<std::uint32_t>(base_.size());
-    return f < base ? kNone : (f - base) / 2;
+    return f < base || f == kNone ? kNone : (f - base) / 2;
   }
   std::uint32_t vertex_count() const { return static_cast<std::uint32_t>(leaf_.size()); }
   /// Source vertex positions, for measurements (flipped triangles) and checks, not for

@@ -323,10 +323,10 @@ struct SelectiveIndexBuilder {
   }
 };
 
-const NormalCone& SelectiveIndex::vertex_cone(std::uint32_t n) const {
+std::span<const NormalCone> SelectiveIndex::vertex_cones() const {
   if (vertex_cones_.empty())
     throw_input("selective refinement: the index was built without vertex cones");
-  return vertex_cones_.at(n);
+  return vertex_cones_;
 }
 
 std::shared_ptr<const SelectiveIndex> SelectiveIndex::build(const OpSource& source,
