@@ -148,8 +148,8 @@ bool crosses_after(Crossings& c, const PmMesh& m, const CollapseLog& log, QemPmS
       s.dead_near.push_back({id, tb});
     }
   };
-  c.grid.visit(all, sort_near, c.kNear);
-  if (c.archive_largest > above) c.grid.visit(all, sort_near, c.kArchive);
+  c.grid.visit(all, sort_near, c.kNear, above);  // keys: live +inf, dead their destroyers' bounds
+  if (c.archive_largest > above) c.grid.visit(all, sort_near, c.kArchive, above);
   bool crossed = false;
   for (std::size_t i = 0; i < s.made.size() && !crossed; ++i) {
     const MeshTriangle& t = s.made[i];
@@ -172,6 +172,7 @@ void record_collapse(Crossings& c, const PmMesh& m, const CollapseLog& log) {
   const Collapse& col = log.collapses.back();
   for (std::uint32_t k = col.old_begin; k < col.old_end; ++k) {
     c.dead.push_back(log.old_tris[k]);  // stays in the grid, dead (crosses_dead)
+    c.grid.set_key(log.old_tris[k], col.error);
   }
   for (std::uint32_t k = col.new_begin; k < col.new_end; ++k) {
     const std::uint32_t id = log.new_tris[k];
@@ -189,7 +190,7 @@ void retire_dead(Crossings& c, const PmMesh& m, const CollapseLog& log, double l
       c.dead[kept++] = id;
       continue;
     }
-    c.grid.insert(id, box_of(m, m.tris[id].v), c.kArchive);  // out of kNear
+    c.grid.insert(id, box_of(m, m.tris[id].v), c.kArchive, b);  // out of kNear
     c.archive_largest = std::max(c.archive_largest, b);
   }
   c.dead.resize(kept);

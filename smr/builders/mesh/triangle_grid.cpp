@@ -3,6 +3,9 @@
 #include "smr/builders/mesh/triangle_grid.h"
 
 #include <algorithm>
+#include <limits>
+
+#include "base/error.h"
 
 namespace smr::qem {
 
@@ -10,10 +13,29 @@ void TriangleGrid::reset(const Vec3& origin, double cell) {
   origin_ = origin;
   cell_ = cell > 0.0 ? cell : 1.0;
   levels_.assign(std::size_t(kSets) * kLevels, {});
-  entries_.clear();
+  items_.clear();
+  free_.clear();
+  where_.clear();
 }
 
-void TriangleGrid::insert(std::uint32_t id, const Box3& b, int set) {
+std::uint32_t TriangleGrid::take_slab(std::uint8_t slab) {
+  if (free_.size() <= slab) free_.resize(std::size_t(slab) + 1);
+  std::vector<std::uint32_t>& free = free_[slab];
+  if (!free.empty()) {
+    const std::uint32_t begin = free.back();
+    free.pop_back();
+    return begin;
+  }
+  const std::size_t begin = items_.size();
+  const std::size_t end = begin + (std::size_t{1} << slab);
+  if (end > std::numeric_limits<std::uint32_t>::max()) {
+    throw_internal("triangle grid: more than 2^32 boxes in one block");
+  }
+  items_.resize(end);
+  return static_cast<std::uint32_t>(begin);
+}
+
+void TriangleGrid::insert(std::uint32_t id, const Box3& b, int set, double order) {
   erase(id);  // a triangle is in one cell at most
   const Vec3 e = b.hi - b.lo;
   const double extent = std::max({e.x, e.y, e.z});
@@ -26,30 +48,53 @@ void TriangleGrid::insert(std::uint32_t id, const Box3& b, int set) {
   std::uint32_t& slot = l.index[key];  // the cell's index + 1; 0: a new cell
   if (slot == 0) {
     l.keys.push_back(key);
-    l.head.push_back(0);
+    l.cells.emplace_back();
     slot = static_cast<std::uint32_t>(l.keys.size());
   }
-  const std::uint32_t cell = slot - 1;
-  if (l.head[cell] == 0) ++l.occupied;
-  if (entries_.size() <= id) entries_.resize(std::size_t(id) + 1);
-  Entry& x = entries_[id];
+  const std::uint32_t index = slot - 1;
+  Cell& c = l.cells[index];
+  if (c.size == 0) ++l.occupied;
+  if (c.slab == 0 || c.size == (std::uint32_t{1} << c.slab)) {  // a slab twice the size
+    const std::uint8_t slab = c.slab == 0 ? kFirstSlab : std::uint8_t(c.slab + 1);
+    const std::uint32_t begin = take_slab(slab);
+    std::copy_n(items_.begin() + c.begin, c.size, items_.begin() + begin);
+    if (c.slab != 0) free_[c.slab].push_back(c.begin);
+    c.begin = begin;
+    c.slab = slab;
+  }
+  Item& x = items_[std::size_t(c.begin) + c.size];
   x.set_box(b);
-  x.next = l.head[cell];
-  x.cell = cell;
-  x.level = level;
-  l.head[cell] = id + 1;
+  x.id = id;
+  x.key = Item::above(order);
+  if (where_.size() <= id) where_.resize(std::size_t(id) + 1);
+  where_[id] = {level, index, c.size};
+  ++c.size;
+}
+
+void TriangleGrid::set_key(std::uint32_t id, double key) {
+  if (id >= where_.size() || where_[id].level == kNoLevel) return;  // not in the grid
+  const Where& w = where_[id];
+  const Cell& c = levels_[std::size_t(w.level)].cells[w.cell];
+  items_[std::size_t(c.begin) + w.slot].key = Item::above(key);
 }
 
 void TriangleGrid::erase(std::uint32_t id) {
-  if (id >= entries_.size() || entries_[id].level == kNoLevel) return;
-  Entry& x = entries_[id];
-  Level& l = levels_[std::size_t(x.level)];
-  std::uint32_t* link = &l.head[x.cell];
-  while (*link != id + 1) link = &entries_[*link - 1].next;
-  *link = x.next;
-  if (l.head[x.cell] == 0) --l.occupied;
-  x.level = kNoLevel;
-  x.next = 0;
+  if (id >= where_.size() || where_[id].level == kNoLevel) return;
+  Where& w = where_[id];
+  Level& l = levels_[std::size_t(w.level)];
+  Cell& c = l.cells[w.cell];
+  const std::uint32_t last = c.size - 1;
+  if (w.slot != last) {
+    const Item& moved = items_[std::size_t(c.begin) + last];
+    where_[moved.id].slot = w.slot;
+    items_[std::size_t(c.begin) + w.slot] = moved;
+  }
+  if (--c.size == 0) {  // the slab goes back to the pool
+    --l.occupied;
+    free_[c.slab].push_back(c.begin);
+    c.slab = 0;
+  }
+  w.level = kNoLevel;
 }
 
 }  // namespace smr::qem

@@ -6,9 +6,12 @@
 // cell size s, a box then meets only triangles of the cells holding its own box grown by s / 2;
 // where that range has more cells than the level holds, the level's cells are scanned instead.
 // The grid keeps each triangle's box, so the boxes that miss the query are dropped without
-// touching the mesh: one record of 36 bytes per triangle id, chained from its cell (a vector per
-// cell cost three times that, and a block's grids hold every triangle it ever made), visited in
-// no particular order.
+// touching the mesh. A cell's boxes lie side by side in a slab of a shared pool (slabs of 2^k
+// items, reused through free lists per size): a query scans ~8 boxes for every one it meets
+// (the loose cells, and the dead triangles the test keeps), and when each box was a record by
+// triangle id chained from its cell, every one of them was a cache miss (40 % of the visits'
+// time, the largest single cost of a mesh ingest). A triangle's place (level, cell, slot) is
+// kept by id; erasing moves its cell's last box into its slot. Visited in no particular order.
 #pragma once
 
 #include <algorithm>
@@ -31,13 +34,20 @@ class TriangleGrid {
   // (collapse_crossings.h).
   static constexpr int kSets = 2;
   void reset(const Vec3& origin, double cell);
-  // Puts triangle `id` in `set` (taking it out of where it was).
-  void insert(std::uint32_t id, const Box3& b, int set = 0);
+  // Puts triangle `id` in `set` with `key` (taking it out of where it was).
+  void insert(std::uint32_t id, const Box3& b, int set = 0,
+              double key = std::numeric_limits<double>::infinity());
   void erase(std::uint32_t id);
+  // A new key for triangle `id` (none if it is not in the grid). Keys let a query pass over
+  // triangles without reading anything but the grid's own memory (collapse_crossings.cpp: a dead
+  // triangle's key is its destroyer's bound).
+  void set_key(std::uint32_t id, double key);
   // f(id, box) for every triangle of `set` whose box meets b (box: its box, rounded outwards to
-  // floats).
+  // floats), except some whose key is at most `least`: a key is kept rounded up to a float, so a
+  // triangle passed over has its key <= least, and f still sees some that do.
   template <class F>
-  void visit(const Box3& b, F&& f, int set = 0) const {
+  void visit(const Box3& b, F&& f, int set = 0,
+             double least = -std::numeric_limits<double>::infinity()) const {
     double size = cell_;
     for (int level = 0; level < kLevels; ++level, size *= 2.0) {
       const Level& l = levels_[std::size_t(set * kLevels + level)];
@@ -56,8 +66,8 @@ class TriangleGrid {
       };
       if (range > double(l.keys.size())) {  // fewer cells than the range: all of them
         for (std::size_t c = 0; c < l.keys.size(); ++c) {
-          if (l.head[c] == 0 || !inside(l.keys[c])) continue;
-          visit_cell(l.head[c], b, f);
+          if (l.cells[c].size == 0 || !inside(l.keys[c])) continue;
+          visit_cell(l.cells[c], b, least, f);
         }
         continue;
       }
@@ -65,7 +75,7 @@ class TriangleGrid {
         for (std::int64_t y = lo[1]; y <= hi[1]; ++y) {
           for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
             const std::uint32_t* slot = l.index.find(key_of({x, y, z}));
-            if (slot != nullptr) visit_cell(l.head[*slot - 1], b, f);
+            if (slot != nullptr) visit_cell(l.cells[*slot - 1], b, least, f);
           }
         }
       }
@@ -77,14 +87,12 @@ class TriangleGrid {
   static constexpr int kNoLevel = -1;
   static constexpr std::int64_t kOffset = std::int64_t{1} << 20;
   static constexpr std::uint64_t kMask = (std::uint64_t{1} << 21) - 1;
-  // A triangle's box in floats, rounded outwards (the box test runs on the grid's own memory:
-  // looking up each triangle's corners missed the cache on most visits), where it is, and the
-  // next triangle of its cell. By triangle id.
-  struct Entry {
+  static constexpr std::uint8_t kFirstSlab = 2;  // the least slab: 4 items
+  // A triangle's box in floats, rounded outwards, its id and its key, rounded up.
+  struct Item {
     std::array<float, 3> lo, hi;
-    std::uint32_t next = 0;  // the cell's next triangle's id + 1; 0: none
-    std::uint32_t cell = 0;
-    std::int32_t level = kNoLevel;  // set * kLevels + level; kNoLevel: not in the grid
+    std::uint32_t id = 0;
+    float key = 0.0f;
     void set_box(const Box3& b) {
       for (int k = 0; k < 3; ++k) {
         lo[std::size_t(k)] = below(b.lo[k]);
@@ -100,7 +108,8 @@ class TriangleGrid {
       return double(f) >= x ? f : std::nextafter(f, std::numeric_limits<float>::infinity());
     }
     template <class F>
-    void visit(std::uint32_t id, const Box3& b, F& f) const {
+    void visit(const Box3& b, double least, F& f) const {
+      if (double(key) <= least) return;
       for (int k = 0; k < 3; ++k) {
         if (double(lo[std::size_t(k)]) > b.hi[k] || double(hi[std::size_t(k)]) < b.lo[k]) return;
       }
@@ -110,19 +119,31 @@ class TriangleGrid {
       f(id, box);
     }
   };
-  // One grid: its cells in a flat hash table (cells emptied stay, to be filled again).
+  // A cell: its items, items_[begin, begin + size), in a slab of 2^slab items (slab 0: none).
+  struct Cell {
+    std::uint32_t begin = 0, size = 0;
+    std::uint8_t slab = 0;
+  };
+  // One grid: its cells in a flat hash table (cells emptied stay, to be filled again; their slabs
+  // go back to the pool).
   struct Level {
     IdMap<std::uint32_t> index;       // cell key -> its index + 1
     std::vector<std::uint64_t> keys;  // per cell
-    std::vector<std::uint32_t> head;  // per cell: its first triangle's id + 1; 0: empty
+    std::vector<Cell> cells;          // per cell
     std::size_t occupied = 0;         // cells holding a triangle
   };
-  // f(id, box) for the triangles of the cell whose first is `first` (id + 1) that meet b.
+  // Where a triangle is, by id.
+  struct Where {
+    std::int32_t level = kNoLevel;  // set * kLevels + level; kNoLevel: not in the grid
+    std::uint32_t cell = 0, slot = 0;
+  };
   template <class F>
-  void visit_cell(std::uint32_t first, const Box3& b, F& f) const {
-    for (std::uint32_t n = first; n != 0; n = entries_[n - 1].next)
-      entries_[n - 1].visit(n - 1, b, f);
+  void visit_cell(const Cell& c, const Box3& b, double least, F& f) const {
+    const Item* it = items_.data() + c.begin;
+    for (const Item* end = it + c.size; it != end; ++it) it->visit(b, least, f);
   }
+  // A slab of 2^slab items: one freed before, or new at the pool's end.
+  std::uint32_t take_slab(std::uint8_t slab);
   std::array<std::int64_t, 3> index_of(const Vec3& p, double size) const {
     std::array<std::int64_t, 3> i{};
     for (int k = 0; k < 3; ++k) {
@@ -140,7 +161,9 @@ class TriangleGrid {
   Vec3 origin_{0.0};
   double cell_ = 1.0;
   std::vector<Level> levels_;
-  std::vector<Entry> entries_;  // by triangle id
+  std::vector<Item> items_;                       // the slabs
+  std::vector<std::vector<std::uint32_t>> free_;  // per slab size: the free slabs' starts
+  std::vector<Where> where_;                      // by triangle id
 };
 
 }  // namespace smr::qem
