@@ -27,7 +27,7 @@ std::uint32_t TriangleGrid::take_slab(std::uint8_t slab) {
     return begin;
   }
   const std::size_t begin = items_.size();
-  const std::size_t end = begin + (std::size_t{1} << slab);
+  const std::size_t end = begin + slab_size(slab);
   if (end > std::numeric_limits<std::uint32_t>::max()) {
     throw_internal("triangle grid: more than 2^32 boxes in one block");
   }
@@ -47,6 +47,8 @@ void TriangleGrid::insert(std::uint32_t id, const Box3& b, int set, double order
   const std::uint64_t key = key_of(index_of(0.5 * (b.lo + b.hi), size));
   std::uint32_t& slot = l.index[key];  // the cell's index + 1; 0: a new cell
   if (slot == 0) {
+    if (l.keys.size() + 1 >= (std::size_t{1} << kCellBits))
+      throw_internal("triangle grid: more than 2^25 cells in one level of one block");
     l.keys.push_back(key);
     l.cells.emplace_back();
     slot = static_cast<std::uint32_t>(l.keys.size());
@@ -54,7 +56,7 @@ void TriangleGrid::insert(std::uint32_t id, const Box3& b, int set, double order
   const std::uint32_t index = slot - 1;
   Cell& c = l.cells[index];
   if (c.size == 0) ++l.occupied;
-  if (c.slab == 0 || c.size == (std::uint32_t{1} << c.slab)) {  // a slab twice the size
+  if (c.slab == 0 || c.size == slab_size(c.slab)) {  // the next slab size
     const std::uint8_t slab = c.slab == 0 ? kFirstSlab : std::uint8_t(c.slab + 1);
     const std::uint32_t begin = take_slab(slab);
     std::copy_n(items_.begin() + c.begin, c.size, items_.begin() + begin);
@@ -67,22 +69,22 @@ void TriangleGrid::insert(std::uint32_t id, const Box3& b, int set, double order
   x.id = id;
   x.key = Item::above(order);
   if (where_.size() <= id) where_.resize(std::size_t(id) + 1);
-  where_[id] = {level, index, c.size};
+  where_[id] = {std::uint32_t(level) << kCellBits | index, c.size};
   ++c.size;
 }
 
 void TriangleGrid::set_key(std::uint32_t id, double key) {
-  if (id >= where_.size() || where_[id].level == kNoLevel) return;  // not in the grid
+  if (id >= where_.size() || where_[id].level() == kNoLevel) return;  // not in the grid
   const Where& w = where_[id];
-  const Cell& c = levels_[std::size_t(w.level)].cells[w.cell];
+  const Cell& c = levels_[w.level()].cells[w.cell()];
   items_[std::size_t(c.begin) + w.slot].key = Item::above(key);
 }
 
 void TriangleGrid::erase(std::uint32_t id) {
-  if (id >= where_.size() || where_[id].level == kNoLevel) return;
+  if (id >= where_.size() || where_[id].level() == kNoLevel) return;
   Where& w = where_[id];
-  Level& l = levels_[std::size_t(w.level)];
-  Cell& c = l.cells[w.cell];
+  Level& l = levels_[w.level()];
+  Cell& c = l.cells[w.cell()];
   const std::uint32_t last = c.size - 1;
   if (w.slot != last) {
     const Item& moved = items_[std::size_t(c.begin) + last];
@@ -94,7 +96,7 @@ void TriangleGrid::erase(std::uint32_t id) {
     free_[c.slab].push_back(c.begin);
     c.slab = 0;
   }
-  w.level = kNoLevel;
+  w = Where{};
 }
 
 }  // namespace smr::qem

@@ -6,10 +6,10 @@
 // cell size s, a box then meets only triangles of the cells holding its own box grown by s / 2;
 // where that range has more cells than the level holds, the level's cells are scanned instead.
 // The grid keeps each triangle's box, so the boxes that miss the query are dropped without
-// touching the mesh. A cell's boxes lie side by side in a slab of a shared pool (slabs of 2^k
-// items, reused through free lists per size): a query scans ~8 boxes for every one it meets
-// (the loose cells, and the dead triangles the test keeps), and when each box was a record by
-// triangle id chained from its cell, every one of them was a cache miss (40 % of the visits'
+// touching the mesh. A cell's boxes lie side by side in a slab of a shared pool (slabs of 2, 3,
+// 4, 6, 8, 12 ... items, reused through free lists per size): a query scans ~8 boxes for every one
+// it meets (the loose cells, and the dead triangles the test keeps), and when each box was a record
+// by triangle id chained from its cell, every one of them was a cache miss (40 % of the visits'
 // time, the largest single cost of a mesh ingest). A triangle's place (level, cell, slot) is
 // kept by id; erasing moves its cell's last box into its slot. Visited in no particular order.
 #pragma once
@@ -83,11 +83,17 @@ class TriangleGrid {
   }
 
  private:
-  static constexpr int kLevels = 40;
-  static constexpr int kNoLevel = -1;
+  static constexpr int kLevels = 40;              // kSets * kLevels < kNoLevel
+  static constexpr std::uint32_t kNoLevel = 127;  // Where: not in the grid
+  static constexpr int kCellBits = 25;            // Where: cells per level < 2^25
   static constexpr std::int64_t kOffset = std::int64_t{1} << 20;
   static constexpr std::uint64_t kMask = (std::uint64_t{1} << 21) - 1;
-  static constexpr std::uint8_t kFirstSlab = 2;  // the least slab: 4 items
+  static constexpr std::uint8_t kFirstSlab = 1;  // the least slab: 2 items
+  // Slab sizes grow by 3/2 or 4/3 in turn (1: 2 items, 2: 3, 3: 4, 4: 6, 5: 8, ...): a cell's slab
+  // is at least 2/3 full once it holds 2 items or more.
+  static std::uint32_t slab_size(std::uint8_t slab) {
+    return slab % 2 ? std::uint32_t{1} << ((slab + 1) / 2) : std::uint32_t{3} << (slab / 2 - 1);
+  }
   // A triangle's box in floats, rounded outwards, its id and its key, rounded up.
   struct Item {
     std::array<float, 3> lo, hi;
@@ -119,7 +125,8 @@ class TriangleGrid {
       f(id, box);
     }
   };
-  // A cell: its items, items_[begin, begin + size), in a slab of 2^slab items (slab 0: none).
+  // A cell: its items, items_[begin, begin + size), in a slab of slab_size(slab) items (slab 0:
+  // none).
   struct Cell {
     std::uint32_t begin = 0, size = 0;
     std::uint8_t slab = 0;
@@ -132,17 +139,20 @@ class TriangleGrid {
     std::vector<Cell> cells;          // per cell
     std::size_t occupied = 0;         // cells holding a triangle
   };
-  // Where a triangle is, by id.
+  // Where a triangle is, by id: its level (set * kLevels + level; kNoLevel: not in the grid) and
+  // cell in one word, and its slot.
   struct Where {
-    std::int32_t level = kNoLevel;  // set * kLevels + level; kNoLevel: not in the grid
-    std::uint32_t cell = 0, slot = 0;
+    std::uint32_t place = kNoLevel << kCellBits;
+    std::uint32_t slot = 0;
+    std::uint32_t level() const { return place >> kCellBits; }
+    std::uint32_t cell() const { return place & ((std::uint32_t{1} << kCellBits) - 1); }
   };
   template <class F>
   void visit_cell(const Cell& c, const Box3& b, double least, F& f) const {
     const Item* it = items_.data() + c.begin;
     for (const Item* end = it + c.size; it != end; ++it) it->visit(b, least, f);
   }
-  // A slab of 2^slab items: one freed before, or new at the pool's end.
+  // A slab of slab_size(slab) items: one freed before, or new at the pool's end.
   std::uint32_t take_slab(std::uint8_t slab);
   std::array<std::int64_t, 3> index_of(const Vec3& p, double size) const {
     std::array<std::int64_t, 3> i{};
