@@ -29,7 +29,8 @@ struct CrossingScratch {
 // The test's state: the live triangles by box, made at the first test, and the dead ones a
 // collapse may still need (crosses_dead in collapse_crossings.cpp): they stay in the grid's set
 // kNear while bounds near theirs are still to come (`dead`), then move to its set kArchive
-// (retire_dead).
+// (retire_dead). A live triangle's grid key is +inf, a dead one's its destroyer's bound, so a
+// query with `least` = r * the collapse's bound passes over the dead triangles the test drops.
 struct Crossings {
   static constexpr int kNear = 0, kArchive = 1;  // TriangleGrid sets
   bool enabled = false;                          // !QemPmOptions::allow_self_intersections
