@@ -225,20 +225,18 @@ namespace {
 
 // The heap for a build: main() hands blocks of 128 KiB and more to mmap and glibc gives the top
 // of the heap back past 128 KiB free, right for an extraction's bound (main.cpp), but a build
-// allocates and frees a block's tables (hundreds of KiB to tens of MiB) hundreds of times, and
-// each time the kernel zeroed their pages again: page faults were 6-7 % of a mesh ingest's
-// cycles. With a budget of 1 GiB or more (or none: an in-memory build), glibc keeps a 32nd of it
-// (at most 64 MiB) on the heap: blocks up to that size come from it, and that much stays mapped
-// at its top (pad) or free in it before it is trimmed, in each of its arenas. The armadillo
-// subdivided 3 times (3.3 M triangles, --memory 2G): ingest 102-128 -> 86-92 s, peak RSS 457 ->
-// 573 MiB. Smaller budgets keep main()'s settings: at --memory 32M even a 1 MiB pad added 16 MiB
-// to the peak (one per arena), a third of what the bound leaves.
+// allocates and frees its tables many times over, and each time the kernel zeroed their pages
+// again: page faults were 6-7 % of a mesh ingest's cycles. With a budget of 1 GiB or more (or
+// none: an in-memory build), glibc keeps a 32nd of it (at most 64 MiB) mapped at the top of each
+// arena's heap (pad) and twice that free in it before it trims. Measured: benchmarks/README.md,
+// "Stop 53" (the mmap threshold stayed at 128 KiB there: glibc takes at most 32 MiB, and raising
+// it is not measured yet). Smaller budgets keep main()'s settings: at --memory 32M even a 1 MiB
+// pad added 16 MiB to the peak (one per arena), a third of what the bound leaves.
 void tune_heap_for_build(std::uint64_t budget) {
 #if defined(__GLIBC__)
   if (budget != 0 && budget < (std::uint64_t{1} << 30)) return;
   const std::uint64_t keep =
       budget == 0 ? std::uint64_t{64} << 20 : std::min(budget / 32, std::uint64_t{64} << 20);
-  mallopt(M_MMAP_THRESHOLD, static_cast<int>(keep));
   mallopt(M_TOP_PAD, static_cast<int>(keep));
   mallopt(M_TRIM_THRESHOLD, static_cast<int>(2 * keep));
 #else

@@ -149,7 +149,15 @@ TEST(TriangleGrid, KeysRoundUpSoNoTriangleAboveLeastIsPassedOver) {
   grid.set_key(7, 0.25);  // a float
   EXPECT_EQ(count(0.25), 0);
   EXPECT_EQ(count(std::nextafter(0.25, 0.0)), 1);
+  // Beyond floats' range: an infinite key (a live triangle) is above the largest double, and a
+  // key above the largest float is kept as +inf, not passed over below it.
+  grid.set_key(7, std::numeric_limits<double>::infinity());
+  EXPECT_EQ(count(std::numeric_limits<double>::max()), 1);
+  grid.set_key(7, 1e300);
+  EXPECT_EQ(count(1e299), 1);
   grid.erase(7);
+  EXPECT_EQ(count(-1.0), 0);
+  grid.set_key(7, 0.5);  // erased: nothing happens
   EXPECT_EQ(count(-1.0), 0);
 }
 

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <array>
+#include <limits>
 
 namespace smr::qem {
 namespace {
@@ -148,8 +149,11 @@ bool crosses_after(Crossings& c, const PmMesh& m, const CollapseLog& log, QemPmS
       s.dead_near.push_back({id, tb});
     }
   };
-  c.grid.visit(all, sort_near, c.kNear, above);  // keys: live +inf, dead their destroyers' bounds
-  if (c.archive_largest > above) c.grid.visit(all, sort_near, c.kArchive, above);
+  // Keys: live +inf, dead their destroyers' bounds. The grid passes over keys <= least: at most
+  // the largest double, so that no live triangle is passed over even for an infinite bound.
+  const double least = std::min(above, std::numeric_limits<double>::max());
+  c.grid.visit(all, sort_near, c.kNear, least);
+  if (c.archive_largest > above) c.grid.visit(all, sort_near, c.kArchive, least);
   bool crossed = false;
   for (std::size_t i = 0; i < s.made.size() && !crossed; ++i) {
     const MeshTriangle& t = s.made[i];

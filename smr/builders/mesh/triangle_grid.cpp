@@ -35,7 +35,7 @@ std::uint32_t TriangleGrid::take_slab(std::uint8_t slab) {
   return static_cast<std::uint32_t>(begin);
 }
 
-void TriangleGrid::insert(std::uint32_t id, const Box3& b, int set, double order) {
+void TriangleGrid::insert(std::uint32_t id, const Box3& b, int set, double key) {
   erase(id);  // a triangle is in one cell at most
   const Vec3 e = b.hi - b.lo;
   const double extent = std::max({e.x, e.y, e.z});
@@ -44,16 +44,16 @@ void TriangleGrid::insert(std::uint32_t id, const Box3& b, int set, double order
   while (size < extent && level + 1 < kLevels) size *= 2.0, ++level;
   level += set * kLevels;
   Level& l = levels_[std::size_t(level)];
-  const std::uint64_t key = key_of(index_of(0.5 * (b.lo + b.hi), size));
-  std::uint32_t& slot = l.index[key];  // the cell's index + 1; 0: a new cell
-  if (slot == 0) {
+  const std::uint64_t cell_key = key_of(index_of(0.5 * (b.lo + b.hi), size));
+  std::uint32_t& number = l.index[cell_key];  // the cell's index + 1; 0: a new cell
+  if (number == 0) {
     if (l.keys.size() + 1 >= (std::size_t{1} << kCellBits))
       throw_internal("triangle grid: more than 2^25 cells in one level of one block");
-    l.keys.push_back(key);
+    l.keys.push_back(cell_key);
     l.cells.emplace_back();
-    slot = static_cast<std::uint32_t>(l.keys.size());
+    number = static_cast<std::uint32_t>(l.keys.size());
   }
-  const std::uint32_t index = slot - 1;
+  const std::uint32_t index = number - 1;
   Cell& c = l.cells[index];
   if (c.size == 0) ++l.occupied;
   if (c.slab == 0 || c.size == slab_size(c.slab)) {  // the next slab size
@@ -67,7 +67,7 @@ void TriangleGrid::insert(std::uint32_t id, const Box3& b, int set, double order
   Item& x = items_[std::size_t(c.begin) + c.size];
   x.set_box(b);
   x.id = id;
-  x.key = Item::above(order);
+  x.key = Item::above(key);
   if (where_.size() <= id) where_.resize(std::size_t(id) + 1);
   where_[id] = {std::uint32_t(level) << kCellBits | index, c.size};
   ++c.size;

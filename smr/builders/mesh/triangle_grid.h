@@ -86,11 +86,12 @@ class TriangleGrid {
   static constexpr int kLevels = 40;              // kSets * kLevels < kNoLevel
   static constexpr std::uint32_t kNoLevel = 127;  // Where: not in the grid
   static constexpr int kCellBits = 25;            // Where: cells per level < 2^25
+  static_assert(kSets * kLevels < int(kNoLevel) && kNoLevel < (1u << (32 - kCellBits)));
   static constexpr std::int64_t kOffset = std::int64_t{1} << 20;
   static constexpr std::uint64_t kMask = (std::uint64_t{1} << 21) - 1;
   static constexpr std::uint8_t kFirstSlab = 1;  // the least slab: 2 items
-  // Slab sizes grow by 3/2 or 4/3 in turn (1: 2 items, 2: 3, 3: 4, 4: 6, 5: 8, ...): a cell's slab
-  // is at least 2/3 full once it holds 2 items or more.
+  // Slab sizes grow by 3/2 or 4/3 in turn (1: 2 items, 2: 3, 3: 4, 4: 6, 5: 8, ...): a growing
+  // cell's slab is at least 2/3 full once it holds 2 items or more (erasures do not shrink it).
   static std::uint32_t slab_size(std::uint8_t slab) {
     return slab % 2 ? std::uint32_t{1} << ((slab + 1) / 2) : std::uint32_t{3} << (slab / 2 - 1);
   }
@@ -105,11 +106,19 @@ class TriangleGrid {
         hi[std::size_t(k)] = above(b.hi[k]);
       }
     }
+    // The largest float <= x and the smallest >= x (outside floats' range: the float at its end
+    // or an infinity, never a conversion out of range).
     static float below(double x) {
+      constexpr float kMax = std::numeric_limits<float>::max();
+      if (x > double(kMax)) return kMax;
+      if (x < -double(kMax)) return -std::numeric_limits<float>::infinity();
       const auto f = static_cast<float>(x);
       return double(f) <= x ? f : std::nextafter(f, -std::numeric_limits<float>::infinity());
     }
     static float above(double x) {
+      constexpr float kMax = std::numeric_limits<float>::max();
+      if (x > double(kMax)) return std::numeric_limits<float>::infinity();
+      if (x < -double(kMax)) return -kMax;
       const auto f = static_cast<float>(x);
       return double(f) >= x ? f : std::nextafter(f, std::numeric_limits<float>::infinity());
     }
