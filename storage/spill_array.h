@@ -1,19 +1,23 @@
 // A table of fixed-size values by number (one per removal or per op of a build) that stays within
 // a resident budget whatever its length: the out-of-core builders' per-item tables.
 //
-// Without a budget it is a std::vector. With one, the values live in a shared mapping of an
-// anonymous scratch file (storage::TempFile): the kernel keeps the file's pages in its page
-// cache, which is not the process's memory, and the mapping's pages are dropped from the
-// resident set (madvise MADV_DONTNEED; clean or dirty, they stay in the page cache and fault back
-// in on the next access) after every budget / 4 KiB accesses, since each access maps at most one
-// page in. So the table holds at most its budget however it is accessed, and a table read with
-// locality (the builders' are: removals are numbered along space) faults little.
+// Without a budget it is a std::vector. With one, the values live in an anonymous scratch file
+// (storage::TempFile) and the process holds copies of some of its 4 KiB blocks, in slots (block
+// number mod slots): a value in no slot is read by reading its block into its slot (pread; a
+// block changed by set() is written back first). The kernel keeps the file's pages in its page
+// cache, which is not the process's memory, so the table holds at most its slots resident. (It
+// once mapped the file and dropped the mapping's pages every so many accesses: that does not
+// bound what is resident, as fault-around and large page-cache folios map many pages per fault;
+// and mapping windows of the file in place bounds it but costs a remap's TLB shootdown per miss.)
+// A table read with locality (the builders' are: removals are numbered along space) misses little.
 #pragma once
 
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -22,87 +26,133 @@
 
 namespace smr::storage {
 
-/// The mapped scratch file under a SpillArray.
-class ScratchMapping {
+/// The scratch file under a SpillArray and the blocks of it at hand.
+class ScratchBlocks {
  public:
-  ScratchMapping(const std::string& dir, std::uint64_t resident_bytes);
-  ~ScratchMapping();
-  ScratchMapping(const ScratchMapping&) = delete;
-  ScratchMapping& operator=(const ScratchMapping&) = delete;
+  /// At most `resident_bytes` (at least 64 KiB) of the file's blocks at hand.
+  ScratchBlocks(const std::string& dir, std::uint64_t resident_bytes);
+  ScratchBlocks(const ScratchBlocks&) = delete;
+  ScratchBlocks& operator=(const ScratchBlocks&) = delete;
 
   /// Makes the first `bytes` addressable (new bytes are zero). Not concurrent with accesses.
   void reserve(std::uint64_t bytes);
-  void* data() const { return data_; }
-  /// Counts an access; every resident_bytes / 4 KiB of them drops the mapping's pages. Several
-  /// threads may access (and so trim) at once.
-  void touch() const {
-    if (touches_.fetch_add(1, std::memory_order_relaxed) % trim_every_ == trim_every_ - 1) trim();
+
+  /// Reads the `n` bytes at `offset` (within one block: n divides the block size and offset is a
+  /// multiple of n). Threads may read at once.
+  void read(std::uint64_t offset, void* out, std::size_t n) const {
+    const std::uint64_t block = offset / kBlock;
+    const std::size_t s = slot_of(block);
+    const Slot& slot = slots_[s];
+    for (;;) {
+      const std::uint64_t tag = slot.tag.load(std::memory_order_acquire);
+      if (static_cast<std::uint32_t>(tag) != block + 1) {
+        fill(block);
+        continue;
+      }
+      std::memcpy(out, data_.get() + s * kBlock + offset % kBlock, n);
+      // Seqlock: the copy counts only if no refill of the slot began meanwhile.
+      std::atomic_thread_fence(std::memory_order_acquire);
+      if (slot.tag.load(std::memory_order_relaxed) == tag) return;
+    }
   }
-  std::uint64_t trims() const { return trims_.load(); }
+
+  /// Writes `n` bytes at `offset` (as read). Not concurrent with other accesses.
+  void write(std::uint64_t offset, const void* in, std::size_t n) {
+    const std::uint64_t block = offset / kBlock;
+    const std::size_t s = slot_of(block);
+    if (static_cast<std::uint32_t>(slots_[s].tag.load(std::memory_order_relaxed)) != block + 1) {
+      fill(block);
+    }
+    slots_[s].dirty = true;
+    std::memcpy(data_.get() + s * kBlock + offset % kBlock, in, n);
+  }
+
+  /// Times a block was read into a slot.
+  std::uint64_t fills() const { return fills_.load(); }
+
+  static constexpr std::uint64_t kBlock = 4096;
 
  private:
-  void trim() const;
+  struct Slot {
+    // (generation << 32) | (block + 1); 0 in the low half while no block (or a refill) is there.
+    std::atomic<std::uint64_t> tag{0};
+    bool dirty = false;
+  };
+  std::size_t slot_of(std::uint64_t block) const {
+    return static_cast<std::size_t>(block & (slots_.size() - 1));
+  }
+  void fill(std::uint64_t block) const;
 
-  TempFile file_;
-  void* data_ = nullptr;
+  mutable TempFile file_;
   std::uint64_t capacity_ = 0;
-  std::uint64_t trim_every_;
-  mutable std::atomic<std::uint64_t> touches_{0}, trims_{0};
+  mutable std::vector<Slot> slots_;  // a power of two of them
+  std::unique_ptr<char[]> data_;     // a block per slot
+  mutable std::mutex fill_;
+  mutable std::atomic<std::uint64_t> fills_{0};
 };
 
 template <class T>
 class SpillArray {
   static_assert(std::is_trivially_copyable_v<T>, "values live in a file's bytes");
+  static_assert((sizeof(T) & (sizeof(T) - 1)) == 0 && sizeof(T) <= 4096,
+                "a value lies within one block");
 
  public:
   /// In memory when `resident_bytes` is 0, else in a scratch file in `dir` (already resolved by
   /// scratch_dir()) holding at most `resident_bytes` (at least 64 KiB) resident.
   SpillArray(const std::string& dir, std::uint64_t resident_bytes) {
-    if (resident_bytes > 0) map_ = std::make_unique<ScratchMapping>(dir, resident_bytes);
+    if (resident_bytes > 0) blocks_ = std::make_unique<ScratchBlocks>(dir, resident_bytes);
   }
 
   std::size_t size() const { return size_; }
+
   /// Grows (new values are zero) or shrinks. Not concurrent with accesses.
   void resize(std::size_t n) {
-    if (map_) {
-      map_->reserve(std::uint64_t{n} * sizeof(T));
+    if (blocks_) {
+      blocks_->reserve(std::uint64_t{n} * sizeof(T));
     } else {
       mem_.resize(n);
     }
     size_ = n;
   }
+
   void push_back(const T& v) {
-    if (!map_) {
+    if (!blocks_) {
       mem_.push_back(v);
       ++size_;
       return;
     }
     if (size_ == capacity_) {
       capacity_ = capacity_ < 4096 ? 4096 : capacity_ * 2;
-      map_->reserve(std::uint64_t{capacity_} * sizeof(T));
+      blocks_->reserve(std::uint64_t{capacity_} * sizeof(T));
     }
     set(size_++, v);
   }
+
+  /// Threads may read at once.
   T operator[](std::size_t i) const {
-    if (!map_) return mem_[i];
-    map_->touch();
-    return static_cast<const T*>(map_->data())[i];
+    if (!blocks_) return mem_[i];
+    T v;
+    blocks_->read(std::uint64_t{i} * sizeof(T), &v, sizeof(T));
+    return v;
   }
+
+  /// Not concurrent with other accesses.
   void set(std::size_t i, const T& v) {
-    if (!map_) {
+    if (!blocks_) {
       mem_[i] = v;
       return;
     }
-    map_->touch();
-    static_cast<T*>(map_->data())[i] = v;
+    blocks_->write(std::uint64_t{i} * sizeof(T), &v, sizeof(T));
   }
-  bool spilled() const { return map_ != nullptr; }
-  /// Times the resident pages were dropped (0 in memory).
-  std::uint64_t trims() const { return map_ ? map_->trims() : 0; }
+
+  bool spilled() const { return blocks_ != nullptr; }
+  /// Times a block of the scratch file was read (0 in memory).
+  std::uint64_t fills() const { return blocks_ ? blocks_->fills() : 0; }
 
  private:
   std::vector<T> mem_;
-  std::unique_ptr<ScratchMapping> map_;
+  std::unique_ptr<ScratchBlocks> blocks_;
   std::size_t size_ = 0, capacity_ = 0;
 };
 

@@ -5,12 +5,15 @@
 #include <gtest/gtest.h>
 
 #include <cstdint>
+#include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <random>
 #include <string>
 #include <thread>
 #include <vector>
+
+#include <fcntl.h>
+#include <unistd.h>
 
 namespace smr::storage {
 namespace {
@@ -19,18 +22,19 @@ std::string tmp() {
   return std::filesystem::temp_directory_path().string();
 }
 
-// The process's resident set, in bytes (VmRSS).
+// The process's resident set, in bytes (statm's second field, in pages). Read without allocating:
+// under AddressSanitizer each allocation is fresh memory held in quarantine, which the measure
+// would count.
 std::uint64_t rss_bytes() {
-  std::ifstream in("/proc/self/status");
-  std::string key;
-  std::uint64_t kib = 0;
-  while (in >> key) {
-    if (key == "VmRSS:") {
-      in >> kib;
-      break;
-    }
-  }
-  return kib << 10;
+  char buf[128] = {};
+  const int fd = ::open("/proc/self/statm", O_RDONLY);
+  if (fd < 0) return 0;
+  const ssize_t n = ::read(fd, buf, sizeof buf - 1);
+  ::close(fd);
+  if (n <= 0) return 0;
+  unsigned long long size = 0, resident = 0;
+  if (std::sscanf(buf, "%llu %llu", &size, &resident) != 2) return 0;
+  return resident * static_cast<std::uint64_t>(::sysconf(_SC_PAGESIZE));
 }
 
 TEST(SpillArray, HoldsTheValuesOfAVectorUnderAnyBudget) {
@@ -38,7 +42,7 @@ TEST(SpillArray, HoldsTheValuesOfAVectorUnderAnyBudget) {
     SpillArray<std::uint64_t> a(tmp(), budget);
     std::vector<std::uint64_t> ref;
     std::mt19937_64 rng(11);
-    for (std::uint64_t i = 0; i < 200'000; ++i) {  // grows through several remaps
+    for (std::uint64_t i = 0; i < 200'000; ++i) {  // grows through several reserves
       const std::uint64_t v = rng();
       a.push_back(v);
       ref.push_back(v);
@@ -58,7 +62,7 @@ TEST(SpillArray, HoldsTheValuesOfAVectorUnderAnyBudget) {
     for (std::size_t j = 0; j < ref.size(); ++j) ASSERT_EQ(a[j], ref[j]) << "value " << j;
     EXPECT_EQ(a.spilled(), budget > 0);
     if (budget > 0) {
-      EXPECT_GT(a.trims(), 0u);
+      EXPECT_GT(a.fills(), 0u);
     }
   }
 }
@@ -66,6 +70,8 @@ TEST(SpillArray, HoldsTheValuesOfAVectorUnderAnyBudget) {
 TEST(SpillArray, StaysWithinItsBudgetWhereAVectorGrows) {
   constexpr std::size_t n = std::size_t{16} << 20;  // 128 MiB of values
   constexpr std::uint64_t budget = std::uint64_t{4} << 20;
+  // Filled in order, then read and written at random: a random read is what the kernel answers
+  // with the most pages at once (fault-around maps up to 16 neighbours already in its cache).
   const auto growth = [&](std::uint64_t b) {
     const std::uint64_t before = rss_bytes();
     SpillArray<std::uint64_t> a(tmp(), b);
@@ -75,17 +81,27 @@ TEST(SpillArray, StaysWithinItsBudgetWhereAVectorGrows) {
       a.set(i, i * 3);
       if (i % 65536 == 0) peak = std::max(peak, rss_bytes());
     }
-    std::uint64_t sum = 0;
-    for (std::size_t i = 0; i < n; i += 7) sum += a[i];
-    EXPECT_GT(sum, 0u);
+    std::mt19937_64 rng(5);
+    std::uint64_t wrong = 0;
+    for (std::size_t k = 0; k < 200'000; ++k) {
+      const std::size_t i = rng() % n;
+      if (k % 4 == 0) {
+        a.set(i, i * 3);
+      } else if (a[i] != i * 3) {
+        ++wrong;
+      }
+      if (k % 4096 == 0) peak = std::max(peak, rss_bytes());
+    }
+    EXPECT_EQ(wrong, 0u);
     return std::max(peak, rss_bytes()) - before;
   };
   const std::uint64_t spilled = growth(budget), in_memory = growth(0);
   EXPECT_GT(in_memory, std::uint64_t{100} << 20) << "the measure cannot see the table";
-  EXPECT_LT(spilled, budget + (std::uint64_t{4} << 20));
+  // The margin: code and the allocator's first pages (and the sanitizer's shadow of the slots).
+  EXPECT_LT(spilled, budget + (std::uint64_t{2} << 20));
 }
 
-TEST(SpillArray, ThreadsReadWhileTheyTrim) {
+TEST(SpillArray, ThreadsReadWhileSlotsAreRefilled) {
   SpillArray<std::uint32_t> a(tmp(), 64 << 10);
   constexpr std::uint32_t n = 2'000'000;
   a.resize(n);
@@ -103,7 +119,7 @@ TEST(SpillArray, ThreadsReadWhileTheyTrim) {
   }
   for (auto& th : threads) th.join();
   for (std::uint64_t w : wrong) EXPECT_EQ(w, 0u);
-  EXPECT_GT(a.trims(), 100u);
+  EXPECT_GT(a.fills(), 100u);
 }
 
 }  // namespace
