@@ -3,6 +3,7 @@
 #include "smr/builders/mesh/triangle_grid.h"
 
 #include <algorithm>
+#include <bit>
 #include <limits>
 
 #include "base/error.h"
@@ -49,7 +50,7 @@ void TriangleGrid::insert(std::uint32_t id, const Box3& b, int set, double key) 
   if (number == 0) {
     if (l.keys.size() + 1 >= (std::size_t{1} << kCellBits))
       throw_internal("triangle grid: more than 2^25 cells in one level of one block");
-    l.keys.push_back(cell_key);
+    l.add_key(cell_key);
     l.cells.emplace_back();
     number = static_cast<std::uint32_t>(l.keys.size());
   }
@@ -71,6 +72,19 @@ void TriangleGrid::insert(std::uint32_t id, const Box3& b, int set, double key) 
   if (where_.size() <= id) where_.resize(std::size_t(id) + 1);
   where_[id] = {std::uint32_t(level) << kCellBits | index, c.size};
   ++c.size;
+}
+
+void TriangleGrid::Level::add_key(std::uint64_t key) {
+  keys.push_back(key);
+  constexpr std::size_t kBitsPerCell = 16, kLeastBits = 4096;
+  if (keys.size() * kBitsPerCell <= seen.size() * 64) {
+    mark(key);
+    return;
+  }
+  const std::size_t bits = std::max(kLeastBits, 2 * seen.size() * 64);
+  seen.assign(bits / 64, 0);
+  seen_shift = 64 - static_cast<unsigned>(std::countr_zero(bits));
+  for (const std::uint64_t k : keys) mark(k);
 }
 
 void TriangleGrid::set_key(std::uint32_t id, double key) {

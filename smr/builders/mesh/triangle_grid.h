@@ -74,7 +74,9 @@ class TriangleGrid {
       for (std::int64_t x = lo[0]; x <= hi[0]; ++x) {
         for (std::int64_t y = lo[1]; y <= hi[1]; ++y) {
           for (std::int64_t z = lo[2]; z <= hi[2]; ++z) {
-            const std::uint32_t* slot = l.index.find(key_of({x, y, z}));
+            const std::uint64_t key = key_of({x, y, z});
+            if (!l.may_hold(key)) continue;
+            const std::uint32_t* slot = l.index.find(key);
             if (slot != nullptr) visit_cell(l.cells[*slot - 1], b, least, f);
           }
         }
@@ -142,12 +144,31 @@ class TriangleGrid {
   };
   // One grid: its cells in a flat hash table (cells emptied stay, to be filled again; their slabs
   // go back to the pool).
+  //
+  // A query's range is mostly cells the level never had (~65 lookups a query, most of them
+  // misses, each a cache miss in the table): a bit per hash of a cell key, 16 bits a cell, answers
+  // most of them first.
   struct Level {
     IdMap<std::uint32_t> index;       // cell key -> its index + 1
     std::vector<std::uint64_t> keys;  // per cell
     std::vector<Cell> cells;          // per cell
     std::size_t occupied = 0;         // cells holding a triangle
+    std::vector<std::uint64_t> seen;  // bit hash(key): some cell has that hash
+    unsigned seen_shift = 64;         // hash(key) = (key * odd) >> seen_shift
+
+    std::uint64_t bit_of(std::uint64_t key) const { return (key * kHashFactor) >> seen_shift; }
+    bool may_hold(std::uint64_t key) const {
+      const std::uint64_t h = bit_of(key);
+      return (seen[h >> 6] >> (h & 63)) & 1u;
+    }
+    void mark(std::uint64_t key) {
+      const std::uint64_t h = bit_of(key);
+      seen[h >> 6] |= std::uint64_t{1} << (h & 63);
+    }
+    // A new cell's key, in keys and in seen (which doubles, all keys marked again, as it fills).
+    void add_key(std::uint64_t key);
   };
+  static constexpr std::uint64_t kHashFactor = 0x9e3779b97f4a7c15ull;
   // Where a triangle is, by id: its level (set * kLevels + level; kNoLevel: not in the grid) and
   // cell in one word, and its slot.
   struct Where {
