@@ -4,6 +4,7 @@
 #include <bit>
 #include <cerrno>
 #include <cstring>
+#include <limits>
 
 #include <unistd.h>
 
@@ -25,6 +26,10 @@ void ScratchBlocks::reserve(std::uint64_t bytes) {
   // Whole blocks, so that a block read never reaches past the file's end.
   const std::uint64_t grown = std::max({bytes, capacity_ * 2, std::uint64_t{1} << 20});
   const std::uint64_t capacity = (grown + kBlock - 1) / kBlock * kBlock;
+  if (capacity / kBlock >= std::numeric_limits<std::uint32_t>::max()) {  // a slot's tag: 32 bits
+    throw_internal("a scratch table of " + std::to_string(capacity) +
+                   " bytes: more than 2^32 - 1 blocks of 4 KiB");
+  }
   if (::ftruncate(file_.fd(), static_cast<off_t>(capacity)) != 0) {
     throw_io("cannot grow a scratch table to " + std::to_string(capacity) +
              " bytes: " + std::strerror(errno));

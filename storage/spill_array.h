@@ -12,7 +12,9 @@
 // A table read with locality (the builders' are: removals are numbered along space) misses little.
 #pragma once
 
+#include <algorithm>
 #include <atomic>
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -29,7 +31,8 @@ namespace smr::storage {
 /// The scratch file under a SpillArray and the blocks of it at hand.
 class ScratchBlocks {
  public:
-  /// At most `resident_bytes` (at least 64 KiB) of the file's blocks at hand.
+  /// At most `resident_bytes` (at least 64 KiB) of the file's blocks at hand (and 16 bytes of
+  /// bookkeeping a 4 KiB block). Tables up to 2^32 - 1 blocks (16 TiB); reserve() refuses more.
   ScratchBlocks(const std::string& dir, std::uint64_t resident_bytes);
   ScratchBlocks(const ScratchBlocks&) = delete;
   ScratchBlocks& operator=(const ScratchBlocks&) = delete;
@@ -94,7 +97,7 @@ class ScratchBlocks {
 template <class T>
 class SpillArray {
   static_assert(std::is_trivially_copyable_v<T>, "values live in a file's bytes");
-  static_assert((sizeof(T) & (sizeof(T) - 1)) == 0 && sizeof(T) <= 4096,
+  static_assert(std::has_single_bit(sizeof(T)) && sizeof(T) <= ScratchBlocks::kBlock,
                 "a value lies within one block");
 
  public:
@@ -110,6 +113,10 @@ class SpillArray {
   void resize(std::size_t n) {
     if (blocks_) {
       blocks_->reserve(std::uint64_t{n} * sizeof(T));
+      // Values once held past the size (shrunk, then grown) become zero again; the file's bytes
+      // past every size it had are zero already.
+      for (std::size_t i = size_; i < std::min(n, high_); ++i) set(i, T{});
+      high_ = std::max(high_, n);
     } else {
       mem_.resize(n);
     }
@@ -122,17 +129,14 @@ class SpillArray {
       ++size_;
       return;
     }
-    if (size_ == capacity_) {
-      capacity_ = capacity_ < 4096 ? 4096 : capacity_ * 2;
-      blocks_->reserve(std::uint64_t{capacity_} * sizeof(T));
-    }
-    set(size_++, v);
+    resize(size_ + 1);  // the file grows by doubling (ScratchBlocks::reserve)
+    set(size_ - 1, v);
   }
 
   /// Threads may read at once.
   T operator[](std::size_t i) const {
     if (!blocks_) return mem_[i];
-    T v;
+    T v{};
     blocks_->read(std::uint64_t{i} * sizeof(T), &v, sizeof(T));
     return v;
   }
@@ -153,7 +157,7 @@ class SpillArray {
  private:
   std::vector<T> mem_;
   std::unique_ptr<ScratchBlocks> blocks_;
-  std::size_t size_ = 0, capacity_ = 0;
+  std::size_t size_ = 0, high_ = 0;  // high_: the largest size it has had (spilled)
 };
 
 }  // namespace smr::storage

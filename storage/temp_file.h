@@ -25,7 +25,7 @@ class TempFile {
   void write(std::uint64_t offset, const void* data, std::size_t n);
   void read(std::uint64_t offset, void* data, std::size_t n) const;
   std::uint64_t bytes_written() const { return written_; }
-  /// The file's descriptor (for a mapping of it: storage::ScratchMapping).
+  /// The file's descriptor (to size it: storage::ScratchBlocks).
   int fd() const { return fd_; }
 
  private:

@@ -75,16 +75,17 @@ void TriangleGrid::insert(std::uint32_t id, const Box3& b, int set, double key) 
 }
 
 void TriangleGrid::Level::add_key(std::uint64_t key) {
-  keys.push_back(key);
   constexpr std::size_t kBitsPerCell = 16, kLeastBits = 4096;
-  if (keys.size() * kBitsPerCell <= seen.size() * 64) {
-    mark(key);
-    return;
+  // The bits first, so that keys and cells stay in step if making them throws.
+  if ((keys.size() + 1) * kBitsPerCell > seen.size() * 64) {
+    const std::size_t bits = std::max(kLeastBits, 2 * seen.size() * 64);
+    std::vector<std::uint64_t> more(bits / 64, 0);
+    seen.swap(more);
+    seen_shift = 64 - static_cast<unsigned>(std::countr_zero(bits));
+    for (const std::uint64_t k : keys) mark(k);
   }
-  const std::size_t bits = std::max(kLeastBits, 2 * seen.size() * 64);
-  seen.assign(bits / 64, 0);
-  seen_shift = 64 - static_cast<unsigned>(std::countr_zero(bits));
-  for (const std::uint64_t k : keys) mark(k);
+  keys.push_back(key);
+  mark(key);
 }
 
 void TriangleGrid::set_key(std::uint32_t id, double key) {

@@ -91,7 +91,8 @@ class TriangleGrid {
   static_assert(kSets * kLevels < int(kNoLevel) && kNoLevel < (1u << (32 - kCellBits)));
   static constexpr std::int64_t kOffset = std::int64_t{1} << 20;
   static constexpr std::uint64_t kMask = (std::uint64_t{1} << 21) - 1;
-  static constexpr std::uint8_t kFirstSlab = 1;  // the least slab: 2 items
+  static constexpr std::uint8_t kFirstSlab = 1;                        // the least slab: 2 items
+  static constexpr std::uint64_t kHashFactor = 0x9e3779b97f4a7c15ull;  // Level::seen
   // Slab sizes grow by 3/2 or 4/3 in turn (1: 2 items, 2: 3, 3: 4, 4: 6, 5: 8, ...): a growing
   // cell's slab is at least 2/3 full once it holds 2 items or more (erasures do not shrink it).
   static std::uint32_t slab_size(std::uint8_t slab) {
@@ -146,15 +147,16 @@ class TriangleGrid {
   // go back to the pool).
   //
   // A query's range is mostly cells the level never had (~65 lookups a query, most of them
-  // misses, each a cache miss in the table): a bit per hash of a cell key, 16 bits a cell, answers
-  // most of them first.
+  // misses, each a cache miss in the table): a bit per hash of a cell key, 16 to 32 bits a cell
+  // (at least 4096 a level), answers most of them first. Made with the level's first cell: visit()
+  // reads it only in levels holding a triangle.
   struct Level {
     IdMap<std::uint32_t> index;       // cell key -> its index + 1
     std::vector<std::uint64_t> keys;  // per cell
     std::vector<Cell> cells;          // per cell
     std::size_t occupied = 0;         // cells holding a triangle
     std::vector<std::uint64_t> seen;  // bit hash(key): some cell has that hash
-    unsigned seen_shift = 64;         // hash(key) = (key * odd) >> seen_shift
+    unsigned seen_shift = 52;         // hash(key) = (key * odd) >> seen_shift
 
     std::uint64_t bit_of(std::uint64_t key) const { return (key * kHashFactor) >> seen_shift; }
     bool may_hold(std::uint64_t key) const {
@@ -168,7 +170,6 @@ class TriangleGrid {
     // A new cell's key, in keys and in seen (which doubles, all keys marked again, as it fills).
     void add_key(std::uint64_t key);
   };
-  static constexpr std::uint64_t kHashFactor = 0x9e3779b97f4a7c15ull;
   // Where a triangle is, by id: its level (set * kLevels + level; kNoLevel: not in the grid) and
   // cell in one word, and its slot.
   struct Where {
