@@ -21,8 +21,7 @@ ScratchBlocks::ScratchBlocks(const std::string& dir, std::uint64_t resident_byte
       slots_(std::bit_floor(std::max(resident_bytes, kMinResident) / kBlock)),
       data_(new char[slots_.size() * kBlock]) {}
 
-void ScratchBlocks::reserve(std::uint64_t bytes) {
-  if (bytes <= capacity_) return;
+void ScratchBlocks::grow(std::uint64_t bytes) {
   // Whole blocks, so that a block read never reaches past the file's end.
   const std::uint64_t grown = std::max({bytes, capacity_ * 2, std::uint64_t{1} << 20});
   const std::uint64_t capacity = (grown + kBlock - 1) / kBlock * kBlock;
@@ -43,7 +42,7 @@ void ScratchBlocks::fill(std::uint64_t block) const {
   Slot& slot = slots_[s];
   const std::uint64_t tag = slot.tag.load(std::memory_order_relaxed);
   if (static_cast<std::uint32_t>(tag) == block + 1) return;  // another thread read it
-  char* data = data_.get() + s * kBlock;
+  char* data = at(s, 0);
   if (slot.dirty) {  // only set() makes a block dirty, and it is never concurrent with reads
     file_.write(std::uint64_t{static_cast<std::uint32_t>(tag) - 1u} * kBlock, data, kBlock);
     slot.dirty = false;

@@ -38,7 +38,9 @@ class ScratchBlocks {
   ScratchBlocks& operator=(const ScratchBlocks&) = delete;
 
   /// Makes the first `bytes` addressable (new bytes are zero). Not concurrent with accesses.
-  void reserve(std::uint64_t bytes);
+  void reserve(std::uint64_t bytes) {
+    if (bytes > capacity_) grow(bytes);  // push_back asks on every value
+  }
 
   /// Reads the `n` bytes at `offset` (within one block: n divides the block size and offset is a
   /// multiple of n). Threads may read at once.
@@ -52,7 +54,7 @@ class ScratchBlocks {
         fill(block);
         continue;
       }
-      std::memcpy(out, data_.get() + s * kBlock + offset % kBlock, n);
+      std::memcpy(out, at(s, offset), n);
       // Seqlock: the copy counts only if no refill of the slot began meanwhile.
       std::atomic_thread_fence(std::memory_order_acquire);
       if (slot.tag.load(std::memory_order_relaxed) == tag) return;
@@ -67,7 +69,7 @@ class ScratchBlocks {
       fill(block);
     }
     slots_[s].dirty = true;
-    std::memcpy(data_.get() + s * kBlock + offset % kBlock, in, n);
+    std::memcpy(at(s, offset), in, n);
   }
 
   /// Times a block was read into a slot.
@@ -84,6 +86,11 @@ class ScratchBlocks {
   std::size_t slot_of(std::uint64_t block) const {
     return static_cast<std::size_t>(block & (slots_.size() - 1));
   }
+  // Where the byte at `offset` is in slot s (holding its block).
+  char* at(std::size_t s, std::uint64_t offset) const {
+    return data_.get() + s * kBlock + offset % kBlock;
+  }
+  void grow(std::uint64_t bytes);
   void fill(std::uint64_t block) const;
 
   mutable TempFile file_;
