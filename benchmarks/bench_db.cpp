@@ -544,9 +544,9 @@ json mode_codecs(const CodecArgs& a) {
     // Each record stream's bytes, raw and compressed alone per page (what a field costs).
     std::map<std::string, std::pair<std::uint64_t, std::uint64_t>> streams;
     for (std::size_t i = 0; i < pages.size(); ++i) {
-      page_bytes += pages[i].size();
-      const smr::storage::ByteView payload =
-          smr::storage::unseal(pages[i], "pages", std::to_string(i));
+      const smr::PageValue value = smr::split_page_value(pages[i], "pages/" + std::to_string(i));
+      page_bytes += pages[i].size() - value.leaf.size();  // the leaf is the R-tree's
+      const smr::storage::ByteView payload = smr::page_payload(pages[i], "pages", std::to_string(i));
       const smr::PageSections parts = smr::page_sections(payload, "pages/" + std::to_string(i));
       for (const auto& [stream, bytes] :
            smr::page_record_streams(payload, "pages/" + std::to_string(i))) {
@@ -643,7 +643,7 @@ json mode_decode(const DecodeArgs& a) {
   std::uint64_t ops = 0, bytes = 0, decoded_bytes = 0;
   std::array<std::uint64_t, 7> totals{};
   for (std::size_t i = 0; i < pages.size(); ++i) {
-    payloads.push_back(smr::storage::unseal(pages[i], "pages", std::to_string(i)));
+    payloads.push_back(smr::page_payload(pages[i], "pages", std::to_string(i)));
     const smr::PageSections parts = smr::page_sections(payloads.back(), "page");
     for (std::size_t k = 0; k < totals.size(); ++k) totals[k] += parts.totals[k];
     const auto page = smr::decode_page(payloads.back(), db->grid(), db->info(), "page", a.links);

@@ -249,17 +249,31 @@ Summary TreeWriter::emit(const detail::Node& node) {
   return summarize(stored);
 }
 
-void TreeWriter::add_leaf(std::span<const Entry> leaf) {
+namespace {
+// The leaf node of `leaf`'s entries (checked).
+detail::Node leaf_node(std::span<const Entry> leaf) {
   if (leaf.empty()) throw_internal("R-tree write: an empty leaf");
-  if (node_id_ >= std::numeric_limits<std::uint32_t>::max()) {  // leaves so far
-    throw_input("R-tree: more than 2^32 leaves");
-  }
   detail::Node node;
   node.items.reserve(leaf.size());
   for (const Entry& e : leaf) {
     check_entry(e);
     node.items.push_back({e.roi, e.box, e.res, e.id});
   }
+  return node;
+}
+}  // namespace
+
+Bytes encode_leaf(std::span<const Entry> leaf) {
+  Bytes payload;
+  (void)detail::encode_node(leaf_node(leaf), payload);
+  return storage::seal(payload);
+}
+
+void TreeWriter::add_leaf(std::span<const Entry> leaf) {
+  if (node_id_ >= std::numeric_limits<std::uint32_t>::max()) {  // leaves so far
+    throw_input("R-tree: more than 2^32 leaves");
+  }
+  const detail::Node node = leaf_node(leaf);
   entries_ += leaf.size();
   const Summary s = emit(node);
   if (spilled_) {
@@ -367,8 +381,9 @@ Bytes write(const Plan& plan, std::span<const Entry> entries, const BuildOptions
 
 struct RTree::Node : detail::Node {};
 
-RTree::RTree(ByteView header, std::function<Bytes(std::uint64_t node_id)> fetch, std::string table)
-    : fetch_(std::move(fetch)), table_(std::move(table)) {
+RTree::RTree(ByteView header, std::function<Bytes(std::uint64_t node_id)> fetch, std::string table,
+             std::string leaf_table)
+    : fetch_(std::move(fetch)), table_(std::move(table)), leaf_table_(std::move(leaf_table)) {
   const ByteView payload = storage::unseal(header, table_, "header");
   storage::ByteReader r(payload, table_ + "/header");
   if (r.u32() != kHeaderMagic) r.fail("not an R-tree header (bad magic)");
@@ -405,13 +420,17 @@ RTree::RTree(ByteView header, std::function<Bytes(std::uint64_t node_id)> fetch,
 }
 
 std::string RTree::node_context(std::uint64_t node_id) const {
-  return table_ + "/" + node_key(node_id);
+  return table_of(node_id) + "/" + node_key(node_id);
+}
+
+const std::string& RTree::table_of(std::uint64_t node_id) const {
+  return node_id < leaf_count() && !leaf_table_.empty() ? leaf_table_ : table_;
 }
 
 RTree::Node RTree::read_node(std::uint64_t node_id, std::uint64_t level) const {
   const Bytes sealed = fetch_(node_id);
   const std::string key = node_key(node_id);
-  const ByteView payload = storage::unseal(sealed, table_, key);
+  const ByteView payload = storage::unseal(sealed, table_of(node_id), key);
   const std::string context = node_context(node_id);
   Node node{detail::decode_node(payload, context)};
   if (node.level != level) {

@@ -176,7 +176,8 @@ class TreeWriter {
   ~TreeWriter();
   TreeWriter(const TreeWriter&) = delete;
   TreeWriter& operator=(const TreeWriter&) = delete;
-  // Throws kInvalidInput on an entry check_entry rejects, kInternal on an empty leaf.
+  // Throws kInvalidInput on an entry check_entry rejects, kInternal on an empty leaf. The leaf's
+  // node goes to `put` at once (encode_leaf's bytes), with the next leaf id.
   void add_leaf(std::span<const Entry> leaf);
   // Writes the internal levels; returns the sealed header (as write()).
   Bytes finish();
@@ -190,6 +191,10 @@ class TreeWriter {
   std::uint64_t node_id_ = 0, entries_ = 0;
   Bytes payload_, sealed_;
 };
+
+// The sealed node TreeWriter::add_leaf puts for `leaf` (a caller that keeps each leaf beside its
+// data page measures the two together before it cuts the page). Same exceptions as add_leaf.
+Bytes encode_leaf(std::span<const Entry> leaf);
 
 // Orders and packs `entries` (see the header comment). Deterministic: the same set of entries in
 // any order gives the same plan. Throws kInvalidInput on a duplicate id, an empty or non-finite
@@ -233,10 +238,12 @@ struct QueryStats {
 class RTree {
  public:
   // `header` is write()'s result; `fetch(node_id)` returns the node's bytes as given to put();
-  // `table` is where the caller keeps them, for messages ("<table>/<node id>", "<table>/header").
+  // `table` is where the caller keeps them, for messages ("<table>/<node id>", "<table>/header");
+  // `leaf_table`, when not empty, where it keeps the leaves (ids 0 .. leaf_count() - 1).
   // Every node read is verified (checksum, level, counts, child ids within the level below —
   // which also rules out cycles) and a malformation throws smr::Error (kCorrupt) naming the node.
-  RTree(ByteView header, std::function<Bytes(std::uint64_t node_id)> fetch, std::string table);
+  RTree(ByteView header, std::function<Bytes(std::uint64_t node_id)> fetch, std::string table,
+        std::string leaf_table = {});
 
   // Called, if set, with the children a query is about to enter below a node, before it reads
   // them (a caller reading from disk can ask for them all at once).
@@ -260,12 +267,13 @@ class RTree {
   struct Node;
   Node read_node(std::uint64_t node_id, std::uint64_t level) const;
   std::string node_context(std::uint64_t node_id) const;  // "<table>/<node id>"
+  const std::string& table_of(std::uint64_t node_id) const;
   void visit(std::uint64_t node_id, std::uint64_t level, std::uint64_t expected_count,
              Visitor& visitor, std::vector<Hit>& hits, QueryStats& stats) const;
 
   std::function<Bytes(std::uint64_t)> fetch_;
   std::function<void(std::span<const std::uint64_t>)> advise_;
-  std::string table_;
+  std::string table_, leaf_table_;
   std::vector<std::uint64_t> level_sizes_;   // nodes per level, leaves first
   std::vector<std::uint64_t> level_starts_;  // first node id of each level
   std::uint64_t node_count_ = 0;

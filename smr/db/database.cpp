@@ -309,13 +309,14 @@ std::unique_ptr<Database> Database::open(const std::string& path, const Options&
     return std::make_unique<index::RTree>(
         *header,
         [self](std::uint64_t node) {
-          return std::get<Bytes>(*self->cached(3, Table::kRtree, node));
+          return std::get<Bytes>(*self->cached(3, self->node_table(node), node));
         },
-        std::string(table_name(Table::kRtree)));
+        std::string(table_name(Table::kRtree)), std::string(table_name(Table::kPages)));
   });
   db->rtree_->set_advise([self](std::span<const std::uint64_t> nodes) {
     const std::vector<std::uint64_t> missing = self->uncached(3, nodes, self->rtree_->node_count());
-    if (!missing.empty()) self->env_->read().will_need(Table::kRtree, missing);
+    // The children of one node: all leaves (in the pages' values) or none.
+    if (!missing.empty()) self->env_->read().will_need(self->node_table(missing.front()), missing);
   });
   if (db->rtree_->entry_count() != db->op_count_ || db->rtree_->leaf_count() != db->page_count_)
     throw Error(ErrorKind::kCorrupt, path + ": R-tree and meta disagree on the counts");
@@ -348,7 +349,7 @@ void Database::maybe_release(bool trim) const {
 std::shared_ptr<const Database::CacheItem> Database::fetch(std::uint64_t kind, Table table,
                                                            std::uint64_t id) const {
   return cache_->get((kind << 60) | id, [&]() {
-    return naming_file(path(), [&] { return load(table, id, kind == kLinkedPages); });
+    return naming_file(path(), [&] { return load(kind, table, id); });
   });
 }
 
@@ -384,8 +385,10 @@ void Database::with_value(Table table, std::uint64_t id,
 void Database::with_page_bytes(std::uint64_t page, const std::function<void(ByteView)>& f) const {
   naming_file(path(), [&] {
     with_value(Table::kPages, page, [&](ByteView raw) {
-      page_bytes_read_.fetch_add(raw.size());
-      f(storage::unseal(raw, table_name(Table::kPages), key_text(page)));
+      const std::string key = key_text(page);
+      const ByteView sealed = split_page_value(raw, "pages/" + key).page;
+      page_bytes_read_.fetch_add(sealed.size());
+      f(storage::unseal(sealed, table_name(Table::kPages), key));
     });
   });
   pages_read_.fetch_add(1);
@@ -394,14 +397,22 @@ void Database::with_page_bytes(std::uint64_t page, const std::function<void(Byte
   maybe_release(false);
 }
 
-storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table, std::uint64_t id,
-                                                               bool links) const {
+storage::PageCache<Database::CacheItem>::Loaded Database::load(std::uint64_t kind, Table table,
+                                                               std::uint64_t id) const {
   storage::PageCache<CacheItem>::Loaded loaded;
   const std::string name = std::string(table_name(table)) + "/" + key_text(id);
   Bytes raw;
-  with_value(table, id, [&](ByteView v) { raw.assign(v.begin(), v.end()); });
+  with_value(table, id, [&](ByteView v) {
+    // A pages value holds an R-tree leaf, then its data page (page.h, PageValue).
+    ByteView part = v;
+    if (table == Table::kPages) {
+      const PageValue both = split_page_value(v, name);
+      part = kind == 3 ? both.leaf : both.page;
+    }
+    raw.assign(part.begin(), part.end());
+  });
   loaded.bytes_read = raw.size();
-  if (table == Table::kRtree) {
+  if (kind == 3) {
     loaded.charged_bytes = kCacheItemOverhead + heap_block_bytes(raw.capacity());
     rtree_bytes_read_.fetch_add(raw.size());
     loaded.value = std::make_shared<const CacheItem>(std::move(raw));
@@ -409,7 +420,7 @@ storage::PageCache<Database::CacheItem>::Loaded Database::load(Table table, std:
   } else if (table == Table::kPages) {
     const ByteView payload = storage::unseal(raw, table_name(table), key_text(id));
     std::shared_ptr<const DecodedPage> ops =
-        decode_page(payload, grid_, info_, path() + ": " + name, links);
+        decode_page(payload, grid_, info_, path() + ": " + name, kind == kLinkedPages);
     loaded.charged_bytes = kCacheItemOverhead + ops->memory_bytes();
     loaded.value = std::make_shared<const CacheItem>(std::move(ops));
     pages_read_.fetch_add(1);

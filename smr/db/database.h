@@ -117,8 +117,13 @@ class Database final : public OpSource {
   // when it is missing.
   void with_value(Table table, std::uint64_t id,
                   const std::function<void(storage::ByteView)>& f) const;
-  // Reads and decodes one value (the cache's loader); a data page with its links or not.
-  storage::PageCache<CacheItem>::Loaded load(Table table, std::uint64_t id, bool links) const;
+  // Reads and decodes one item of `kind` (the cache's loader) from its table.
+  storage::PageCache<CacheItem>::Loaded load(std::uint64_t kind, Table table,
+                                             std::uint64_t id) const;
+  // Where R-tree node `node` is: a leaf in its page's value (page.h, PageValue), or the rtree table.
+  Table node_table(std::uint64_t node) const {
+    return node < page_count_ ? Table::kPages : Table::kRtree;
+  }
   // Cache keys are (kind << 60) | id. Kinds: 1 data pages decoded without their links, 2 locator
   // blocks, 3 R-tree nodes, 4 data pages with their links.
   static constexpr std::uint64_t kLinkedPages = 4;

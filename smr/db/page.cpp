@@ -16,6 +16,7 @@
 #include "base/error.h"
 #include "smr/core/crmr.h"
 #include "smr/core/fragment_edges.h"
+#include "storage/checksum.h"
 
 namespace smr {
 
@@ -945,6 +946,37 @@ std::vector<std::pair<std::string, Bytes>> page_record_streams(ByteView page,
   const QuantGrid grid;
   const CrmrInfo info;
   return PageDecoder(page, grid, info, context).streams();
+}
+
+PageValue split_page_value(ByteView value, const std::string& context) {
+  ByteReader r(value, context);
+  const std::uint64_t n = r.varint();
+  if (n > r.remaining()) r.fail("R-tree leaf of " + std::to_string(n) + " bytes past the value");
+  PageValue v;
+  v.leaf = r.bytes(std::size_t(n));
+  v.page = r.bytes(r.remaining());
+  return v;
+}
+
+Bytes join_page_value(ByteView leaf, ByteView page) {
+  Bytes out;
+  out.reserve(page_value_overhead(leaf.size()) + page.size());
+  ByteWriter w(out);
+  w.varint(leaf.size());
+  w.bytes(leaf);
+  w.bytes(page);
+  return out;
+}
+
+std::size_t page_value_overhead(std::size_t leaf_bytes) {
+  std::size_t varint = 1;
+  for (std::size_t n = leaf_bytes; n >= 0x80; n >>= 7) ++varint;
+  return varint + leaf_bytes;
+}
+
+ByteView page_payload(ByteView value, std::string_view table, const std::string& key) {
+  const std::string context = std::string(table) + "/" + key;
+  return storage::unseal(split_page_value(value, context).page, table, key);
 }
 
 DecodedPage::~DecodedPage() = default;

@@ -109,6 +109,22 @@ struct PageSections {
 };
 PageSections page_sections(storage::ByteView page, const std::string& context);
 
+/// A value of the `pages` table (database format 5): varint n, the sealed R-tree leaf of the page
+/// (n bytes; its entries are the page's ops, slot for slot), then the sealed page. The leaf lives
+/// beside its page so that neither takes LMDB overflow pages of its own (a ~2.6 KB leaf filled a
+/// 4 KiB page alone), and a query that enters a leaf and then reads the page reads one value.
+struct PageValue {
+  storage::ByteView leaf, page;  // both sealed
+};
+/// Throws kCorrupt "<context>: ..." when the framing is malformed (checksums are the reader's).
+PageValue split_page_value(storage::ByteView value, const std::string& context);
+storage::Bytes join_page_value(storage::ByteView leaf, storage::ByteView page);
+/// The bytes join_page_value adds to a sealed page whose sealed leaf takes `leaf_bytes`.
+std::size_t page_value_overhead(std::size_t leaf_bytes);
+/// The page of a `pages` value, checked and unsealed; errors name "<table>" and "<key>".
+storage::ByteView page_payload(storage::ByteView value, std::string_view table,
+                               const std::string& key);
+
 /// The streams of a page's records (page.cpp, Stream), decompressed, by name: for tools that
 /// measure what each field costs. Throws kCorrupt naming `context`.
 std::vector<std::pair<std::string, storage::Bytes>> page_record_streams(storage::ByteView page,

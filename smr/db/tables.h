@@ -1,10 +1,12 @@
 // The tables of a database file (docs/design.md sections 3, 5, 6): a CRMR in one LMDB file.
 //
 //   meta         "meta" -> JSON (format, model info, grid, counts, build parameters), sealed
-//   pages        u64 leaf -> data page (smr/db/page.h): the ops of R-tree leaf `leaf`, sealed
+//   pages        u64 leaf -> R-tree leaf `leaf` and its data page (smr/db/page.h, PageValue): the
+//                leaf's entries and the page's ops, slot for slot, each sealed
 //   locators     u64 block -> where ops 256*block .. 256*block+255 are: varint page, varint slot
 //                per op (differences of pages as svarints), sealed
-//   rtree        u64 node -> R-tree node (index/rtree.h); key 2^64-1 -> the tree's header
+//   rtree        u64 node -> R-tree node above the leaves (index/rtree.h); key 2^64-1 -> the
+//                tree's header
 //   aux          unused so far
 // Every value carries an xxhash checksum (storage/checksum.h); a mismatch names the table and key.
 #pragma once
@@ -16,7 +18,8 @@
 
 namespace smr {
 
-inline constexpr int kDatabaseFormat = 4;  // 4: page format 4 (page.h); 3: table "locators"
+// 5: R-tree leaves in the pages' values (page.h, PageValue); 4: page format 4; 3: "locators".
+inline constexpr int kDatabaseFormat = 5;
 inline constexpr std::uint64_t kOpsPerLocatorBlock = 256;
 inline constexpr std::uint64_t kRtreeHeaderKey = std::numeric_limits<std::uint64_t>::max();
 

@@ -38,7 +38,8 @@ namespace {
 // CGAL meshes but the pig).
 std::uint32_t estimated_bytes(const Op& op, ModelKind kind) {
   const std::size_t per_vertex = kind == ModelKind::kMesh3d ? 13 : 2;
-  return static_cast<std::uint32_t>(24 + 4 * op.fragment.size() + per_vertex * op.vertices.size() +
+  // 17: the op's R-tree leaf entry, which its page's value holds too (page.h, PageValue).
+  return static_cast<std::uint32_t>(41 + 4 * op.fragment.size() + per_vertex * op.vertices.size() +
                                     5 * op.pre.size() + 5 * op.coarser.size() +
                                     10 * op.children.size());
 }
@@ -84,7 +85,8 @@ struct PackedRun {
 };
 
 // Cuts a run into pages greedily in leaf order: each page takes as many entries as fit in
-// `cap` bytes sealed (WriteOptions::page_bytes) and max_leaf_entries, measured by encoding them.
+// `cap` bytes (WriteOptions::page_bytes) and max_leaf_entries, measured by encoding them: the
+// `pages` value, i.e. the sealed page and its sealed R-tree leaf (join_page_value).
 // The estimate proposes the first cut (scaled by the real-to-estimated ratio of the run's
 // previous pages), then encodes bracket the cut: [lo fits, hi does not] narrowed by interpolating
 // on the sizes (bisecting after a few tries) until hi = lo + 1, so adding the next entry would
@@ -124,17 +126,17 @@ class PagePacker {
     double ratio = 1.0;
     for (std::size_t at = 0, batch = 0; at < entries.size();) {
       Bytes page;
+      double bytes = 0;
       const std::size_t taken = cut(
           entries.subspan(at),
           [&](std::size_t n) {
             fetch_to(at + n);
             return std::span<const Op* const>(ops).subspan(at, n);
           },
-          ratio, page, run.encodes);
+          ratio, page, bytes, run.encodes);
       std::uint64_t estimated = 0;
       for (std::size_t i = at; i < at + taken; ++i) estimated += entries[i].weight;
-      const double r =
-          double(page.size() + seal_bytes_) / double(std::max<std::uint64_t>(1, estimated));
+      const double r = bytes / double(std::max<std::uint64_t>(1, estimated));
       ratio = at == 0 ? r : 0.25 * r + 0.75 * ratio;
       run.pages.push_back(storage::seal(page));
       at += taken;
@@ -145,10 +147,10 @@ class PagePacker {
 
  private:
   // The entries of the next page (a prefix of `entries`, whose first n ops ops_for(n) returns);
-  // their encoding to `page`, unsealed.
+  // their encoding to `page`, unsealed, and the bytes of its value to `value_bytes`.
   template <class OpsFor>
   std::size_t cut(std::span<const OpEntry> entries, const OpsFor& ops_for, double ratio,
-                  Bytes& page, std::uint64_t& encodes) const {
+                  Bytes& page, double& value_bytes, std::uint64_t& encodes) const {
     const std::size_t limit = std::min<std::size_t>(entries.size(), max_entries_);
     const double cap = cap_;
     // Estimated bytes of each prefix; sizes are predicted as a line in them, which follows an
@@ -160,13 +162,18 @@ class PagePacker {
     };
     std::size_t guess = prefix_within(cap / ratio);
     std::size_t lo = 0, hi = limit + 1;  // prefix lo fits (0 trivially); hi does not (or is past)
-    double lo_bytes = 0, hi_bytes = 0;
+    double lo_bytes = 0, hi_bytes = 0, probe_bytes = 0;
     Bytes probe;
+    std::vector<index::Entry> leaf;
     for (int probes = 1;; ++probes) {
       guess = std::clamp<std::size_t>(guess, lo + 1, std::min(hi - 1, limit));
       probe = encode_page(ops_for(guess), grid_, codec_);
       ++encodes;
-      const double bytes = double(probe.size() + seal_bytes_);
+      leaf.clear();
+      for (std::size_t i = 0; i < guess; ++i) leaf.push_back(entries[i].index_entry());
+      const double bytes =
+          double(probe.size() + seal_bytes_ + page_value_overhead(index::encode_leaf(leaf).size()));
+      probe_bytes = bytes;
       if (bytes <= cap) {
         lo = guess;
         lo_bytes = bytes;
@@ -187,8 +194,10 @@ class PagePacker {
     }
     if (lo == 0) {  // one entry past the cap: a page of its own
       std::swap(page, probe);
+      value_bytes = probe_bytes;
       return 1;
     }
+    value_bytes = lo_bytes;
     return lo;
   }
 
@@ -202,13 +211,15 @@ class PagePacker {
 // (estimated bytes, kRunPages), and each run is packed into pages by PagePacker, so the pages do
 // not depend on the thread count. Runs are packed on every core a window (a run per thread) at a
 // time, and while the helpers start on a window the calling thread appends the previous one's
-// pages, in order, with their locators (to `locators`) and R-tree leaves (to `tree`). Memory holds
+// pages, in order, with their locators (to `locators`) and R-tree leaves (to `tree`, whose `put`
+// hands each leaf back in `leaf`: it is stored in the page's value). Memory holds
 // two windows of runs (entries and pages: ~2 MiB a run on the 4097^2 fBm) and the ops of the
 // pages being cut. Returns the number of ops placed.
 std::uint64_t write_pages(storage::DatabaseWriter& writer, EntrySorter& sorted, const OpsOf& ops_of,
                           const QuantGrid& grid, const index::BuildOptions& bo,
                           const WriteOptions& options, std::uint64_t op_count,
-                          index::TreeWriter& tree, LocatorSorter& locators, WriteReport& report) {
+                          index::TreeWriter& tree, const Bytes& leaf, LocatorSorter& locators,
+                          WriteReport& report) {
   const unsigned threads = thread_count(options.threads);
   const std::size_t window = std::size_t(threads);
   const PagePacker packer(grid, options, bo.max_leaf_entries);
@@ -220,14 +231,15 @@ std::uint64_t write_pages(storage::DatabaseWriter& writer, EntrySorter& sorted, 
     for (const PackedRun& run : packed) {
       for (std::size_t j = 0, begin = 0; j < run.pages.size(); begin = run.ends[j++]) {
         const std::uint64_t page = report.pages++;
-        report.page_bytes += run.pages[j].size();
-        writer.append(Table::kPages, page, run.pages[j]);
         leaf_entries.clear();
         for (std::size_t i = begin; i < run.ends[j]; ++i) {
           locators.add({run.entries[i].id, page, std::uint32_t(i - begin)});
           leaf_entries.push_back(run.entries[i].index_entry());
         }
-        tree.add_leaf(leaf_entries);
+        tree.add_leaf(leaf_entries);  // -> leaf
+        const Bytes value = join_page_value(leaf, run.pages[j]);
+        report.page_bytes += value.size() - leaf.size();  // the leaf is the R-tree's
+        writer.append(Table::kPages, page, value);
       }
       placed += run.entries.size();
       ++report.page_runs;
@@ -341,18 +353,25 @@ WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header
   report.z_shift = z_shift;
   report.ops = counts.ops;
   const index::BuildOptions bo = rtree_options(header, options);
-  // The leaves' summaries (one per page) wait in a scratch file for the upper levels.
+  // The leaves' summaries (one per page) wait in a scratch file for the upper levels. A leaf
+  // goes into its page's value (page.h, PageValue); the table holds the nodes above.
+  Bytes leaf;
+  bool leaves = true;
   index::TreeWriter tree(
       bo,
       [&](std::uint64_t id, ByteView node) {
         report.rtree_bytes += node.size();
         ++report.rtree_nodes;
-        writer.append(Table::kRtree, id, node);
+        if (leaves)
+          leaf.assign(node.begin(), node.end());
+        else
+          writer.append(Table::kRtree, id, node);
       },
       tmp_dir);
   LocatorSorter locators(tmp_dir, side_sort_bytes(options));
-  const std::uint64_t placed =
-      write_pages(writer, sorted, ops_of, grid, bo, options, counts.ops, tree, locators, report);
+  const std::uint64_t placed = write_pages(writer, sorted, ops_of, grid, bo, options, counts.ops,
+                                           tree, leaf, locators, report);
+  leaves = false;
   if (placed != counts.ops)
     throw_internal("database writer: " + std::to_string(placed) + " ops reached the pages, not " +
                    std::to_string(counts.ops));

@@ -414,6 +414,67 @@ TEST(Database, OpsOutOfRangeAreAnErrorNotACrash) {
   EXPECT_THROW(db->page(db->page_count()), Error);
 }
 
+// Format 5 (page.h, PageValue): each pages value holds its R-tree leaf, whose entries are the
+// page's ops slot for slot, and the rtree table holds only the nodes above the leaves and the
+// header. A leaf damaged inside its value is an error naming the pages table and key, for the
+// index's readers, while the page itself still decodes (the two are sealed apart).
+TEST(Database, EachPageValueHoldsItsRtreeLeaf) {
+  const test::Dataset& d = test::dataset("fbm129");
+  TempDir dir;
+  Crmr m = d.crmr;
+  WriteOptions o;
+  o.page_bytes = 2 * 4096 - 16;  // several pages and internal nodes
+  o.rtree_fanout = 4;
+  const WriteReport w = write_database(m, dir.file("x.smrdb"), o);
+  const auto db = Database::open(dir.file("x.smrdb"), {});
+  ASSERT_GE(db->page_count(), 8u);
+  const index::RTree& tree = db->rtree();
+  ASSERT_EQ(tree.leaf_count(), db->page_count());
+  ASSERT_EQ(w.rtree_nodes, tree.node_count());
+  std::size_t entries = 0;
+  for (std::uint32_t p = 0; p < db->page_count(); ++p) {
+    const std::vector<index::Entry> leaf = tree.leaf_entries(p);
+    const auto page = db->page(p);
+    ASSERT_EQ(leaf.size(), page->size()) << "page " << p;
+    for (std::size_t s = 0; s < leaf.size(); ++s) {
+      EXPECT_EQ(leaf[s].id, (*page)[s].id.value) << "page " << p << " slot " << s;
+      entries += 1;
+    }
+  }
+  EXPECT_EQ(entries, m.ops.size());
+  const std::string bytes = read_file(dir.file("x.smrdb"));
+  std::uint64_t rtree_values = 0, leaf_offset = 0, leaf_size = 0;
+  {
+    const storage::Env env = storage::Env::open_read_only(dir.file("x.smrdb"), kTableNames);
+    const storage::ReadTxn txn = env.read();
+    txn.for_each(Table::kRtree, [&](storage::ByteView, storage::ByteView) { ++rtree_values; });
+    const auto value = txn.get(Table::kPages, 3);
+    ASSERT_TRUE(value.has_value());
+    const PageValue parts = split_page_value(*value, "pages/3");
+    EXPECT_EQ(storage::unseal(parts.leaf, "pages", "3").size() + 8, parts.leaf.size());
+    const std::string_view leaf(reinterpret_cast<const char*>(parts.leaf.data()),
+                                parts.leaf.size());
+    leaf_offset = bytes.find(leaf);
+    leaf_size = leaf.size();
+    ASSERT_NE(leaf_offset, std::string::npos);
+  }
+  EXPECT_EQ(rtree_values, tree.node_count() - tree.leaf_count() + 1);  // + the header
+
+  // A bit of page 3's leaf flipped: the index's reader names pages/3; the page still decodes.
+  std::string bad = bytes;
+  bad[leaf_offset + leaf_size / 2] = static_cast<char>(bad[leaf_offset + leaf_size / 2] ^ 4);
+  test::write_file(dir.file("bad.smrdb"), bad);
+  const auto damaged = Database::open(dir.file("bad.smrdb"), {});
+  EXPECT_EQ(damaged->page(3)->size(), db->page(3)->size());
+  try {
+    damaged->rtree().leaf_entries(3);
+    ADD_FAILURE() << "a damaged leaf was read";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.exit_code(), 1) << e.what();
+    EXPECT_NE(std::string(e.what()).find("table 'pages', key 3"), std::string::npos) << e.what();
+  }
+}
+
 // The LMDB sub-database names and their order are part of the file format (tables.h): format 3
 // names the op locators' table "locators" (format 2: "nodes").
 TEST(Database, TableNamesAreTheFormats) {

@@ -85,9 +85,10 @@ using test::extract_all;
 using test::Result;
 using test::same;
 
-// A 65 x 65 fBm terrain in data pages of about 3 KB: 460 KB, 113 LMDB pages (page format 4). The
-// data pages are overflow values; the locators, R-tree nodes and meta are values inside leaf
-// pages; the locators, pages and rtree tables each have a branch page over two or more leaves.
+// A 65 x 65 fBm terrain in data pages of about 3 KB (database format 5: each holds its R-tree
+// leaf). The data pages are overflow values; the locators, internal R-tree nodes (fanout 2, so
+// that there are many) and meta are values inside leaf pages; the locators, pages and rtree
+// tables each have a branch page over two or more leaves.
 struct SmallDb {
   TempDir dir;
   std::string path = dir.file("small.smrdb");
@@ -100,6 +101,7 @@ struct SmallDb {
     Crmr crmr = build_greedy_tin(make_fbm(65, 65, 7, 1600.0, 0, 0.5, 10.0), build);
     WriteOptions o;
     o.page_bytes = 3000;
+    o.rtree_fanout = 2;  // the rtree table holds the internal nodes: enough for a branch page
     write_database(crmr, path, o);
     bytes = read_file(path);
     verified = verify_database(path, nullptr);

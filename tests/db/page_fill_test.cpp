@@ -1,6 +1,6 @@
 // Data pages fill the LMDB pages they take (issue 34): a value of S bytes takes ceil((S + 16) /
-// 4096) 4-KiB overflow pages, so the writer cuts R-tree leaves by encoding their ops, not by an
-// estimate. Every page's value is at most WriteOptions::page_bytes (k * 4096 - 16) unless it holds
+// 4096) 4-KiB overflow pages, so the writer cuts R-tree leaves by encoding their ops and their
+// leaf (the value holds both: page.h, PageValue), not by an estimate. Every page's value is at most WriteOptions::page_bytes (k * 4096 - 16) unless it holds
 // a single op, and the cut is tight: the page with the next op in leaf order added would pass the
 // cap, except at the end of a packing run (WriteReport::page_runs) or of max_leaf_entries. The
 // same model gives the same bytes with one thread or several.
@@ -44,6 +44,7 @@ Fill check_fill(const Crmr& m, const std::string& path, const WriteReport& w,
     });
   }
   std::vector<std::vector<const Op*>> pages(sizes.size());
+  std::vector<std::vector<index::Entry>> leaves(sizes.size());  // as stored
   {
     const auto db = Database::open(path, {std::size_t{64} << 20});
     for (const Op& op : m.ops) {
@@ -52,6 +53,7 @@ Fill check_fill(const Crmr& m, const std::string& path, const WriteReport& w,
       if (p.size() <= slot) p.resize(slot + 1);
       p[slot] = &op;
     }
+    for (std::uint32_t p = 0; p < leaves.size(); ++p) leaves[p] = db->rtree().leaf_entries(p);
   }
   const std::uint64_t seal = storage::seal({}).size();
   const std::uint32_t max_entries = index::BuildOptions{}.max_leaf_entries;
@@ -65,7 +67,13 @@ Fill check_fill(const Crmr& m, const std::string& path, const WriteReport& w,
     if (p + 1 == pages.size() || pages[p].size() >= max_entries) continue;
     std::vector<const Op*> more = pages[p];
     more.push_back(pages[p + 1].front());
-    if (encode_page(more, w.grid, o.codec).size() + seal <= o.page_bytes) ++f.loose;
+    // The value holds the leaf too (PageValue): its size depends on the count and ids alone.
+    std::vector<index::Entry> leaf = leaves[p];
+    leaf.push_back(leaves[p + 1].front());
+    if (encode_page(more, w.grid, o.codec).size() + seal +
+            page_value_overhead(index::encode_leaf(leaf).size()) <=
+        o.page_bytes)
+      ++f.loose;
   }
   f.mean_value = double(total) / double(sizes.size());
   return f;

@@ -121,7 +121,7 @@ TEST(TerrainVertexIds, AreTheDemSampleIndices) {
       const storage::ReadTxn txn = env.read();
       txn.for_each(Table::kPages, [&](storage::ByteView, storage::ByteView value) {
         for (const auto& [stream, bytes] :
-             page_record_streams(storage::unseal(value, "pages", "page"), "page")) {
+             page_record_streams(page_payload(value, "pages", "page"), "page")) {
           if (stream == "vertex_ids") {
             EXPECT_LE(bytes.size(), 6u) << name;
           }

@@ -591,7 +591,7 @@ std::vector<Seed> read_pages(const Source& s) {
   std::vector<Seed> seeds;
   txn.for_each(Table::kPages, [&](ByteView key, ByteView value) {
     const std::uint64_t n = storage::parse_key_u64(key, "pages");
-    const ByteView payload = storage::unseal(value, table_name(Table::kPages), std::to_string(n));
+    const ByteView payload = page_payload(value, table_name(Table::kPages), std::to_string(n));
     seeds.push_back({&s, n, Bytes(payload.begin(), payload.end())});
   });
   if (seeds.size() != s.db->page_count())
