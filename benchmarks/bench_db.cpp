@@ -546,7 +546,8 @@ json mode_codecs(const CodecArgs& a) {
     for (std::size_t i = 0; i < pages.size(); ++i) {
       const smr::PageValue value = smr::split_page_value(pages[i], "pages/" + std::to_string(i));
       page_bytes += pages[i].size() - value.leaf.size();  // the leaf is the R-tree's
-      const smr::storage::ByteView payload = smr::page_payload(pages[i], "pages", std::to_string(i));
+      const smr::storage::ByteView payload =
+          smr::page_payload(pages[i], "pages", std::to_string(i));
       const smr::PageSections parts = smr::page_sections(payload, "pages/" + std::to_string(i));
       for (const auto& [stream, bytes] :
            smr::page_record_streams(payload, "pages/" + std::to_string(i))) {

@@ -348,9 +348,8 @@ void Database::maybe_release(bool trim) const {
 
 std::shared_ptr<const Database::CacheItem> Database::fetch(std::uint64_t kind, Table table,
                                                            std::uint64_t id) const {
-  return cache_->get((kind << 60) | id, [&]() {
-    return naming_file(path(), [&] { return load(kind, table, id); });
-  });
+  return cache_->get((kind << 60) | id,
+                     [&]() { return naming_file(path(), [&] { return load(kind, table, id); }); });
 }
 
 std::shared_ptr<const Database::CacheItem> Database::cached(std::uint64_t kind, Table table,

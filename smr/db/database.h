@@ -120,7 +120,8 @@ class Database final : public OpSource {
   // Reads and decodes one item of `kind` (the cache's loader) from its table.
   storage::PageCache<CacheItem>::Loaded load(std::uint64_t kind, Table table,
                                              std::uint64_t id) const;
-  // Where R-tree node `node` is: a leaf in its page's value (page.h, PageValue), or the rtree table.
+  // Where R-tree node `node` is: a leaf in its page's value (page.h, PageValue), or the rtree
+  // table.
   Table node_table(std::uint64_t node) const {
     return node < page_count_ ? Table::kPages : Table::kRtree;
   }

@@ -1,9 +1,10 @@
 // Data pages fill the LMDB pages they take (issue 34): a value of S bytes takes ceil((S + 16) /
 // 4096) 4-KiB overflow pages, so the writer cuts R-tree leaves by encoding their ops and their
-// leaf (the value holds both: page.h, PageValue), not by an estimate. Every page's value is at most WriteOptions::page_bytes (k * 4096 - 16) unless it holds
-// a single op, and the cut is tight: the page with the next op in leaf order added would pass the
-// cap, except at the end of a packing run (WriteReport::page_runs) or of max_leaf_entries. The
-// same model gives the same bytes with one thread or several.
+// leaf (the value holds both: page.h, PageValue), not by an estimate. Every page's value is at most
+// WriteOptions::page_bytes (k * 4096 - 16) unless it holds a single op, and the cut is tight: the
+// page with the next op in leaf order added would pass the cap, except at the end of a packing run
+// (WriteReport::page_runs) or of max_leaf_entries. The same model gives the same bytes with one
+// thread or several.
 #include <cstdint>
 #include <vector>
 
