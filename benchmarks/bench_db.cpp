@@ -203,15 +203,27 @@ PageIndex read_page_index(const smr::Database& db, const std::string& path) {
   const smr::storage::Env env = smr::storage::Env::open_read_only(path, smr::kTableNames);
   const smr::storage::ReadTxn txn = env.read();
   for (std::uint64_t p = 0; p < index.page_size.size(); ++p) {
-    index.page_size[p] = txn.get(smr::Table::kPages, p)->size();
+    // The page part of the value (its leaf is the R-tree's: DatabaseStats counts it there).
+    index.page_size[p] =
+        smr::split_page_value(*txn.get(smr::Table::kPages, p), "pages/" + std::to_string(p))
+            .page.size();
     index.all_page_bytes += index.page_size[p];
   }
   return index;
 }
 
+// Per record stream: raw bytes and bytes compressed alone per page (what a field costs).
+using StreamBytes = std::map<std::string, std::pair<std::uint64_t, std::uint64_t>>;
+
+void add_streams(StreamBytes& streams, smr::storage::ByteView payload, const std::string& context) {
+  for (const auto& [stream, bytes] : smr::page_record_streams(payload, context)) {
+    streams[stream].first += bytes.size();
+    if (!bytes.empty()) streams[stream].second += smr::storage::zstd_compress(bytes).size();
+  }
+}
+
 // Per record stream: raw and alone-compressed bytes per model vertex.
-json streams_json(const std::map<std::string, std::pair<std::uint64_t, std::uint64_t>>& streams,
-                  std::uint64_t vertices) {
+json streams_json(const StreamBytes& streams, std::uint64_t vertices) {
   json out = json::object();
   for (const auto& [name, bytes] : streams) {
     out[name] = {{"raw", double(bytes.first) / double(vertices)},
@@ -541,19 +553,14 @@ json mode_codecs(const CodecArgs& a) {
         pages.emplace_back(v.begin(), v.end());
       });
     }
-    // Each record stream's bytes, raw and compressed alone per page (what a field costs).
-    std::map<std::string, std::pair<std::uint64_t, std::uint64_t>> streams;
+    StreamBytes streams;
     for (std::size_t i = 0; i < pages.size(); ++i) {
       const smr::PageValue value = smr::split_page_value(pages[i], "pages/" + std::to_string(i));
       page_bytes += pages[i].size() - value.leaf.size();  // the leaf is the R-tree's
       const smr::storage::ByteView payload =
           smr::page_payload(pages[i], "pages", std::to_string(i));
       const smr::PageSections parts = smr::page_sections(payload, "pages/" + std::to_string(i));
-      for (const auto& [stream, bytes] :
-           smr::page_record_streams(payload, "pages/" + std::to_string(i))) {
-        streams[stream].first += bytes.size();
-        if (!bytes.empty()) streams[stream].second += smr::storage::zstd_compress(bytes).size();
-      }
+      add_streams(streams, payload, "pages/" + std::to_string(i));
       record_bytes += parts.records.size();
       page_triangles += parts.totals[2];  // fragment triangles (pages keep them in the records)
       const smr::storage::ByteView geo = parts.geometry;
@@ -641,12 +648,18 @@ json mode_decode(const DecodeArgs& a) {
     }
   }
   std::vector<smr::storage::ByteView> payloads;
-  std::uint64_t ops = 0, bytes = 0, decoded_bytes = 0;
+  std::uint64_t ops = 0, bytes = 0, decoded_bytes = 0, leaf_bytes = 0, record_bytes = 0,
+                geo_bytes = 0;
   std::array<std::uint64_t, 7> totals{};
+  StreamBytes streams;
   for (std::size_t i = 0; i < pages.size(); ++i) {
+    leaf_bytes += smr::split_page_value(pages[i], "pages/" + std::to_string(i)).leaf.size();
     payloads.push_back(smr::page_payload(pages[i], "pages", std::to_string(i)));
+    add_streams(streams, payloads.back(), "pages/" + std::to_string(i));
     const smr::PageSections parts = smr::page_sections(payloads.back(), "page");
     for (std::size_t k = 0; k < totals.size(); ++k) totals[k] += parts.totals[k];
+    record_bytes += parts.records.size();
+    geo_bytes += parts.geometry.size();
     const auto page = smr::decode_page(payloads.back(), db->grid(), db->info(), "page", a.links);
     ops += page->size();
     bytes += pages[i].size();
@@ -668,9 +681,16 @@ json mode_decode(const DecodeArgs& a) {
   const char* names[] = {"vertices", "list", "triangles", "pre", "links", "parents", "children"};
   for (std::size_t k = 0; k < totals.size(); ++k)
     per_op[names[k]] = double(totals[k]) / double(ops);
+  // Bytes per model vertex of the pages read (all of them with --stride 1).
+  const double vertices = double(db->info().vertex_count);
   return {{"mode", "decode"},
           {"db", a.db},
           {"per_op", per_op},
+          {"per_model_vertex",
+           {{"leaves", double(leaf_bytes) / vertices},
+            {"records", double(record_bytes) / vertices},
+            {"geometry", double(geo_bytes) / vertices},
+            {"record_streams", streams_json(streams, db->info().vertex_count)}}},
           {"machine", smr::bench::machine_json()},
           {"pages", pages.size()},
           {"ops", ops},

@@ -111,11 +111,11 @@ bool cone_contains(const NormalCone& outer, const NormalCone& inner) {
 }
 
 namespace {
-std::array<std::int16_t, 3> axis_codes(const Vec3& axis) {
+std::array<std::int8_t, 3> axis_codes(const Vec3& axis) {
   const double m = std::max({std::abs(axis.x), std::abs(axis.y), std::abs(axis.z)});
-  std::array<std::int16_t, 3> code{};
+  std::array<std::int8_t, 3> code{};
   for (int k = 0; k < 3; ++k)
-    code[k] = static_cast<std::int16_t>(std::lround(axis[k] / m * 32767.0));
+    code[k] = static_cast<std::int8_t>(std::lround(axis[k] / m * double(kConeAxisMax)));
   return code;
 }
 }  // namespace
@@ -131,7 +131,7 @@ ConeCode cone_code(const NormalCone& c) {
   if (c.half_angle >= M_PI / 2) return code;
   code.full = false;
   code.axis = axis_codes(c.axis);
-  code.half = static_cast<std::uint16_t>(std::lround(c.half_angle / kConeStep));
+  code.half = static_cast<std::uint8_t>(std::lround(c.half_angle / kConeStep));
   return code;
 }
 
@@ -139,12 +139,12 @@ NormalCone canonical_cone(const NormalCone& c) {
   ConeCode code;
   if (c.half_angle < M_PI / 2) {
     code.axis = axis_codes(c.axis);
-    code.full = code.axis == std::array<std::int16_t, 3>{};
+    code.full = code.axis == std::array<std::int8_t, 3>{};
     const NormalCone rounded = decode_cone(code);
     const double shift = std::acos(std::clamp(glm::dot(rounded.axis, c.axis), -1.0, 1.0));
     const double steps = std::ceil((c.half_angle + shift + 1e-9) / kConeStep);
-    if (steps < 65535.0) {
-      code.half = static_cast<std::uint16_t>(steps);
+    if (steps < double(kConeHalfSteps)) {
+      code.half = static_cast<std::uint8_t>(steps);
     } else {
       code.full = true;
     }

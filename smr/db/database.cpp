@@ -337,8 +337,15 @@ std::uint64_t Database::file_bytes() const {
   return env_->file_bytes();
 }
 
+std::uint64_t Database::value_bytes_read() const {
+  // Not env_->bytes_read(): that counts a whole pages value for a leaf read from its head.
+  return page_bytes_read_.load(std::memory_order_relaxed) +
+         rtree_bytes_read_.load(std::memory_order_relaxed) +
+         locator_bytes_read_.load(std::memory_order_relaxed);
+}
+
 void Database::maybe_release(bool trim) const {
-  const std::uint64_t read = env_->bytes_read();
+  const std::uint64_t read = value_bytes_read();
   std::uint64_t last = released_at_.load();
   if (read - last >= kReleaseEveryBytes && released_at_.compare_exchange_strong(last, read)) {
     env_->release_mapped_pages();
@@ -497,7 +504,7 @@ DatabaseStats Database::stats() const {
   s.rtree_nodes_read = nodes_read_.load();
   s.rtree_bytes_read = rtree_bytes_read_.load();
   s.locator_bytes_read = locator_bytes_read_.load();
-  s.lmdb_bytes_read = env_->bytes_read();
+  s.lmdb_bytes_read = value_bytes_read();
   return s;
 }
 

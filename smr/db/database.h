@@ -28,11 +28,12 @@ struct DatabaseStats {
   storage::CacheStats cache;
   std::uint64_t pages_read = 0;        // data pages fetched from LMDB
   std::uint64_t pages_prefetched = 0;  // of which decoded ahead on the prefetch thread
-  std::uint64_t page_bytes_read = 0;   // their bytes
+  std::uint64_t page_bytes_read = 0;   // their bytes (a pages value's page part)
   std::uint64_t rtree_nodes_read = 0;
-  std::uint64_t rtree_bytes_read = 0;    // bytes of R-tree nodes fetched
+  std::uint64_t rtree_bytes_read = 0;    // bytes of R-tree nodes fetched (a leaf: its part of
+                                         // its page's value, page.h PageValue)
   std::uint64_t locator_bytes_read = 0;  // bytes of op-locator blocks fetched
-  std::uint64_t lmdb_bytes_read = 0;     // every value fetched from LMDB
+  std::uint64_t lmdb_bytes_read = 0;     // the three above: what was read of LMDB's values
 };
 
 /// A database opened for reading. An OpSource: ops are read lazily, a data page at a time,
@@ -133,6 +134,7 @@ class Database final : public OpSource {
   }
   Locator locate(OpId id) const;
   void maybe_release(bool trim = true) const;  // trim: malloc_trim the heap too
+  std::uint64_t value_bytes_read() const;      // DatabaseStats::lmdb_bytes_read
 
   class Prefetcher;
   void decode_ahead(std::uint64_t page) const;  // the prefetcher's work: into the cache

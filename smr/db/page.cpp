@@ -82,7 +82,7 @@ enum Stream : std::size_t {
   kEdges,        // per boundary edge of F: u8 0 model boundary, 1 its PreF triangle's, 2 stored
   kLinks,        // per stored link: svarint op delta, varint triangle, u8 edge
   kRois,         // per op: 6 varint grid steps outside the op's box
-  kCones,        // per op: u8 0 full | 1, then 3 svarint axis, u16 half angle
+  kCones,        // per op: u8 0 full | 1, then 3 x i8 axis, u8 half angle (ConeCode)
   kStreamCount
 };
 constexpr std::array<const char*, kStreamCount> kStreamNames = {
@@ -340,8 +340,8 @@ class PageEncoder {
     const ConeCode cone = cone_code(op.subtree_cone);
     w(kCones).u8(cone.full ? 0 : 1);
     if (!cone.full) {
-      for (std::int16_t a : cone.axis) w(kCones).svarint(a);
-      w(kCones).u16(cone.half);
+      for (std::int8_t a : cone.axis) w(kCones).u8(static_cast<std::uint8_t>(a));
+      w(kCones).u8(cone.half);
     }
   }
 
@@ -881,14 +881,13 @@ class PageDecoder {
     if (cone_flag > 1) c.fail("bad subtree cone flag");
     cone.full = cone_flag == 0;
     if (!cone.full) {
-      for (std::int16_t& a : cone.axis) {
-        const std::int64_t v = c.svarint();
-        if (v < -32767 || v > 32767) c.fail("subtree cone axis out of range");
-        a = static_cast<std::int16_t>(v);
+      for (std::int8_t& a : cone.axis) {
+        a = static_cast<std::int8_t>(c.u8());
+        if (a < -kConeAxisMax) c.fail("subtree cone axis out of range");
       }
-      if (cone.axis == std::array<std::int16_t, 3>{}) c.fail("subtree cone without an axis");
-      cone.half = c.u16();
-      if (cone.half == 0xffff) c.fail("subtree cone angle out of range");
+      if (cone.axis == std::array<std::int8_t, 3>{}) c.fail("subtree cone without an axis");
+      cone.half = c.u8();
+      if (cone.half >= kConeHalfSteps) c.fail("subtree cone angle out of range");
     }
     op.subtree_cone = decode_cone(cone);
   }

@@ -10,12 +10,13 @@
 // op's error is the one its resolution stands for (smr/db/quantize.h: round_for_storage,
 // stored_op_error).
 //
-// Layout of the (unsealed) value, format 4: u8 format, u8 codec, varint op count, seven varint
-// totals (page vertices, op vertex-list entries, fragment triangles, PreF triangles, links,
-// parents, children: the decoder sizes its one block from them), blob records (zstd), blob
-// geometry (codec: the page's vertex positions, in the order ops first list them; no faces).
-// The records are streams, one per field of every op (page.cpp, Stream), each preceded in a table
-// by its length, so that zstd sees like next to like. What format 4 no longer stores:
+// Layout of the (unsealed) value, format 5 (4 with two-byte cone codes): u8 format, u8 codec,
+// varint op count, seven varint totals (page vertices, op vertex-list entries, fragment triangles,
+// PreF triangles, links, parents, children: the decoder sizes its one block from them), blob
+// records (zstd), blob geometry (codec: the page's vertex positions, in the order ops first list
+// them; no faces). The records are streams, one per field of every op (page.cpp, Stream), each
+// preceded in a table by its length, so that zstd sees like next to like. What format 4 no longer
+// stores:
 // - a fragment triangle's corners index its op's vertex list (a few values, not page indices);
 // - a vertex-list entry is "the next new page vertex" or how far back in the page's table;
 // - a Hypermesh link is one code per boundary edge of F (model boundary, or the link the PreF
@@ -40,7 +41,8 @@
 
 namespace smr {
 
-inline constexpr std::uint8_t kPageFormat = 4;  // 4: streams, derived links (3: one-block decoding)
+// 5: one-byte cone codes; 4: streams, derived links; 3: one-block decoding.
+inline constexpr std::uint8_t kPageFormat = 5;
 
 /// The ops of one data page, decoded into one block. Immutable once made.
 class DecodedPage {

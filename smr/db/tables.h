@@ -18,7 +18,8 @@
 
 namespace smr {
 
-// 5: R-tree leaves in the pages' values (page.h, PageValue); 4: page format 4; 3: "locators".
+// 5: R-tree leaves in the pages' values (page.h, PageValue), page format 5; 4: page format 4;
+// 3: table "locators".
 inline constexpr int kDatabaseFormat = 5;
 inline constexpr std::uint64_t kOpsPerLocatorBlock = 256;
 inline constexpr std::uint64_t kRtreeHeaderKey = std::numeric_limits<std::uint64_t>::max();

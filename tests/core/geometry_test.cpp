@@ -101,7 +101,10 @@ TEST(Geometry, ConeUnionAndCanonicalFormHoldTheirCones) {
     EXPECT_EQ(canonical_cone(c).half_angle >= c.half_angle, true);
     if (c.half_angle < M_PI) {
       ++partial;
-      EXPECT_LE(c.half_angle, ab.half_angle + 1e-3);  // rounding costs little
+      // Rounding costs little: the axis's shift (half a code on each component of a vector of
+      // length >= kConeAxisMax) and a step of the angle.
+      const double shift = std::asin(std::sqrt(3.0) / 2.0 / double(kConeAxisMax));
+      EXPECT_LE(c.half_angle, ab.half_angle + shift + kConeStep + 1e-9);
     }
   }
   EXPECT_GT(partial, 500);

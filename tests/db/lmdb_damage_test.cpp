@@ -100,8 +100,8 @@ struct SmallDb {
     build.max_error = 1.6;
     Crmr crmr = build_greedy_tin(make_fbm(65, 65, 7, 1600.0, 0, 0.5, 10.0), build);
     WriteOptions o;
-    o.page_bytes = 3000;
-    o.rtree_fanout = 2;  // the rtree table holds the internal nodes: enough for a branch page
+    o.page_bytes = 2400;  // over LMDB's ~2 KB inline limit: overflow values
+    o.rtree_fanout = 2;   // the rtree table holds the internal nodes: enough for a branch page
     write_database(crmr, path, o);
     bytes = read_file(path);
     verified = verify_database(path, nullptr);
