@@ -23,7 +23,8 @@
 //   decode DB    decode_page alone on the real pages of a built database (every --stride-th
 //                page, copied out of LMDB first): microseconds per page and nanoseconds per op,
 //                the figure page-format work is judged by; --keep holds every page of a pass, so
-//                each is decoded into fresh memory as in a first view (not into the last one's).
+//                each is decoded into fresh memory as in a first view (not into the last one's);
+//                and bytes per model vertex of the leaves, records (by stream) and geometry.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -205,7 +206,7 @@ PageIndex read_page_index(const smr::Database& db, const std::string& path) {
   for (std::uint64_t p = 0; p < index.page_size.size(); ++p) {
     // The page part of the value (its leaf is the R-tree's: DatabaseStats counts it there).
     index.page_size[p] =
-        smr::split_page_value(*txn.get(smr::Table::kPages, p), "pages/" + std::to_string(p))
+        smr::split_page_value(*txn.get(smr::Table::kPages, p), "pages", std::to_string(p))
             .page.size();
     index.all_page_bytes += index.page_size[p];
   }
@@ -368,7 +369,8 @@ json pages_json(const PageUse& u, const Timed& first, const PageIndex& index) {
           {"of_database", index.page_size.size()}};
 }
 
-// Every byte fetched from LMDB over the bytes of the needed pages (the target).
+// Every byte read of LMDB's values (pages, R-tree nodes including the leaves at the head of the
+// pages values, op locators: DatabaseStats::lmdb_bytes_read) over the bytes of the needed pages.
 double lmdb_over_needed(const PageUse& u, const Timed& first) {
   return double(first.stats.lmdb_bytes_read) / double(std::max<std::uint64_t>(1, u.needed_bytes));
 }
@@ -555,10 +557,10 @@ json mode_codecs(const CodecArgs& a) {
     }
     StreamBytes streams;
     for (std::size_t i = 0; i < pages.size(); ++i) {
-      const smr::PageValue value = smr::split_page_value(pages[i], "pages/" + std::to_string(i));
+      const smr::PageValue value = smr::split_page_value(pages[i], "pages", std::to_string(i));
       page_bytes += pages[i].size() - value.leaf.size();  // the leaf is the R-tree's
       const smr::storage::ByteView payload =
-          smr::page_payload(pages[i], "pages", std::to_string(i));
+          smr::storage::unseal(value.page, "pages", std::to_string(i));
       const smr::PageSections parts = smr::page_sections(payload, "pages/" + std::to_string(i));
       add_streams(streams, payload, "pages/" + std::to_string(i));
       record_bytes += parts.records.size();
@@ -653,8 +655,9 @@ json mode_decode(const DecodeArgs& a) {
   std::array<std::uint64_t, 7> totals{};
   StreamBytes streams;
   for (std::size_t i = 0; i < pages.size(); ++i) {
-    leaf_bytes += smr::split_page_value(pages[i], "pages/" + std::to_string(i)).leaf.size();
-    payloads.push_back(smr::page_payload(pages[i], "pages", std::to_string(i)));
+    const smr::PageValue value = smr::split_page_value(pages[i], "pages", std::to_string(i));
+    leaf_bytes += value.leaf.size();
+    payloads.push_back(smr::storage::unseal(value.page, "pages", std::to_string(i)));
     add_streams(streams, payloads.back(), "pages/" + std::to_string(i));
     const smr::PageSections parts = smr::page_sections(payloads.back(), "page");
     for (std::size_t k = 0; k < totals.size(); ++k) totals[k] += parts.totals[k];
@@ -662,7 +665,7 @@ json mode_decode(const DecodeArgs& a) {
     geo_bytes += parts.geometry.size();
     const auto page = smr::decode_page(payloads.back(), db->grid(), db->info(), "page", a.links);
     ops += page->size();
-    bytes += pages[i].size();
+    bytes += pages[i].size() - value.leaf.size();  // the leaf is the R-tree's
     decoded_bytes += page->memory_bytes();
   }
   std::uint64_t sink = 0;

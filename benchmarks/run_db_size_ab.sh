@@ -14,8 +14,9 @@
 #   3. OUT (JSON): everything above, per-case medians over the rounds and new / old ratios.
 #
 # Environment: OLD_BUILD_DIR (required: a build of the commit to compare with, with tools/smrdb
-# and benchmarks/bench_extract_speed), BUILD_DIR (build/release), WORK_DIR
-# ($BUILD_DIR/bench-size-ab; inputs and databases are reused when present), SMRDB_DATA_DIR
+# and benchmarks/bench_extract_speed; the JSON names it), BUILD_DIR (build/release), WORK_DIR
+# ($BUILD_DIR/bench-size-ab; inputs are reused, databases while the smrdb that wrote them is the
+# same binary), SMRDB_DATA_DIR
 # (data), SIZES ("4097"), MAX_ERROR (1.6), BIG_SIZE (16385; empty: no oblique case), BIG_ERROR
 # (0.5), MESHES ("armadillo.off bunny00.off ChineseDragon-10kv.off"), ROUNDS (6), OUT
 # (benchmarks/results/db_size_ab.json).
@@ -40,8 +41,12 @@ require_executables "$BUILD_DIR" "$BUILD_DIR/tools/smrdb" "$BUILD_DIR/benchmarks
 require_executables "$OLD_BUILD_DIR" "$OLD_BUILD_DIR/tools/smrdb" \
   "$OLD_BUILD_DIR/benchmarks/bench_extract_speed"
 require_tools
-mkdir -p "$WORK_DIR/old" "$WORK_DIR/new" "$(dirname "$OUT")"
 build_dir() { [[ "$1" == old ]] && echo "$OLD_BUILD_DIR" || echo "$BUILD_DIR"; }
+# Each build's databases in a directory named by its smrdb binary, so a rebuilt one makes new ones.
+db_dir() { echo "$WORK_DIR/$1-$(sha1sum "$(build_dir "$1")/tools/smrdb" | cut -c1-12)"; }
+mkdir -p "$(db_dir old)" "$(db_dir new)" "$(dirname "$OUT")"
+stderr_log="$WORK_DIR/bench.stderr"
+: >"$stderr_log"
 
 # Inputs, made once by this build.
 smrdb="$BUILD_DIR/tools/smrdb"
@@ -60,7 +65,7 @@ sizes='[]'
 for b in old new; do
   for spec in "${inputs[@]}"; do
     IFS='=' read -r name src err <<<"$spec"
-    db="$WORK_DIR/$b/$name.smrdb"
+    db="$(db_dir "$b")/$name.smrdb"
     if [[ ! -f "$db" ]]; then
       log "$b: ingest $name"
       args=("$src" -o "$db" -q --force)
@@ -70,7 +75,9 @@ for b in old new; do
     info="$("$(build_dir "$b")/tools/smrdb" info "$db" --json)"
     lmdb='{}'
     if command -v mdb_stat >/dev/null; then
-      lmdb="$(mdb_stat -n -a "$db" | awk '/^Status of /{t=$3} /Leaf pages|Branch pages|Overflow pages/{n[t]+=$3} END{printf "{"; s=""; for (k in n) {printf "%s\"%s\":%d", s, k, n[k]; s=","} printf "}"}')"
+      lmdb="$(mdb_stat -n -a "$db" | awk '/^Status of /{sub(/^Status of /, ""); t=$0}
+        /Leaf pages|Branch pages|Overflow pages/{n[t]+=$3}
+        END{printf "{"; s=""; for (k in n) {printf "%s\"%s\":%d", s, k, n[k]; s=","} printf "}"}')"
     fi
     sizes="$(jq -c --arg b "$b" --arg name "$name" --argjson info "$info" --argjson lmdb "$lmdb" \
       '. + [{build: $b, name: $name, file_bytes: $info.file_bytes,
@@ -83,17 +90,20 @@ done
 reads='[]'
 first="fbm${SIZES%% *}"
 for r in $(seq 1 "$ROUNDS"); do
-  for b in old new; do
+  order="old new"
+  ((r % 2 == 0)) && order="new old"  # either build first in every other round
+  for b in $order; do
     bench="$(build_dir "$b")/benchmarks/bench_extract_speed"
     cases=("$first full --repeat 3 --cache-mb 4096")
     [[ -n "$BIG_SIZE" ]] && cases+=("fbm$BIG_SIZE oblique --repeat 30 --cache-mb 64")
     for c in "${cases[@]}"; do
       read -r name kind rest <<<"$c"
-      db="$WORK_DIR/$b/$name.smrdb"
+      db="$(db_dir "$b")/$name.smrdb"
       cat "$db" >/dev/null
       load="$(cut -d' ' -f1 /proc/loadavg)"
       # shellcheck disable=SC2086
-      got="$("$bench" "$db" --cases "$kind" --algorithms minimal-pages $rest 2>/dev/null)"
+      got="$("$bench" "$db" --cases "$kind" --algorithms minimal-pages $rest 2>>"$stderr_log")" ||
+        { log "$b $name $kind failed; see $stderr_log"; exit 1; }
       reads="$(jq -c --arg b "$b" --arg r "$r" --arg name "$name" --arg kind "$kind" \
         --arg load "$load" --argjson got "$got" \
         '. + [{round: ($r | tonumber), build: $b, db: $name, case: $kind, load: ($load | tonumber),
@@ -110,7 +120,7 @@ done
 
 # 3. The results.
 jq -n --argjson sizes "$sizes" --argjson reads "$reads" \
-  --arg old "$(git -C "$OLD_BUILD_DIR/.." rev-parse --short HEAD 2>/dev/null || echo "$OLD_BUILD_DIR")" \
+  --arg old "$OLD_BUILD_DIR" \
   --arg new "$(git -C "$root" rev-parse --short HEAD)" --arg date "$(date -u +%FT%TZ)" \
   --arg cpu "$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')" \
   --argjson nproc "$(nproc)" '

@@ -676,8 +676,8 @@ ReadTxn::~ReadTxn() {
   if (txn_ != nullptr) mdb_txn_abort(static_cast<MDB_txn*>(txn_));
 }
 
-std::optional<ByteView> ReadTxn::get_bytes(Table table, ByteView key,
-                                           const std::string& key_text) const {
+std::optional<ByteView> ReadTxn::get_bytes(Table table, ByteView key, const std::string& key_text,
+                                           std::size_t head) const {
   const std::optional<Node> node = env_->find(table, key, key_text);  // checks LMDB's way there
   MDB_val k = to_val(key);
   MDB_val v{};
@@ -697,7 +697,7 @@ std::optional<ByteView> ReadTxn::get_bytes(Table table, ByteView key,
     // The file is opened MDB_NORDAHEAD, so a value over several pages would be read a page per
     // fault, each waiting on the disk: asked for whole, its pages are read together.
     const auto start = reinterpret_cast<std::uintptr_t>(v.mv_data) & ~std::uintptr_t{4095};
-    const auto end = reinterpret_cast<std::uintptr_t>(v.mv_data) + v.mv_size;
+    const auto end = reinterpret_cast<std::uintptr_t>(v.mv_data) + std::min(v.mv_size, head);
     (void)::madvise(reinterpret_cast<void*>(start), end - start, MADV_WILLNEED);  // advisory
   }
   env_->check_value(*node, v, [&] { return env_->where(table) + ", key " + key_text; });
@@ -735,7 +735,7 @@ void ReadTxn::will_need_leaves(Table table, std::span<const std::uint64_t> keys)
   advise_leaves(*env_, table, keys);
 }
 
-void ReadTxn::will_need(Table table, std::span<const std::uint64_t> keys) const {
+void ReadTxn::will_need(Table table, std::span<const std::uint64_t> keys, std::size_t head) const {
   const std::vector<detail::EnvState::LeafAt> at = advise_leaves(*env_, table, keys);
   for (std::size_t i = 0; i < keys.size(); ++i) {
     const std::optional<Node> node =
@@ -743,19 +743,21 @@ void ReadTxn::will_need(Table table, std::span<const std::uint64_t> keys) const 
     if (!node || node->flags != kBigData) continue;  // absent, or in the leaf page just read
     const std::uint64_t first = read_le(node->data, 8);
     const std::uint64_t count = (kPageHeader - 1 + node->size) / env_->page_size + 1;
+    const std::uint64_t asked =
+        head >= node->size ? count : (kPageHeader - 1 + head) / env_->page_size + 1;
     if (first + count > env_->pages) continue;  // get() will say why
-    (void)::madvise(const_cast<std::uint8_t*>(env_->page(first)), count * env_->page_size,
+    (void)::madvise(const_cast<std::uint8_t*>(env_->page(first)), asked * env_->page_size,
                     MADV_WILLNEED);  // advisory
   }
 }
 
-std::optional<ByteView> ReadTxn::get(Table table, std::uint64_t key) const {
+std::optional<ByteView> ReadTxn::get(Table table, std::uint64_t key, std::size_t head) const {
   const Bytes k = key_u64(key);
-  return get_bytes(table, k, std::to_string(key));
+  return get_bytes(table, k, std::to_string(key), head);
 }
 
 std::optional<ByteView> ReadTxn::get(Table table, std::string_view key) const {
-  return get_bytes(table, as_bytes(key), quoted(key));
+  return get_bytes(table, as_bytes(key), quoted(key), kWhole);
 }
 
 void ReadTxn::for_each(Table table,

@@ -93,11 +93,16 @@ class ReadTxn {
   ReadTxn& operator=(ReadTxn&&) noexcept;
   ~ReadTxn();
 
-  std::optional<ByteView> get(Table table, std::uint64_t key) const;  // key_u64(key)
+  // A value over a page is asked of the OS whole (the file is opened MDB_NORDAHEAD), or only its
+  // first `head` bytes for a reader of its head.
+  static constexpr std::size_t kWhole = ~std::size_t{0};
+  std::optional<ByteView> get(Table table, std::uint64_t key,
+                              std::size_t head = kWhole) const;  // key_u64(key)
   std::optional<ByteView> get(Table table, std::string_view key) const;
-  // Asks the OS to start reading the values of `keys` (those stored on pages of their own) without
-  // waiting for them: get() on them later finds them read, or in flight together.
-  void will_need(Table table, std::span<const std::uint64_t> keys) const;
+  // Asks the OS to start reading the values of `keys` (those stored on pages of their own, or
+  // their first `head` bytes) without waiting for them: get() on them later finds them read, or in
+  // flight together.
+  void will_need(Table table, std::span<const std::uint64_t> keys, std::size_t head = kWhole) const;
   // The same for values kept in their tree's leaf pages (small ones): asks for the keys' leaves,
   // reading only branch pages meanwhile.
   void will_need_leaves(Table table, std::span<const std::uint64_t> keys) const;
@@ -108,7 +113,8 @@ class ReadTxn {
  private:
   friend class Env;
   ReadTxn(const detail::EnvState* env, void* txn) : env_(env), txn_(txn) {}
-  std::optional<ByteView> get_bytes(Table table, ByteView key, const std::string& key_text) const;
+  std::optional<ByteView> get_bytes(Table table, ByteView key, const std::string& key_text,
+                                    std::size_t head) const;
 
   const detail::EnvState* env_ = nullptr;
   void* txn_ = nullptr;  // MDB_txn*

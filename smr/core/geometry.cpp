@@ -141,8 +141,15 @@ NormalCone canonical_cone(const NormalCone& c) {
     code.axis = axis_codes(c.axis);
     code.full = code.axis == std::array<std::int8_t, 3>{};
     const NormalCone rounded = decode_cone(code);
-    const double shift = std::acos(std::clamp(glm::dot(rounded.axis, c.axis), -1.0, 1.0));
-    const double steps = std::ceil((c.half_angle + shift + 1e-9) / kConeStep);
+    // The angle between the axes from their chord (acos loses ~1e-8 rad near 0): exactly 0 for
+    // an axis that is already a code's, so a canonical cone is its own canonical form. Without
+    // that, re-canonicalising at every level of the DAG (compute_rois) widened cones by a step a
+    // level. A moved axis adds a margin for the rounding of `shift`.
+    const double chord = glm::length(rounded.axis - c.axis);
+    const double shift = 2.0 * std::asin(std::min(1.0, chord / 2.0));
+    const double need = c.half_angle + shift + (shift > 0.0 ? 1e-12 : 0.0);
+    double steps = std::max(0.0, std::ceil(need / kConeStep - 1e-6));
+    while (steps * kConeStep < need) steps += 1.0;  // decode_cone's product
     if (steps < double(kConeHalfSteps)) {
       code.half = static_cast<std::uint8_t>(steps);
     } else {

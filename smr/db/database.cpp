@@ -309,14 +309,18 @@ std::unique_ptr<Database> Database::open(const std::string& path, const Options&
     return std::make_unique<index::RTree>(
         *header,
         [self](std::uint64_t node) {
-          return std::get<Bytes>(*self->cached(3, self->node_table(node), node));
+          return std::get<Bytes>(*self->cached(kRtreeNodes, self->node_table(node), node));
         },
         std::string(table_name(Table::kRtree)), std::string(table_name(Table::kPages)));
   });
   db->rtree_->set_advise([self](std::span<const std::uint64_t> nodes) {
-    const std::vector<std::uint64_t> missing = self->uncached(3, nodes, self->rtree_->node_count());
-    // The children of one node: all leaves (in the pages' values) or none.
-    if (!missing.empty()) self->env_->read().will_need(self->node_table(missing.front()), missing);
+    const std::vector<std::uint64_t> missing =
+        self->uncached(kRtreeNodes, nodes, self->rtree_->node_count());
+    if (missing.empty()) return;
+    // The children of one node: all leaves (the heads of pages values) or none.
+    const Table table = self->node_table(missing.front());
+    self->env_->read().will_need(
+        table, missing, table == Table::kPages ? kLeafHeadBytes : storage::ReadTxn::kWhole);
   });
   if (db->rtree_->entry_count() != db->op_count_ || db->rtree_->leaf_count() != db->page_count_)
     throw Error(ErrorKind::kCorrupt, path + ": R-tree and meta disagree on the counts");
@@ -361,7 +365,7 @@ std::shared_ptr<const Database::CacheItem> Database::fetch(std::uint64_t kind, T
 
 std::shared_ptr<const Database::CacheItem> Database::cached(std::uint64_t kind, Table table,
                                                             std::uint64_t id) const {
-  if (kind == 3) return fetch(kind, table, id);  // R-tree nodes
+  if (kind == kRtreeNodes) return fetch(kind, table, id);
   memoized(kind, table, id);
   return memo(kind).slot(id).item;
 }
@@ -378,10 +382,10 @@ const Database::CacheItem& Database::memoized(std::uint64_t kind, Table table,
   return *m.item;
 }
 
-void Database::with_value(Table table, std::uint64_t id,
-                          const std::function<void(ByteView)>& f) const {
+void Database::with_value(Table table, std::uint64_t id, const std::function<void(ByteView)>& f,
+                          std::size_t head) const {
   const storage::ReadTxn txn = env_->read();
-  const auto value = txn.get(table, id);
+  const auto value = txn.get(table, id, head);
   if (!value)
     throw Error(ErrorKind::kCorrupt, path() + ": " + std::string(table_name(table)) + "/" +
                                          key_text(id) + " is missing");
@@ -392,7 +396,7 @@ void Database::with_page_bytes(std::uint64_t page, const std::function<void(Byte
   naming_file(path(), [&] {
     with_value(Table::kPages, page, [&](ByteView raw) {
       const std::string key = key_text(page);
-      const ByteView sealed = split_page_value(raw, "pages/" + key).page;
+      const ByteView sealed = split_page_value(raw, table_name(Table::kPages), key).page;
       page_bytes_read_.fetch_add(sealed.size());
       f(storage::unseal(sealed, table_name(Table::kPages), key));
     });
@@ -408,17 +412,21 @@ storage::PageCache<Database::CacheItem>::Loaded Database::load(std::uint64_t kin
   storage::PageCache<CacheItem>::Loaded loaded;
   const std::string name = std::string(table_name(table)) + "/" + key_text(id);
   Bytes raw;
-  with_value(table, id, [&](ByteView v) {
-    // A pages value holds an R-tree leaf, then its data page (page.h, PageValue).
-    ByteView part = v;
-    if (table == Table::kPages) {
-      const PageValue both = split_page_value(v, name);
-      part = kind == 3 ? both.leaf : both.page;
-    }
-    raw.assign(part.begin(), part.end());
-  });
+  const bool leaf = kind == kRtreeNodes && table == Table::kPages;
+  with_value(
+      table, id,
+      [&](ByteView v) {
+        // A pages value holds an R-tree leaf, then its data page (page.h, PageValue).
+        ByteView part = v;
+        if (table == Table::kPages) {
+          const PageValue both = split_page_value(v, table_name(table), key_text(id));
+          part = leaf ? both.leaf : both.page;
+        }
+        raw.assign(part.begin(), part.end());
+      },
+      leaf ? kLeafHeadBytes : storage::ReadTxn::kWhole);
   loaded.bytes_read = raw.size();
-  if (kind == 3) {
+  if (kind == kRtreeNodes) {
     loaded.charged_bytes = kCacheItemOverhead + heap_block_bytes(raw.capacity());
     rtree_bytes_read_.fetch_add(raw.size());
     loaded.value = std::make_shared<const CacheItem>(std::move(raw));

@@ -116,8 +116,9 @@ class Database final : public OpSource {
   static Memo& memo(std::uint64_t kind);
   // f(a value as stored, sealed) while its read transaction lasts; throws kCorrupt naming it
   // when it is missing.
-  void with_value(Table table, std::uint64_t id,
-                  const std::function<void(storage::ByteView)>& f) const;
+  // `head`: the bytes of it the reader needs (storage::ReadTxn::get).
+  void with_value(Table table, std::uint64_t id, const std::function<void(storage::ByteView)>& f,
+                  std::size_t head = storage::ReadTxn::kWhole) const;
   // Reads and decodes one item of `kind` (the cache's loader) from its table.
   storage::PageCache<CacheItem>::Loaded load(std::uint64_t kind, Table table,
                                              std::uint64_t id) const;
@@ -128,6 +129,7 @@ class Database final : public OpSource {
   }
   // Cache keys are (kind << 60) | id. Kinds: 1 data pages decoded without their links, 2 locator
   // blocks, 3 R-tree nodes, 4 data pages with their links.
+  static constexpr std::uint64_t kRtreeNodes = 3;
   static constexpr std::uint64_t kLinkedPages = 4;
   std::uint64_t page_kind() const {
     return links_.load(std::memory_order_relaxed) ? kLinkedPages : 1;

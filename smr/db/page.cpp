@@ -947,8 +947,8 @@ std::vector<std::pair<std::string, Bytes>> page_record_streams(ByteView page,
   return PageDecoder(page, grid, info, context).streams();
 }
 
-PageValue split_page_value(ByteView value, const std::string& context) {
-  ByteReader r(value, context);
+PageValue split_page_value(ByteView value, std::string_view table, const std::string& key) {
+  ByteReader r(value, "table '" + std::string(table) + "', key " + key);
   const std::uint64_t n = r.varint();
   if (n > r.remaining()) r.fail("R-tree leaf of " + std::to_string(n) + " bytes past the value");
   PageValue v;
@@ -974,8 +974,7 @@ std::size_t page_value_overhead(std::size_t leaf_bytes) {
 }
 
 ByteView page_payload(ByteView value, std::string_view table, const std::string& key) {
-  const std::string context = std::string(table) + "/" + key;
-  return storage::unseal(split_page_value(value, context).page, table, key);
+  return storage::unseal(split_page_value(value, table, key).page, table, key);
 }
 
 DecodedPage::~DecodedPage() = default;

@@ -10,7 +10,8 @@
 // op's error is the one its resolution stands for (smr/db/quantize.h: round_for_storage,
 // stored_op_error).
 //
-// Layout of the (unsealed) value, format 5 (4 with two-byte cone codes): u8 format, u8 codec,
+// Layout of the (unsealed) page, the second part of its `pages` value (PageValue below), format 5
+// (4 with two-byte cone codes): u8 format, u8 codec,
 // varint op count, seven varint totals (page vertices, op vertex-list entries, fragment triangles,
 // PreF triangles, links, parents, children: the decoder sizes its one block from them), blob
 // records (zstd), blob geometry (codec: the page's vertex positions, in the order ops first list
@@ -118,8 +119,12 @@ PageSections page_sections(storage::ByteView page, const std::string& context);
 struct PageValue {
   storage::ByteView leaf, page;  // both sealed
 };
-/// Throws kCorrupt "<context>: ..." when the framing is malformed (checksums are the reader's).
-PageValue split_page_value(storage::ByteView value, const std::string& context);
+/// Throws kCorrupt "table '<table>', key <key>: ..." when the framing is malformed (checksums are
+/// the reader's).
+PageValue split_page_value(storage::ByteView value, std::string_view table, const std::string& key);
+/// What a reader of a leaf asks the OS for of a pages value (storage::ReadTxn::get's `head`): its
+/// first LMDB page, which holds the usual leaf (~2.6 KB); a longer one faults its rest in.
+inline constexpr std::size_t kLeafHeadBytes = 4096;
 storage::Bytes join_page_value(storage::ByteView leaf, storage::ByteView page);
 /// The bytes join_page_value adds to a sealed page whose sealed leaf takes `leaf_bytes`.
 std::size_t page_value_overhead(std::size_t leaf_bytes);

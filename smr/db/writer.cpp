@@ -70,6 +70,12 @@ void progress_to(const WriteOptions& options, double f) {
   if (options.progress) options.progress(f);
 }
 
+// The R-tree leaf TreeWriter::add_leaf just put, kept for its page's value (write_pages).
+struct LeafSlot {
+  Bytes bytes;
+  std::uint64_t id = ~std::uint64_t{0};
+};
+
 // Runs of sorted entries packed on their own (see write_pages): a run ends before the entry that
 // would take its estimated bytes past this many pages' worth. Each run's last page may be partly
 // filled (half a page in 60 on average); longer runs waste less but leave fewer to share out
@@ -218,7 +224,7 @@ class PagePacker {
 std::uint64_t write_pages(storage::DatabaseWriter& writer, EntrySorter& sorted, const OpsOf& ops_of,
                           const QuantGrid& grid, const index::BuildOptions& bo,
                           const WriteOptions& options, std::uint64_t op_count,
-                          index::TreeWriter& tree, const Bytes& leaf, LocatorSorter& locators,
+                          index::TreeWriter& tree, const LeafSlot& leaf, LocatorSorter& locators,
                           WriteReport& report) {
   const unsigned threads = thread_count(options.threads);
   const std::size_t window = std::size_t(threads);
@@ -237,8 +243,9 @@ std::uint64_t write_pages(storage::DatabaseWriter& writer, EntrySorter& sorted, 
           leaf_entries.push_back(run.entries[i].index_entry());
         }
         tree.add_leaf(leaf_entries);  // -> leaf
-        const Bytes value = join_page_value(leaf, run.pages[j]);
-        report.page_bytes += value.size() - leaf.size();  // the leaf is the R-tree's
+        if (leaf.id != page) throw_internal("database writer: leaf and page out of step");
+        const Bytes value = join_page_value(leaf.bytes, run.pages[j]);
+        report.page_bytes += value.size() - leaf.bytes.size();  // the leaf is the R-tree's
         writer.append(Table::kPages, page, value);
       }
       placed += run.entries.size();
@@ -355,17 +362,19 @@ WriteReport write_tables(storage::DatabaseWriter& writer, const CrmrInfo& header
   const index::BuildOptions bo = rtree_options(header, options);
   // The leaves' summaries (one per page) wait in a scratch file for the upper levels. A leaf
   // goes into its page's value (page.h, PageValue); the table holds the nodes above.
-  Bytes leaf;
+  LeafSlot leaf;
   bool leaves = true;
   index::TreeWriter tree(
       bo,
       [&](std::uint64_t id, ByteView node) {
         report.rtree_bytes += node.size();
         ++report.rtree_nodes;
-        if (leaves)
-          leaf.assign(node.begin(), node.end());
-        else
+        if (leaves) {
+          leaf.bytes.assign(node.begin(), node.end());
+          leaf.id = id;
+        } else {
           writer.append(Table::kRtree, id, node);
+        }
       },
       tmp_dir);
   LocatorSorter locators(tmp_dir, side_sort_bytes(options));

@@ -450,7 +450,7 @@ TEST(Database, EachPageValueHoldsItsRtreeLeaf) {
     txn.for_each(Table::kRtree, [&](storage::ByteView, storage::ByteView) { ++rtree_values; });
     const auto value = txn.get(Table::kPages, 3);
     ASSERT_TRUE(value.has_value());
-    const PageValue parts = split_page_value(*value, "pages/3");
+    const PageValue parts = split_page_value(*value, "pages", "3");
     EXPECT_EQ(storage::unseal(parts.leaf, "pages", "3").size() + 8, parts.leaf.size());
     const std::string_view leaf(reinterpret_cast<const char*>(parts.leaf.data()),
                                 parts.leaf.size());

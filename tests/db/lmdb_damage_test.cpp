@@ -85,7 +85,7 @@ using test::extract_all;
 using test::Result;
 using test::same;
 
-// A 65 x 65 fBm terrain in data pages of about 3 KB (database format 5: each holds its R-tree
+// A 65 x 65 fBm terrain in data pages of about 2.4 KB (database format 5: each holds its R-tree
 // leaf). The data pages are overflow values; the locators, internal R-tree nodes (fanout 2, so
 // that there are many) and meta are values inside leaf pages; the locators, pages and rtree
 // tables each have a branch page over two or more leaves.

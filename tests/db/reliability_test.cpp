@@ -229,7 +229,8 @@ TEST(Reliability, BitFlipInRtreeIsCaught) {
 TEST(Reliability, SmallDatabaseHasSeveralValuesPerTable) {
   const SmallDb& db = small_db();
   EXPECT_GE(db.written.pages, 20u);
-  EXPECT_GE(db.written.rtree_nodes, 22u);
+  // Nodes above the leaves (the rtree table's values; the leaves are in the pages values).
+  EXPECT_GE(db.written.rtree_nodes - db.written.pages, 2u);
   EXPECT_GE(db.crmr.ops.size(), 3 * kOpsPerLocatorBlock);
 }
 
