@@ -81,7 +81,7 @@ enum Stream : std::size_t {
   kPreCorners,   // per PreF triangle: 3 varint corners, as indices into the op's list
   kEdges,        // per boundary edge of F: u8 0 model boundary, 1 its PreF triangle's, 2 stored
   kLinks,        // per stored link: svarint op delta, varint triangle, u8 edge
-  kRois,         // per op: 6 varint grid steps outside the op's box
+  kRois,         // per op: 6 varint units of 2^roi_shift grid steps outside the op's box
   kCones,        // per op: u8 0 full | 1, then 3 x i8 axis, u8 half angle (ConeCode)
   kStreamCount
 };
@@ -335,8 +335,16 @@ class PageEncoder {
   void write_roi_and_cone(const Op& op) {
     const auto blo = grid_.quantize(op.box.lo), bhi = grid_.quantize(op.box.hi);
     const auto rlo = grid_.quantize(op.roi.lo), rhi = grid_.quantize(op.roi.hi);
-    for (int k = 0; k < 3; ++k) w(kRois).varint(std::uint64_t(std::int64_t(blo[k]) - rlo[k]));
-    for (int k = 0; k < 3; ++k) w(kRois).varint(std::uint64_t(std::int64_t(rhi[k]) - bhi[k]));
+    std::array<int, 3> shift{};
+    for (int k = 0; k < 3; ++k) shift[k] = roi_shift(op.error, grid_.step[k]);
+    auto units = [&](std::int64_t d, int k) {  // d grid steps, a multiple of 2^shift (stored_roi)
+      if (d < 0 || (d & ((std::int64_t{1} << shift[k]) - 1)) != 0)
+        throw_internal("page encoding: op " + std::to_string(op.id.value) +
+                       "'s ROI is not as stored_roi gives it");
+      return std::uint64_t(d >> shift[k]);
+    };
+    for (int k = 0; k < 3; ++k) w(kRois).varint(units(std::int64_t(blo[k]) - rlo[k], k));
+    for (int k = 0; k < 3; ++k) w(kRois).varint(units(std::int64_t(rhi[k]) - bhi[k], k));
     const ConeCode cone = cone_code(op.subtree_cone);
     w(kCones).u8(cone.full ? 0 : 1);
     if (!cone.full) {
@@ -862,17 +870,21 @@ class PageDecoder {
     auto [lo, hi] = box;
     ByteReader& r = in_[kRois];
     constexpr std::int64_t kMax = std::numeric_limits<std::int32_t>::max();
+    std::array<int, 3> shift{};  // stored_roi's units, from the op's stored error
+    for (int k = 0; k < 3; ++k) shift[k] = roi_shift(op.error, grid_.step[k]);
     for (int k = 0; k < 3; ++k) {
-      const std::uint64_t d = r.varint();
-      if (d > std::uint64_t(2 * kMax) || std::int64_t(lo[k]) - std::int64_t(d) < -kMax)
-        r.fail("ROI outside the grid");
-      lo[k] = std::int32_t(std::int64_t(lo[k]) - std::int64_t(d));
+      const std::uint64_t u = r.varint();
+      if (u > std::uint64_t(2 * kMax) >> shift[k]) r.fail("ROI outside the grid");
+      const auto d = std::int64_t(u << shift[k]);
+      if (std::int64_t(lo[k]) - d < -kMax) r.fail("ROI outside the grid");
+      lo[k] = std::int32_t(std::int64_t(lo[k]) - d);
     }
     for (int k = 0; k < 3; ++k) {
-      const std::uint64_t d = r.varint();
-      if (d > std::uint64_t(2 * kMax) || std::int64_t(hi[k]) + std::int64_t(d) > kMax)
-        r.fail("ROI outside the grid");
-      hi[k] = std::int32_t(std::int64_t(hi[k]) + std::int64_t(d));
+      const std::uint64_t u = r.varint();
+      if (u > std::uint64_t(2 * kMax) >> shift[k]) r.fail("ROI outside the grid");
+      const auto d = std::int64_t(u << shift[k]);
+      if (std::int64_t(hi[k]) + d > kMax) r.fail("ROI outside the grid");
+      hi[k] = std::int32_t(std::int64_t(hi[k]) + d);
     }
     op.roi = Box3{grid_.dequantize(lo), grid_.dequantize(hi)};
     ConeCode cone;

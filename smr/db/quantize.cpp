@@ -99,6 +99,30 @@ double stored_op_error(const CrmrInfo& info, double birth_res) {
   return std::min(info.err0, error_at(info, birth_res));
 }
 
+int roi_shift(double error, double step) {
+  const double units = error / 8.0 / step;
+  if (!(units >= 2.0)) return 0;  // also NaN
+  return std::min(24, std::ilogb(units));
+}
+
+Box3 stored_roi(const Box3& roi, const Box3& box, double error, const QuantGrid& grid) {
+  const auto blo = grid.quantize(box.lo), bhi = grid.quantize(box.hi);
+  auto rlo = grid.quantize(roi.lo), rhi = grid.quantize(roi.hi);
+  for (int k = 0; k < 3; ++k) {
+    const int s = roi_shift(error, grid.step[k]);
+    const std::int64_t unit = std::int64_t{1} << s;
+    const std::int64_t below = (std::int64_t(blo[k]) - rlo[k] + unit - 1) / unit * unit;
+    const std::int64_t above = (std::int64_t(rhi[k]) - bhi[k] + unit - 1) / unit * unit;
+    if (below < 0 || above < 0) throw_internal("stored_roi: an ROI that does not hold its box");
+    const std::int64_t lo = std::int64_t(blo[k]) - below, hi = std::int64_t(bhi[k]) + above;
+    constexpr std::int64_t kMax = std::numeric_limits<std::int32_t>::max();
+    if (lo < -kMax || hi > kMax) throw_input("an op's region of influence leaves the grid");
+    rlo[k] = std::int32_t(lo);
+    rhi[k] = std::int32_t(hi);
+  }
+  return Box3{grid.dequantize(rlo), grid.dequantize(rhi)};
+}
+
 void round_for_storage(Op& op) {
   op.birth_res = stored_resolution(op.birth_res);
   for (FragmentTriangle& t : op.fragment) t.death_res = stored_resolution(t.death_res);
@@ -117,6 +141,14 @@ double quantize(Crmr& crmr, const QuantGrid& grid) {
   crmr.header.err0 += shift;
   crmr.header.err_final += shift;
   for (Op& op : crmr.ops) op.error = stored_op_error(crmr.header, op.birth_res);
+  // ROIs as pages store them (stored_roi), children first (they have larger ids): compute_rois'
+  // rule with each op's ROI rounded before its parents take it in.
+  for (std::uint64_t i = crmr.ops.size(); i-- > 0;) {
+    Op& op = crmr.ops[i];
+    Box3 roi = op.box;
+    for (OpId c : op.children) roi.add(crmr.ops.at(c.value).roi);
+    op.roi = stored_roi(roi, op.box, op.error, grid);
+  }
   return shift;
 }
 

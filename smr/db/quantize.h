@@ -59,4 +59,14 @@ void round_for_storage(Op& op);
 /// rounded down.
 double stored_op_error(const CrmrInfo& info, double birth_res);
 
+/// Pages store an op's ROI as how far each side lies outside the op's own box, in units of
+/// 2^roi_shift(error, step) grid steps on each axis: the largest power of two within an eighth of
+/// the op's (stored) error, at most 2^24. The reader derives the shift from the op's stored
+/// resolution, so it costs nothing; an ROI loose by less than an eighth of the op's error moves
+/// no RCF verdict that matters (distances to the eye, the frustum), and bounds stay true.
+int roi_shift(double error, double step);
+/// `roi` pushed outwards so that each side lies a multiple of 2^roi_shift grid steps from `box`
+/// (both on `grid`): the ROI a page gives back. Contains `roi`.
+Box3 stored_roi(const Box3& roi, const Box3& box, double error, const QuantGrid& grid);
+
 }  // namespace smr

@@ -362,6 +362,10 @@ struct DatabaseStreamWriter::State {
           cone = cone_union(cone, m.cone);
           height = std::max(height, m.height + 1);
         }
+        // As pages store it, before the parents take it in (quantize's rule; header's errors
+        // already include the snapping's shift).
+        r.entry.roi = to_index(stored_roi(from_index(r.entry.roi), from_index(r.entry.box),
+                                          stored_op_error(header, r.entry.res), grid));
         r.entry.cone = canonical_cone(cone);
         if (r.parent_count == 0) dag_depth = std::max(dag_depth, height);
         for (std::uint32_t j = 0; j < r.parent_count; ++j) {
@@ -449,10 +453,10 @@ WriteReport DatabaseStreamWriter::finish() {
   TableCounts counts;
   counts.ops = s.records.count();
   counts.triangles = s.triangles;
+  s.header.err0 += s.shift;  // before the sweep: stored ROIs follow the stored errors
+  s.header.err_final += s.shift;
   counts.dag_depth = s.sweep(sorted, &scratch);
   const double seconds_sweep = seconds_since(t0);
-  s.header.err0 += s.shift;
-  s.header.err_final += s.shift;
   WriteReport report = write_tables(
       s.writer, s.header, s.grid, s.shift, sorted, counts,
       [&](std::span<const OpEntry> page, std::vector<Op>& held) {

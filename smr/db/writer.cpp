@@ -417,7 +417,9 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
   for (const Op& op : crmr.ops) {
     if (op.id.value >= crmr.ops.size() || &op != &crmr.ops[op.id.value])
       throw_internal("database writer: op " + std::to_string(op.id.value) + " is out of place");
-    order.observe(entry_of(op, crmr.header.kind, op.roi, op.subtree_cone).index_entry());
+    // The ordering cube is around the boxes, as the stream writer observes them (before its
+    // sweep): the stored ROIs reach past them by their rounding (stored_roi).
+    order.observe(entry_of(op, crmr.header.kind, op.box, op.subtree_cone).index_entry());
     std::uint32_t& d = depth[op.id.value];
     for (OpId p : op.parents) {
       if (p.value < op.id.value) d = std::max(d, depth[p.value] + 1);  // always, in a valid CRMR
