@@ -85,6 +85,41 @@ TEST(StoredResolution, DatabasesOnlyGrowErrors) {
 // DEM's database is row * width + col of its grid position and lies at that sample's height, and
 // the pages derive the ids instead of storing them (each page's vertex id stream is the code and
 // the width: a couple of bytes).
+// Stored ROIs (quantize.h, stored_roi): each margin outside the op's box a multiple of
+// 2^roi_shift grid steps, the ROI holding the true one, stored ROIs nesting (a parent's holds its
+// children's) and holding every box below, and looser than the exact ROI by at most about the
+// op's error; a written database gives them back exactly.
+TEST(StoredRoi, MarginsInUnitsOfTheOpsErrorAndNesting) {
+  Crmr m = test::dataset("jacksboro").crmr;
+  const Crmr truth = m;  // compute_rois' ROIs, before snapping and rounding
+  test::TempDir dir("smrdb-quantize-test");
+  const WriteReport w = write_database(m, dir.file("x.smrdb"), {});
+  std::size_t rounded = 0;
+  double worst = 0.0;
+  for (const Op& op : m.ops) {
+    EXPECT_TRUE(op.roi.contains(op.box)) << op.id.value;
+    for (OpId c : op.children) EXPECT_TRUE(op.roi.contains(m.ops[c.value].roi)) << op.id.value;
+    const auto blo = w.grid.quantize(op.box.lo), bhi = w.grid.quantize(op.box.hi);
+    const auto rlo = w.grid.quantize(op.roi.lo), rhi = w.grid.quantize(op.roi.hi);
+    const Box3& exact = truth.ops[op.id.value].roi;
+    for (int k = 0; k < 3; ++k) {
+      const std::int64_t unit = std::int64_t{1} << roi_shift(op.error, w.grid.step[k]);
+      EXPECT_EQ((std::int64_t(blo[k]) - rlo[k]) % unit, 0) << op.id.value;
+      EXPECT_EQ((std::int64_t(rhi[k]) - bhi[k]) % unit, 0) << op.id.value;
+      rounded += unit > 1;
+      // Looser than the exact ROI by the roundings of this op and its descendants (each less
+      // than an eighth of its own error, smaller down the DAG), the snapping aside.
+      const double loose = std::max(exact.lo[k] - op.roi.lo[k], op.roi.hi[k] - exact.hi[k]);
+      worst = std::max(worst, (loose - 2 * w.z_shift) / op.error);
+    }
+  }
+  EXPECT_GT(rounded, m.ops.size() / 2) << "the z margins of most ops are in units above a step";
+  std::printf("stored ROIs: at most %.3f of the op's error looser than the exact ones\n", worst);
+  EXPECT_LT(worst, 1.5);  // measured 1.0: roundings add up along chains of like errors
+  const auto db = Database::open(dir.file("x.smrdb"), {});
+  for (const Op& op : m.ops) EXPECT_EQ(db->op(op.id)->roi, op.roi) << op.id.value;
+}
+
 TEST(TerrainVertexIds, AreTheDemSampleIndices) {
   for (const char* name : {"jacksboro", "elev"}) {
     const test::Dataset& d = test::dataset(name);
