@@ -870,21 +870,22 @@ class PageDecoder {
     auto [lo, hi] = box;
     ByteReader& r = in_[kRois];
     constexpr std::int64_t kMax = std::numeric_limits<std::int32_t>::max();
-    std::array<int, 3> shift{};  // stored_roi's units, from the op's stored error
-    for (int k = 0; k < 3; ++k) shift[k] = roi_shift(op.error, grid_.step[k]);
-    for (int k = 0; k < 3; ++k) {
+    // A margin: units of 2^roi_shift grid steps (stored_roi), from the op's stored error.
+    const auto margin = [&](int k) {
       const std::uint64_t u = r.varint();
-      if (u > std::uint64_t(2 * kMax) >> shift[k]) r.fail("ROI outside the grid");
-      const auto d = std::int64_t(u << shift[k]);
-      if (std::int64_t(lo[k]) - d < -kMax) r.fail("ROI outside the grid");
-      lo[k] = std::int32_t(std::int64_t(lo[k]) - d);
+      const int shift = roi_shift(op.error, grid_.step[k]);
+      if (u > std::uint64_t(2 * kMax) >> shift) r.fail("ROI outside the grid");
+      return std::int64_t(u << shift);
+    };
+    for (int k = 0; k < 3; ++k) {
+      const std::int64_t v = std::int64_t(lo[k]) - margin(k);
+      if (v < -kMax) r.fail("ROI outside the grid");
+      lo[k] = std::int32_t(v);
     }
     for (int k = 0; k < 3; ++k) {
-      const std::uint64_t u = r.varint();
-      if (u > std::uint64_t(2 * kMax) >> shift[k]) r.fail("ROI outside the grid");
-      const auto d = std::int64_t(u << shift[k]);
-      if (std::int64_t(hi[k]) + d > kMax) r.fail("ROI outside the grid");
-      hi[k] = std::int32_t(std::int64_t(hi[k]) + d);
+      const std::int64_t v = std::int64_t(hi[k]) + margin(k);
+      if (v > kMax) r.fail("ROI outside the grid");
+      hi[k] = std::int32_t(v);
     }
     op.roi = Box3{grid_.dequantize(lo), grid_.dequantize(hi)};
     ConeCode cone;
