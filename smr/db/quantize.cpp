@@ -26,9 +26,10 @@ std::array<std::int32_t, 3> QuantGrid::quantize(const Vec3& p) const {
 
 namespace {
 
-// 3-D meshes: one power-of-two step on every axis, 2^-28 of the largest extent rounded up to a
-// power of two (auto), so source coordinates of float32 precision near the extent are exact
-// and the rest move by less than 2^-29 of it; at most 2^29 steps per axis.
+// 3-D meshes: one power-of-two step on every axis (auto: 2^-24 of P, the largest extent rounded
+// up to a power of two): float32 coordinates of magnitude P/2 or more are exact (their spacing
+// is the step), the rest move by at most 2^-25 P, float32's own rounding at the extent; at most
+// 2^24 steps per axis.
 QuantGrid choose_mesh_grid(const CrmrInfo& info, double step) {
   QuantGrid g;
   if (info.bounds.empty()) throw_input("the mesh has no vertices");
@@ -39,7 +40,7 @@ QuantGrid choose_mesh_grid(const CrmrInfo& info, double step) {
   }
   const double extent = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z, 1e-30});
   if (step < 0.0 || !std::isfinite(step)) throw_input("the quantum must be a positive number");
-  if (step == 0.0) step = std::exp2(std::ceil(std::log2(extent)) - 28);
+  if (step == 0.0) step = std::exp2(std::ceil(std::log2(extent)) - 24);
   if (extent / step > double(1 << 30)) {
     throw_input("quantum " + std::to_string(step) + " is too fine for a mesh extent of " +
                 std::to_string(extent) + " (at most 2^30 steps)");
@@ -51,7 +52,12 @@ QuantGrid choose_mesh_grid(const CrmrInfo& info, double step) {
 
 }  // namespace
 
-QuantGrid choose_grid(const CrmrInfo& info, double z_quantum) {
+double error_z_quantum(double max_error) {
+  if (!(max_error > 0.0) || !std::isfinite(max_error)) return 0.0;
+  return std::exp2(std::floor(std::log2(max_error / 32.0)));
+}
+
+QuantGrid choose_grid(const CrmrInfo& info, double z_quantum, double error_quantum) {
   if (info.kind == ModelKind::kMesh3d) return choose_mesh_grid(info, z_quantum);
   QuantGrid g;
   g.origin = {info.georef.x0, info.georef.y0, 0.0};
@@ -63,7 +69,7 @@ QuantGrid choose_grid(const CrmrInfo& info, double z_quantum) {
     throw_input("z quantum must be a positive number");
   if (z_quantum == 0.0) {
     const double range = std::max(hi - lo, 1e-3);
-    z_quantum = std::exp2(std::floor(std::log2(range / double(1 << 24))));
+    z_quantum = std::max(std::exp2(std::floor(std::log2(range / double(1 << 24)))), error_quantum);
   }
   if ((hi - lo) / z_quantum > double(1 << 30)) {
     throw_input("z quantum " + std::to_string(z_quantum) + " is too fine for a height range of " +

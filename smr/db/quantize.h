@@ -4,8 +4,9 @@
 //
 // Terrain: x and y use the DEM's own lattice (origin x0, y0; steps dx, dy), where every vertex
 // already lies, so they are exact. z uses a power-of-two step (auto: the largest with
-// range / step <= 2^24, e.g. 2^-14 m for a 1600 m range); a DEM whose samples are multiples of
-// it (integer DEMs, float32 values above range/2^... ) is stored exactly. Snapping z moves a
+// range / step <= 2^24, e.g. 2^-14 m for a 1600 m range, or, for a model built to a max error,
+// error_z_quantum of it if that is coarser); a DEM whose samples are multiples of it (integer
+// DEMs, float32 values above range/2^... ) is stored exactly. Snapping z moves a
 // triangle's plane by at most the largest vertex shift, so every stored error grows by that
 // shift (0 when nothing moved): error bounds against the source stay true.
 #pragma once
@@ -28,12 +29,23 @@ struct QuantGrid {
   friend bool operator==(const QuantGrid&, const QuantGrid&) = default;
 };
 
-/// 3-D meshes: one power-of-two step on all three axes, 2^-28 of the largest extent (rounded up
-/// to a power of two) unless given; the error bounds grow by the largest vertex shift as above.
+/// 3-D meshes: one power-of-two step on all three axes, 2^-24 of the largest extent (rounded up
+/// to a power of two: float32's precision there) unless given; the error bounds grow by the
+/// largest vertex shift as above. 2^-28 took 4 more bits a coordinate in every page a vertex is
+/// in: 6.8 bytes a model vertex on armadillo.
 ///
 /// The grid for a model; z_quantum 0 = automatic, otherwise a positive step in data units (for a
-/// 3-D mesh, the step of every axis).
-QuantGrid choose_grid(const CrmrInfo& info, double z_quantum);
+/// 3-D mesh, the step of every axis). A terrain's automatic step is at least `error_quantum`
+/// (error_z_quantum of the error it was built to; 0 = none).
+QuantGrid choose_grid(const CrmrInfo& info, double z_quantum, double error_quantum = 0.0);
+
+/// The z step a terrain built to `max_error` (> 0) can take: the largest power of two within
+/// max_error / 32, so snapping moves a vertex by at most max_error / 64. A DEM's heights carry
+/// more bits than such a model can tell apart: at 2^-14 m for a 1600 m range, heights took 3 of
+/// the 4.6 bytes of a page vertex; at max_error / 32 the 4097^2 fBm's positions take 12.0 bytes
+/// a model vertex instead of 16.7. Ingest builds to max_error less that half step, so the
+/// database's err_final stays within the error asked for. 0 for max_error <= 0 (lossless).
+double error_z_quantum(double max_error);
 
 /// Snaps the vertices of `op` (of the model `model`) to `grid` and returns the largest move;
 /// bounds are left to the caller. A terrain's vertices are then named by their DEM sample: id =

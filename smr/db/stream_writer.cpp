@@ -405,7 +405,7 @@ void DatabaseStreamWriter::begin(const CrmrInfo& header, std::uint64_t /*op_coun
   if (s_->begun) throw_internal("database writer: begin() called twice");
   s_->begun = true;
   s_->header = header;
-  s_->grid = choose_grid(header, s_->options.z_quantum);
+  s_->grid = choose_grid(header, s_->options.z_quantum, s_->options.error_quantum);
   s_->header.bounds = Box3{};  // of the snapped vertices, as quantize() does
   s_->order = std::make_unique<index::EntryOrder>(rtree_options(header, s_->options));
   s_->hand.spooler = std::thread([s = s_.get()] { s->run(); });

@@ -30,7 +30,7 @@ namespace {
 
 // Rough encoded size of an op: it cuts the sorted entries into runs (write_pages) and proposes
 // each page's first cut, which real encodes then correct (PagePacker).
-// A vertex costs most in 3-D: three coordinates on a grid of 2^-28 of the extent, which differ
+// A vertex costs most in 3-D: three coordinates on a grid of 2^-24 of the extent, which differ
 // in their low bits from one vertex to the next, where a terrain vertex has two on the DEM's
 // lattice. Measured on 16 KiB pages: 2 bytes a vertex fill terrain pages to 0.87 of the target
 // (Jacksboro, median; none over); in 3-D they overfilled every page 1.27-1.47x (past 4 LMDB
@@ -407,7 +407,7 @@ WriteReport write_database(Crmr& crmr, const std::string& path, const WriteOptio
   const auto t0 = Clock::now();
   // Opening the writer first checks the path (exists without --force) before any work.
   storage::DatabaseWriter writer = open_writer(path, options);
-  const QuantGrid grid = choose_grid(crmr.header, options.z_quantum);
+  const QuantGrid grid = choose_grid(crmr.header, options.z_quantum, options.error_quantum);
   const double shift = quantize(crmr, grid);  // ROIs and subtree cones derived too
   const std::string tmp_dir = storage::scratch_dir("");
   TableCounts counts;

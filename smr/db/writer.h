@@ -24,6 +24,9 @@ struct WriteOptions {
   storage::CodecId codec = storage::CodecId::kZstd;
   bool force = false;      // replace an existing database at the path
   double z_quantum = 0.0;  // quantization step of heights (grid.step.z); 0 = automatic (quantize.h)
+  // A terrain's automatic z step is at least this: error_z_quantum of the error it was built to
+  // (ingest sets it and builds to that error less half of it; choose_grid).
+  double error_quantum = 0.0;
   // Most bytes of a data page's value, sealed (a page of one op may pass it). LMDB keeps a value
   // of S bytes in ceil((S + 16) / 4096) 4-KiB overflow pages, so k * 4096 - 16 fills k of them:
   // pages are filled to it by encoding their ops, not by an estimate (write_pages in writer.cpp).

@@ -106,11 +106,20 @@ struct Run {
     if (progress.phase) progress.phase(p, report);
   }
 
+  // A DEM built to a max error takes, unless told otherwise, a z step of error_z_quantum of it
+  // (smr/db/quantize.h), and its builder aims half a step below the error asked for: snapping
+  // moves a height by half a step at most, so the database's err_final stays within it.
+  double error_quantum() const {
+    return options.z_quantum == 0.0 ? error_z_quantum(options.max_error) : 0.0;
+  }
+  double build_error() const { return options.max_error - error_quantum() / 2.0; }
+
   WriteOptions write_options() const {
     WriteOptions wo;
     wo.codec = options.codec;
     wo.force = options.force;
     wo.z_quantum = options.z_quantum;
+    wo.error_quantum = error_quantum();
     wo.page_bytes = options.page_kb * 1024 - 16;
     wo.parameters = describe(input, options);
     wo.progress = [this](double f) { fraction(0.8 + 0.2 * f); };
@@ -202,7 +211,7 @@ struct Run {
           dem.width,        dem.height, dem.sample_count(), dem.has_nodata(), dem.georef.geographic,
           seconds_since(t0)};
       GreedyTinOptions opt;
-      opt.max_error = options.max_error;
+      opt.max_error = build_error();
       opt.max_vertices = options.max_vertices;
       opt.base_vertices = options.base_vertices;
       opt.progress = build_progress();
@@ -218,7 +227,7 @@ struct Run {
     const std::unique_ptr<RasterWindows> dem = open_dem(input);
     const BlockTinReport part{dem->width(), dem->height(), dem->georef().geographic, {}};
     auto opt = block_options<BlockTinOptions>();
-    opt.max_error = options.max_error;
+    opt.max_error = build_error();
     opt.block_cells = options.block_cells;
     opt.exact_window_samples = shares.exact_window_samples;
     opt.raster_cache_bytes = shares.raster_cache_bytes;

@@ -150,12 +150,15 @@ TEST_F(DbCli, KillNineDuringIngestLeavesThePreviousOrTheCompleteDatabase) {
                                            "-o",     target, "--force",     "-q"};
   ASSERT_EQ(smrdb("ingest " + old_dem + " -q -o " + target).code, 0);
   const std::string old_bytes = read_file(target);
-  // A full ingest, twice (the first warms the caches); the second one's duration is the scale.
+  // A full ingest, three times (the first warms the caches); the quickest of the last two is the
+  // scale: one slowed by a busy moment made most of the spread kills land after the end (11 of
+  // 22 once, under ctest -j2).
   double full = 0.0;
-  for (int k = 0; k < 2; ++k) {
+  for (int k = 0; k < 3; ++k) {
     const auto t0 = Clock::now();
     const int status = wait_for(spawn_smrdb(ingest));
-    full = std::chrono::duration<double>(Clock::now() - t0).count();
+    const double t = std::chrono::duration<double>(Clock::now() - t0).count();
+    if (k == 1 || (k == 2 && t < full)) full = t;
     ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
   }
   const std::string new_bytes = read_file(target);
