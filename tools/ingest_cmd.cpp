@@ -84,10 +84,11 @@ void IngestArgs::add_to(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--codec", codec, "Geometry codec of the pages: draco, zstd or raw")
       ->capture_default_str();
-  app.add_option("--z-quantum", z_quantum,
-                 "Height quantization step (data units; 0 = automatic: a power of two, the coarser of "
-                 "range / 2^24 and --max-error / 32, the DEM then built to --max-error less half a "
-                 "step)");
+  app.add_option(
+      "--z-quantum", z_quantum,
+      "Height quantization step (data units; 0 = automatic: a power of two, the coarser of "
+      "range / 2^24 and --max-error / 32, the DEM then built to --max-error less half a "
+      "step)");
   app.add_option("--page-kb", page_kb, "Target size of a data page in KiB")->capture_default_str();
   app.add_flag("--force", force, "Replace an existing database");
 }
