@@ -19,7 +19,9 @@
 # same binary), SMRDB_DATA_DIR
 # (data), SIZES ("4097"), MAX_ERROR (1.6), BIG_SIZE (16385; empty: no oblique case), BIG_ERROR
 # (0.5), MESHES ("armadillo.off bunny00.off ChineseDragon-10kv.off"), ROUNDS (6), OUT
-# (benchmarks/results/db_size_ab.json).
+# (benchmarks/results/db_size_ab.json), OLD_INGEST_ARGS and NEW_INGEST_ARGS (more `smrdb ingest`
+# options for each side, e.g. NEW_INGEST_ARGS="--page-kb 12" with OLD_BUILD_DIR = BUILD_DIR to
+# compare two settings of one build).
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -42,8 +44,13 @@ require_executables "$OLD_BUILD_DIR" "$OLD_BUILD_DIR/tools/smrdb" \
   "$OLD_BUILD_DIR/benchmarks/bench_extract_speed"
 require_tools
 build_dir() { [[ "$1" == old ]] && echo "$OLD_BUILD_DIR" || echo "$BUILD_DIR"; }
-# Each build's databases in a directory named by its smrdb binary, so a rebuilt one makes new ones.
-db_dir() { echo "$WORK_DIR/$1-$(sha1sum "$(build_dir "$1")/tools/smrdb" | cut -c1-12)"; }
+ingest_args() { [[ "$1" == old ]] && echo "${OLD_INGEST_ARGS:-}" || echo "${NEW_INGEST_ARGS:-}"; }
+# Each side's databases in a directory named by its smrdb binary and ingest options, so a rebuilt
+# one (or other options) makes new ones.
+db_dir() {
+  echo "$WORK_DIR/$1-$({ sha1sum <"$(build_dir "$1")/tools/smrdb"; ingest_args "$1"; } |
+    sha1sum | cut -c1-12)"
+}
 mkdir -p "$(db_dir old)" "$(db_dir new)" "$(dirname "$OUT")"
 stderr_log="$WORK_DIR/bench.stderr"
 : >"$stderr_log"
@@ -70,6 +77,8 @@ for b in old new; do
       log "$b: ingest $name"
       args=("$src" -o "$db" -q --force)
       [[ -n "$err" ]] && args+=(--max-error "$err")
+      read -r -a more <<<"$(ingest_args "$b")"
+      args+=("${more[@]}")
       "$(build_dir "$b")/tools/smrdb" ingest "${args[@]}"
     fi
     info="$("$(build_dir "$b")/tools/smrdb" info "$db" --json)"
@@ -120,12 +129,14 @@ done
 
 # 3. The results.
 jq -n --argjson sizes "$sizes" --argjson reads "$reads" \
-  --arg old "$OLD_BUILD_DIR" \
+  --arg old "$OLD_BUILD_DIR" --arg old_args "${OLD_INGEST_ARGS:-}" \
+  --arg new_args "${NEW_INGEST_ARGS:-}" \
   --arg new "$(git -C "$root" rev-parse --short HEAD)" --arg date "$(date -u +%FT%TZ)" \
   --arg cpu "$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')" \
   --argjson nproc "$(nproc)" '
   def med: sort | if length == 0 then null else .[(length - 1) / 2 | floor] end;
   {benchmark: "benchmarks/run_db_size_ab.sh", old: $old, new: $new, date: $date,
+   old_ingest_args: $old_args, new_ingest_args: $new_args,
    machine: {cpu: $cpu, nproc: $nproc},
    sizes: $sizes,
    size_ratios: [$sizes | group_by(.name)[] | {name: .[0].name,

@@ -36,7 +36,7 @@ struct IngestArgs {
   std::uint64_t max_vertices = 0, base_vertices = 4;
   std::string codec = "zstd";
   double z_quantum = 0.0;
-  std::uint32_t page_kb = 16;
+  std::uint32_t page_kb = 12;
   bool force = false;
   bool repair = false;
   bool allow_self_intersections = false;

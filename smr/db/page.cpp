@@ -871,11 +871,12 @@ class PageDecoder {
     ByteReader& r = in_[kRois];
     constexpr std::int64_t kMax = std::numeric_limits<std::int32_t>::max();
     // A margin: units of 2^roi_shift grid steps (stored_roi), from the op's stored error.
+    std::array<int, 3> shift{};
+    for (int k = 0; k < 3; ++k) shift[k] = roi_shift(op.error, grid_.step[k]);
     const auto margin = [&](int k) {
       const std::uint64_t u = r.varint();
-      const int shift = roi_shift(op.error, grid_.step[k]);
-      if (u > std::uint64_t(2 * kMax) >> shift) r.fail("ROI outside the grid");
-      return std::int64_t(u << shift);
+      if (u > std::uint64_t(2 * kMax) >> shift[k]) r.fail("ROI outside the grid");
+      return std::int64_t(u << shift[k]);
     };
     for (int k = 0; k < 3; ++k) {
       const std::int64_t v = std::int64_t(lo[k]) - margin(k);

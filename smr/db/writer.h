@@ -30,7 +30,7 @@ struct WriteOptions {
   // Most bytes of a data page's value, sealed (a page of one op may pass it). LMDB keeps a value
   // of S bytes in ceil((S + 16) / 4096) 4-KiB overflow pages, so k * 4096 - 16 fills k of them:
   // pages are filled to it by encoding their ops, not by an estimate (write_pages in writer.cpp).
-  std::uint32_t page_bytes = 16 * 1024 - 16;
+  std::uint32_t page_bytes = 12 * 1024 - 16;
   // Children per internal R-tree node. A view enters internal nodes that each contribute one or
   // two leaves, so small nodes read fewer unused bytes: 16 read 8 % fewer index bytes than 64 on
   // a 4097^2 fBm view (benchmarks/README.md), with little more than 8 gives.

@@ -63,7 +63,7 @@ struct IngestOptions {
   /// Height quantization step (data units; 0 = automatic): WriteOptions::z_quantum.
   double z_quantum = 0.0;
   /// Target size of a data page in KiB (its payload is 16 bytes less).
-  std::uint32_t page_kb = 16;
+  std::uint32_t page_kb = 12;
   /// Replace an existing database at the path.
   bool force = false;
   /// Check the CRMR's invariants before writing it (in memory), or the written database

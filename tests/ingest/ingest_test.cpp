@@ -170,12 +170,12 @@ TEST(Ingest, DescribeNamesEveryParameterOfThePath) {
   o.block_cells = 64;
   EXPECT_EQ(describe("/some/where/fbm513.npy", o),
             "input=fbm513.npy max-error=0.5 max-vertices=0 base-vertices=4 codec=zstd "
-            "z-quantum=0 page-kb=16 builder=blocks block-cells=64 memory=67108864");
+            "z-quantum=0 page-kb=12 builder=blocks block-cells=64 memory=67108864");
   IngestOptions m;
   m.allow_self_intersections = true;
   EXPECT_EQ(describe("bunny.off", m),
             "input=bunny.off max-error=0 max-vertices=0 base-vertices=4 codec=zstd z-quantum=0 "
-            "page-kb=16 self-intersections=allowed repair=no coalesce=32 coalesce-ratio=0.7");
+            "page-kb=12 self-intersections=allowed repair=no coalesce=32 coalesce-ratio=0.7");
 }
 
 }  // namespace
