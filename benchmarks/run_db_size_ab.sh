@@ -21,7 +21,7 @@
 # (0.5), MESHES ("armadillo.off bunny00.off ChineseDragon-10kv.off"), ROUNDS (6), OUT
 # (benchmarks/results/db_size_ab.json), OLD_INGEST_ARGS and NEW_INGEST_ARGS (more `smrdb ingest`
 # options for each side, e.g. NEW_INGEST_ARGS="--page-kb 12" with OLD_BUILD_DIR = BUILD_DIR to
-# compare two settings of one build).
+# compare two settings of one build; split on spaces, so no quoted arguments).
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -47,11 +47,11 @@ build_dir() { [[ "$1" == old ]] && echo "$OLD_BUILD_DIR" || echo "$BUILD_DIR"; }
 ingest_args() { [[ "$1" == old ]] && echo "${OLD_INGEST_ARGS:-}" || echo "${NEW_INGEST_ARGS:-}"; }
 # Each side's databases in a directory named by its smrdb binary and ingest options, so a rebuilt
 # one (or other options) makes new ones.
-db_dir() {
-  echo "$WORK_DIR/$1-$({ sha1sum <"$(build_dir "$1")/tools/smrdb"; ingest_args "$1"; } |
-    sha1sum | cut -c1-12)"
-}
-mkdir -p "$(db_dir old)" "$(db_dir new)" "$(dirname "$OUT")"
+side_key() { { sha1sum <"$(build_dir "$1")/tools/smrdb"; ingest_args "$1"; } | sha1sum | cut -c1-12; }
+old_dir="$WORK_DIR/old-$(side_key old)"
+new_dir="$WORK_DIR/new-$(side_key new)"
+db_dir() { [[ "$1" == old ]] && echo "$old_dir" || echo "$new_dir"; }
+mkdir -p "$old_dir" "$new_dir" "$(dirname "$OUT")"
 stderr_log="$WORK_DIR/bench.stderr"
 : >"$stderr_log"
 
@@ -78,7 +78,7 @@ for b in old new; do
       args=("$src" -o "$db" -q --force)
       [[ -n "$err" ]] && args+=(--max-error "$err")
       read -r -a more <<<"$(ingest_args "$b")"
-      args+=("${more[@]}")
+      args+=(${more[@]+"${more[@]}"})
       "$(build_dir "$b")/tools/smrdb" ingest "${args[@]}"
     fi
     info="$("$(build_dir "$b")/tools/smrdb" info "$db" --json)"

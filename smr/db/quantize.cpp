@@ -54,7 +54,12 @@ QuantGrid choose_mesh_grid(const CrmrInfo& info, double step) {
 
 double error_z_quantum(double max_error) {
   if (!(max_error > 0.0) || !std::isfinite(max_error)) return 0.0;
-  return std::exp2(std::floor(std::log2(max_error / 32.0)));
+  return std::ldexp(1.0, std::ilogb(max_error) - 5);  // exact: 2^floor(log2 e) / 32
+}
+
+TerrainErrorSplit split_terrain_error(double max_error, double z_quantum) {
+  const double q = z_quantum == 0.0 ? error_z_quantum(max_error) : 0.0;
+  return {max_error - q / 2.0, q};
 }
 
 QuantGrid choose_grid(const CrmrInfo& info, double z_quantum, double error_quantum) {
@@ -69,7 +74,12 @@ QuantGrid choose_grid(const CrmrInfo& info, double z_quantum, double error_quant
     throw_input("z quantum must be a positive number");
   if (z_quantum == 0.0) {
     const double range = std::max(hi - lo, 1e-3);
-    z_quantum = std::max(std::exp2(std::floor(std::log2(range / double(1 << 24)))), error_quantum);
+    // Built to an error: its step, unless the range needs more than 2^30 of them (the model
+    // then passes the error by up to half of the coarser step); else range / 2^24.
+    z_quantum =
+        error_quantum > 0.0
+            ? std::max(error_quantum, std::exp2(std::ceil(std::log2(range / double(1 << 30)))))
+            : std::exp2(std::floor(std::log2(range / double(1 << 24))));
   }
   if ((hi - lo) / z_quantum > double(1 << 30)) {
     throw_input("z quantum " + std::to_string(z_quantum) + " is too fine for a height range of " +

@@ -43,9 +43,18 @@ QuantGrid choose_grid(const CrmrInfo& info, double z_quantum, double error_quant
 /// max_error / 32, so snapping moves a vertex by at most max_error / 64. A DEM's heights carry
 /// more bits than such a model can tell apart: at 2^-14 m for a 1600 m range, heights took 3 of
 /// the 4.6 bytes of a page vertex; at max_error / 32 the 4097^2 fBm's positions take 12.0 bytes
-/// a model vertex instead of 16.7. Ingest builds to max_error less that half step, so the
-/// database's err_final stays within the error asked for. 0 for max_error <= 0 (lossless).
+/// a model vertex instead of 16.7. 0 for max_error <= 0 (lossless), infinite or NaN.
 double error_z_quantum(double max_error);
+
+/// How a DEM ingested to `max_error` with `--z-quantum z_quantum` spends its error: the builder
+/// gets build_error, the writer error_quantum (WriteOptions). With z_quantum 0 the step is
+/// error_z_quantum(max_error) and the build aims half a step below max_error, so the database's
+/// err_final stays within max_error (unless the height range needs more than 2^30 such steps:
+/// max_error below ~2^-25 of the range, choose_grid); a z_quantum given is taken as it is.
+struct TerrainErrorSplit {
+  double build_error = 0.0, error_quantum = 0.0;
+};
+TerrainErrorSplit split_terrain_error(double max_error, double z_quantum);
 
 /// Snaps the vertices of `op` (of the model `model`) to `grid` and returns the largest move;
 /// bounds are left to the caller. A terrain's vertices are then named by their DEM sample: id =

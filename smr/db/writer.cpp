@@ -35,7 +35,8 @@ namespace {
 // lattice. Measured on 16 KiB pages: 2 bytes a vertex fill terrain pages to 0.87 of the target
 // (Jacksboro, median; none over); in 3-D they overfilled every page 1.27-1.47x (past 4 LMDB
 // pages), 13 bytes fill them to 0.88-0.94 (median) with the largest at 0.95-1.01 (the seven
-// CGAL meshes but the pig).
+// CGAL meshes but the pig). Measured with 16 KiB pages and the 2^-28 grid: on today's 12 KiB
+// pages and 2^-24 grid it proposes cuts that the encodes then move (it decides no page).
 std::uint32_t estimated_bytes(const Op& op, ModelKind kind) {
   const std::size_t per_vertex = kind == ModelKind::kMesh3d ? 13 : 2;
   // 17: the op's R-tree leaf entry, which its page's value holds too (page.h, PageValue).

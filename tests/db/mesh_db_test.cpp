@@ -108,7 +108,7 @@ TEST(MeshDb, AWholeModelCutReadsEachPageAboutOnceThroughASmallCache) {
   test::TempDir dir("smrdb-mesh-db-test");
   const std::string path = dir.file("mesh.smrdb");
   WriteOptions wo;
-  // The dragon's 16 KiB pages are ~60, fewer than the unheld expansion needs to show its rereads.
+  // The dragon's default pages are ~80, fewer than the unheld expansion needs to show its rereads.
   if (test::kSanitized) wo.page_bytes = 4096 - 16;
   const WriteReport w = write_database(m, path, wo);
   std::size_t decoded = 0;

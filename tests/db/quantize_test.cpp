@@ -120,6 +120,51 @@ TEST(StoredRoi, MarginsInUnitsOfTheOpsErrorAndNesting) {
   for (const Op& op : m.ops) EXPECT_EQ(db->op(op.id)->roi, op.roi) << op.id.value;
 }
 
+// A DEM built to an error e takes the largest power of two within e / 32 as its z step and is
+// built half a step below e (quantize.h): the step is exact, within (e/64, e/32], and the split
+// never lets a snapped height pass e.
+TEST(ErrorZQuantum, APowerOfTwoWithinAThirtySecondOfTheError) {
+  EXPECT_EQ(error_z_quantum(1.6), 0.03125);
+  EXPECT_EQ(error_z_quantum(1.0), 0.03125);
+  EXPECT_EQ(error_z_quantum(std::nextafter(1.0, 0.0)), 0.015625);
+  for (double bad : {0.0, -1.0, std::numeric_limits<double>::infinity(),
+                     std::numeric_limits<double>::quiet_NaN()})
+    EXPECT_EQ(error_z_quantum(bad), 0.0) << bad;
+  EXPECT_EQ(error_z_quantum(std::numeric_limits<double>::denorm_min()), 0.0);  // lossless
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> octave(-20.0, 20.0);
+  for (int i = 0; i < 10000; ++i) {
+    const double e = std::exp2(octave(rng));
+    const double q = error_z_quantum(e);
+    int exponent = 0;
+    ASSERT_EQ(std::frexp(q, &exponent), 0.5) << e;  // a power of two
+    ASSERT_LE(q, e / 32.0) << e;
+    ASSERT_GT(q, e / 64.0) << e;
+    const TerrainErrorSplit split = split_terrain_error(e, 0.0);
+    ASSERT_EQ(split.error_quantum, q);
+    ASSERT_LE(split.build_error + q / 2.0, e) << e;  // the largest snap, added back
+    ASSERT_GT(split.build_error, 0.98 * e) << e;
+  }
+  // A step given on the command line is taken as it is, and the build keeps the whole error.
+  const TerrainErrorSplit given = split_terrain_error(1.6, 0.5);
+  EXPECT_EQ(given.build_error, 1.6);
+  EXPECT_EQ(given.error_quantum, 0.0);
+}
+
+TEST(ErrorZQuantum, TheGridTakesItUnlessTheRangeNeedsACoarserStep) {
+  CrmrInfo info;
+  info.kind = ModelKind::kTerrain;
+  info.georef.dx = info.georef.dy = 1.0;
+  info.bounds.add(Vec3(0.0, 0.0, -100.0));
+  info.bounds.add(Vec3(10.0, 10.0, 1500.0));
+  EXPECT_EQ(choose_grid(info, 0.0, 0.0).step.z, std::exp2(-14));  // range / 2^24
+  EXPECT_EQ(choose_grid(info, 0.0, 0.03125).step.z, 0.03125);
+  EXPECT_EQ(choose_grid(info, 0.0, std::exp2(-16)).step.z, std::exp2(-16));  // finer than 2^24
+  // 1600 / 2^30 rounded up to a power of two: at most 2^30 steps over the range.
+  EXPECT_EQ(choose_grid(info, 0.0, std::exp2(-40)).step.z, std::exp2(-19));
+  EXPECT_EQ(choose_grid(info, 0.25, 0.03125).step.z, 0.25);  // a step given wins
+}
+
 TEST(TerrainVertexIds, AreTheDemSampleIndices) {
   for (const char* name : {"jacksboro", "elev"}) {
     const test::Dataset& d = test::dataset(name);

@@ -55,10 +55,13 @@ TEST(ReadmeExample, ExtractsAViewThatTilesAndMeetsItsRcf) {
   std::filesystem::create_directory("out");
   {
     // What `smrdb ingest data/jacksboro_fault_dem.npz --max-error 1` does, through the library.
+    const TerrainErrorSplit split = split_terrain_error(1.0, 0.0);
     GreedyTinOptions options;
-    options.max_error = 1.0;
+    options.max_error = split.build_error;
     Crmr crmr = build_greedy_tin(dem, options);
-    write_database(crmr, "out/jacksboro.smrdb", {});
+    WriteOptions write;
+    write.error_quantum = split.error_quantum;
+    write_database(crmr, "out/jacksboro.smrdb", write);
   }
 
   // [readme-example]

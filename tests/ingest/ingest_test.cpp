@@ -144,6 +144,10 @@ TEST(Ingest, EveryPathWritesTheDatabaseItReports) {
     EXPECT_EQ(db->info().source, std::filesystem::path(c.input).filename().string());
     EXPECT_NE(db->meta_json().find(describe(c.input, o)), std::string::npos)
         << "meta records the build parameters";
+    if (!is_mesh) {  // heights at a 32nd of the error, and the error kept (quantize.h)
+      EXPECT_EQ(db->grid().step.z, error_z_quantum(o.max_error));
+      EXPECT_LE(db->info().err_final, o.max_error);
+    }
   }
 }
 
