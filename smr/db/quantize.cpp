@@ -57,9 +57,9 @@ double error_z_quantum(double max_error) {
   return std::ldexp(1.0, std::ilogb(max_error) - 5);  // exact: 2^floor(log2 e) / 32
 }
 
-TerrainErrorSplit split_terrain_error(double max_error, double z_quantum) {
+TerrainErrorSplit split_terrain_error(double max_error, double z_quantum, bool heights_on_step) {
   const double q = z_quantum == 0.0 ? error_z_quantum(max_error) : 0.0;
-  return {max_error - q / 2.0, q};
+  return {heights_on_step ? max_error : max_error - q / 2.0, q};
 }
 
 QuantGrid choose_grid(const CrmrInfo& info, double z_quantum, double error_quantum) {

@@ -51,10 +51,14 @@ double error_z_quantum(double max_error);
 /// error_z_quantum(max_error) and the build aims half a step below max_error, so the database's
 /// err_final stays within max_error (unless the height range needs more than 2^30 such steps:
 /// max_error below ~2^-25 of the range, choose_grid); a z_quantum given is taken as it is.
+/// `heights_on_step`: every height is a multiple of error_z_quantum(max_error) (integer DEMs),
+/// so snapping moves none and the build keeps all of max_error (on Jacksboro, whole metres at
+/// 1 m, keeping half a step back made 7 % more vertices).
 struct TerrainErrorSplit {
   double build_error = 0.0, error_quantum = 0.0;
 };
-TerrainErrorSplit split_terrain_error(double max_error, double z_quantum);
+TerrainErrorSplit split_terrain_error(double max_error, double z_quantum,
+                                      bool heights_on_step = false);
 
 /// Snaps the vertices of `op` (of the model `model`) to `grid` and returns the largest move;
 /// bounds are left to the caller. A terrain's vertices are then named by their DEM sample: id =

@@ -120,11 +120,11 @@ struct Run {
   }
 
   // A DEM built to a max error takes, unless told otherwise, a z step of error_z_quantum of it,
-  // and its builder aims half a step below the error asked for (smr/db/quantize.h).
-  TerrainErrorSplit error_split() const {
-    return split_terrain_error(options.max_error, options.z_quantum);
+  // and its builder aims half a step below the error asked for unless its heights all lie on the
+  // step (smr/db/quantize.h; only a DEM in memory is checked).
+  TerrainErrorSplit error_split(bool heights_on_step = false) const {
+    return split_terrain_error(options.max_error, options.z_quantum, heights_on_step);
   }
-  double build_error() const { return error_split().build_error; }
 
   WriteOptions write_options() const {
     WriteOptions wo;
@@ -223,10 +223,7 @@ struct Run {
           dem.width,        dem.height, dem.sample_count(), dem.has_nodata(), dem.georef.geographic,
           seconds_since(t0)};
       GreedyTinOptions opt;
-      // Heights already on the step (integer DEMs) do not move: no half step to keep back. On
-      // Jacksboro (whole metres, 1 m) keeping it back made 7 % more vertices.
-      opt.max_error =
-          on_z_grid(dem, error_split().error_quantum) ? options.max_error : build_error();
+      opt.max_error = error_split(on_z_grid(dem, error_split().error_quantum)).build_error;
       opt.max_vertices = options.max_vertices;
       opt.base_vertices = options.base_vertices;
       opt.progress = build_progress();
@@ -242,7 +239,7 @@ struct Run {
     const std::unique_ptr<RasterWindows> dem = open_dem(input);
     const BlockTinReport part{dem->width(), dem->height(), dem->georef().geographic, {}};
     auto opt = block_options<BlockTinOptions>();
-    opt.max_error = build_error();
+    opt.max_error = error_split().build_error;
     opt.block_cells = options.block_cells;
     opt.exact_window_samples = shares.exact_window_samples;
     opt.raster_cache_bytes = shares.raster_cache_bytes;

@@ -145,6 +145,10 @@ TEST(ErrorZQuantum, APowerOfTwoWithinAThirtySecondOfTheError) {
     ASSERT_LE(split.build_error + q / 2.0, e) << e;  // the largest snap, added back
     ASSERT_GT(split.build_error, 0.98 * e) << e;
   }
+  // Heights on the step do not move: the build keeps the whole error, the step is the same.
+  const TerrainErrorSplit on_step = split_terrain_error(1.6, 0.0, true);
+  EXPECT_EQ(on_step.build_error, 1.6);
+  EXPECT_EQ(on_step.error_quantum, 0.03125);
   // A step given on the command line is taken as it is, and the build keeps the whole error.
   const TerrainErrorSplit given = split_terrain_error(1.6, 0.5);
   EXPECT_EQ(given.build_error, 1.6);
